@@ -1,0 +1,241 @@
+// pybind11 module `radiometer._core`: converts, releases the GIL, maps errors.
+// No rendering logic lives here.
+#include <pybind11/functional.h>
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include "integrators/render.h"
+#include "scene/scene.h"
+
+namespace py = pybind11;
+using namespace rm;
+
+namespace {
+
+// Moves a vector into a numpy array of the given shape without copying.
+py::array_t<float> to_numpy(std::vector<float>&& v, std::vector<py::ssize_t> shape) {
+    auto* heap = new std::vector<float>(std::move(v));
+    py::capsule owner(heap, [](void* p) { delete static_cast<std::vector<float>*>(p); });
+    return py::array_t<float>(shape, heap->data(), owner);
+}
+
+template <class T>
+std::vector<T> flat(const py::object& o, size_t cols, const char* what) {
+    if (o.is_none()) return {};
+    auto a = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(o);
+    if (!a) throw py::value_error(std::string(what) + ": not convertible to an array");
+    if (a.ndim() != 2 || size_t(a.shape(1)) != cols)
+        throw py::value_error(std::string(what) + ": expected shape (N, " + std::to_string(cols) + ")");
+    return std::vector<T>(a.data(), a.data() + a.size());
+}
+
+Matrix4 to_matrix(const py::object& o) {
+    auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(o);
+    if (!a || a.size() != 16) throw py::value_error("expected a 4x4 matrix");
+    Matrix4 m;
+    std::copy(a.data(), a.data() + 16, m.begin());
+    return m;
+}
+
+Color to_color(const py::object& o) {
+    auto t = o.cast<std::vector<float>>();
+    if (t.size() != 3) throw py::value_error("expected an RGB triple");
+    return Color(t[0], t[1], t[2]);
+}
+
+py::tuple color_tuple(const Color& c) { return py::make_tuple(c.x, c.y, c.z); }
+
+}  // namespace
+
+PYBIND11_MODULE(_core, m) {
+    m.doc() = "radiometer's C++ renderer core";
+
+    py::class_<BsdfDesc>(m, "BsdfDesc")
+        .def(py::init<>())
+        .def_readwrite("type", &BsdfDesc::type)
+        .def_readwrite("id", &BsdfDesc::id)
+        .def_property("reflectance", [](const BsdfDesc& d) { return color_tuple(d.reflectance); },
+                      [](BsdfDesc& d, py::object v) { d.reflectance = to_color(v); })
+        .def_property("diffuse_reflectance", [](const BsdfDesc& d) { return color_tuple(d.diffuse_reflectance); },
+                      [](BsdfDesc& d, py::object v) { d.diffuse_reflectance = to_color(v); })
+        .def_property("specular_reflectance", [](const BsdfDesc& d) { return color_tuple(d.specular_reflectance); },
+                      [](BsdfDesc& d, py::object v) { d.specular_reflectance = to_color(v); })
+        .def_property("specular_transmittance", [](const BsdfDesc& d) { return color_tuple(d.specular_transmittance); },
+                      [](BsdfDesc& d, py::object v) { d.specular_transmittance = to_color(v); })
+        .def_property("eta", [](const BsdfDesc& d) { return color_tuple(d.eta); },
+                      [](BsdfDesc& d, py::object v) { d.eta = to_color(v); })
+        .def_property("k", [](const BsdfDesc& d) { return color_tuple(d.k); },
+                      [](BsdfDesc& d, py::object v) { d.k = to_color(v); })
+        .def_readwrite("int_ior", &BsdfDesc::int_ior)
+        .def_readwrite("ext_ior", &BsdfDesc::ext_ior)
+        .def_readwrite("alpha_u", &BsdfDesc::alpha_u)
+        .def_readwrite("alpha_v", &BsdfDesc::alpha_v)
+        .def_readwrite("distribution", &BsdfDesc::distribution)
+        .def_readwrite("sample_visible", &BsdfDesc::sample_visible)
+        .def_readwrite("nonlinear", &BsdfDesc::nonlinear)
+        .def_readwrite("nested", &BsdfDesc::nested);
+
+    py::class_<EmitterDesc>(m, "EmitterDesc")
+        .def(py::init<>())
+        .def_readwrite("type", &EmitterDesc::type)
+        .def_readwrite("id", &EmitterDesc::id)
+        .def_property("radiance", [](const EmitterDesc& d) { return color_tuple(d.radiance); },
+                      [](EmitterDesc& d, py::object v) { d.radiance = to_color(v); })
+        .def_property("intensity", [](const EmitterDesc& d) { return color_tuple(d.intensity); },
+                      [](EmitterDesc& d, py::object v) { d.intensity = to_color(v); })
+        .def_property("irradiance", [](const EmitterDesc& d) { return color_tuple(d.irradiance); },
+                      [](EmitterDesc& d, py::object v) { d.irradiance = to_color(v); })
+        .def_property("to_world", [](const EmitterDesc& d) { return d.to_world; },
+                      [](EmitterDesc& d, py::object v) { d.to_world = to_matrix(v); })
+        .def_readwrite("cutoff_angle", &EmitterDesc::cutoff_angle)
+        .def_readwrite("beam_width", &EmitterDesc::beam_width);
+
+    py::class_<SensorDesc>(m, "SensorDesc")
+        .def(py::init<>())
+        .def_readwrite("type", &SensorDesc::type)
+        .def_property("to_world", [](const SensorDesc& d) { return d.to_world; },
+                      [](SensorDesc& d, py::object v) { d.to_world = to_matrix(v); })
+        .def_readwrite("fov_x", &SensorDesc::fov_x)
+        .def_readwrite("near_clip", &SensorDesc::near_clip)
+        .def_readwrite("far_clip", &SensorDesc::far_clip)
+        .def_readwrite("width", &SensorDesc::width)
+        .def_readwrite("height", &SensorDesc::height)
+        .def_readwrite("rfilter", &SensorDesc::rfilter)
+        .def_readwrite("filter_radius", &SensorDesc::filter_radius)
+        .def_readwrite("filter_stddev", &SensorDesc::filter_stddev)
+        .def_readwrite("shape", &SensorDesc::shape);
+
+    py::class_<IntegratorDesc>(m, "IntegratorDesc")
+        .def(py::init<>())
+        .def_readwrite("type", &IntegratorDesc::type)
+        .def_readwrite("max_depth", &IntegratorDesc::max_depth)
+        .def_readwrite("rr_depth", &IntegratorDesc::rr_depth)
+        .def_readwrite("hide_emitters", &IntegratorDesc::hide_emitters)
+        .def_readwrite("emitter_samples", &IntegratorDesc::emitter_samples)
+        .def_readwrite("bsdf_samples", &IntegratorDesc::bsdf_samples);
+
+    py::class_<Scene>(m, "Scene")
+        .def(py::init<>())
+        .def("add_bsdf", &Scene::add_bsdf)
+        .def("add_mesh",
+             [](Scene& s, const std::string& id, py::object pos, py::object idx, py::object normals, py::object uvs,
+                int bsdf, bool flip) {
+                 return s.add_mesh(id, flat<float>(pos, 3, "positions"), flat<uint32_t>(idx, 3, "indices"),
+                                   flat<float>(normals, 3, "normals"), flat<float>(uvs, 2, "uvs"), bsdf, flip);
+             },
+             py::arg("id"), py::arg("positions"), py::arg("indices"), py::arg("normals") = py::none(),
+             py::arg("uvs") = py::none(), py::arg("bsdf"), py::arg("flip_normals") = false)
+        .def("add_sphere",
+             [](Scene& s, const std::string& id, py::object c, float r, int bsdf, bool flip) {
+                 Color cc = to_color(c);
+                 return s.add_sphere(id, cc, r, bsdf, flip);
+             },
+             py::arg("id"), py::arg("center"), py::arg("radius"), py::arg("bsdf"), py::arg("flip_normals") = false)
+        .def("add_disk",
+             [](Scene& s, const std::string& id, py::object m4, int bsdf, bool flip) {
+                 return s.add_disk(id, to_matrix(m4), bsdf, flip);
+             },
+             py::arg("id"), py::arg("to_world"), py::arg("bsdf"), py::arg("flip_normals") = false)
+        .def("add_area_emitter", &Scene::add_area_emitter)
+        .def("add_emitter", &Scene::add_emitter)
+        .def("set_sensor", &Scene::set_sensor)
+        .def("commit", [](Scene& s) {
+            py::gil_scoped_release nogil;
+            s.commit();
+        })
+        .def_property_readonly("shape_count", [](const Scene& s) { return s.shapes.size(); })
+        .def_property_readonly("emitter_count", [](const Scene& s) { return s.emitters.size(); })
+        .def_property_readonly("width", [](const Scene& s) { return s.sensor ? s.sensor->width : 0; })
+        .def_property_readonly("height", [](const Scene& s) { return s.sensor ? s.sensor->height : 0; })
+        .def_property_readonly("bbox", [](const Scene& s) {
+            return py::make_tuple(color_tuple(s.bbox_lo), color_tuple(s.bbox_hi));
+        })
+        .def_property_readonly("features", [](const Scene& s) {
+            py::dict d;
+            d["has_delta_bsdf"] = s.features.has_delta_bsdf;
+            d["has_smooth_bsdf"] = s.features.has_smooth_bsdf;
+            d["has_area_emitters"] = s.features.has_area_emitters;
+            d["has_delta_emitters"] = s.features.has_delta_emitters;
+            d["has_environment"] = s.features.has_environment;
+            d["has_media"] = s.features.has_media;
+            return d;
+        });
+
+    m.attr("EFFECTS") = [] {
+        py::list l;
+        for (int k = 0; k < kNumEffects; ++k) l.append(effect_name(k));
+        return py::tuple(l);
+    }();
+
+    m.def(
+        "render",
+        [](const Scene& scene, const IntegratorDesc& idesc, std::vector<bool> effects, int spp, double seconds,
+           uint64_t seed, int threads, std::vector<int> checkpoints, py::object progress) {
+            if (!scene.committed()) throw py::value_error("render: scene is not committed");
+            EffectMask mask;
+            if (effects.size() != size_t(kNumEffects)) throw py::value_error("render: effects mask needs 7 entries");
+            for (int k = 0; k < kNumEffects; ++k) mask[k] = effects[k];
+            auto integrator = make_integrator(idesc, mask);
+            RenderOptions opts;
+            opts.spp = spp;
+            opts.seconds = seconds;
+            opts.seed = seed;
+            opts.threads = threads;
+            opts.checkpoints = std::move(checkpoints);
+            bool interrupted = false;
+            std::unique_ptr<py::error_already_set> callback_error;
+            // Runs on the calling thread with the GIL re-acquired: checks for
+            // Ctrl-C and reports progress; either may stop the render.
+            PollFn poll = [&](uint64_t done, uint64_t total) -> bool {
+                py::gil_scoped_acquire gil;
+                if (PyErr_CheckSignals() != 0) {
+                    PyErr_Clear();
+                    interrupted = true;
+                    return false;
+                }
+                if (!progress.is_none()) {
+                    try {
+                        progress(done, total);
+                    } catch (py::error_already_set& e) {
+                        callback_error = std::make_unique<py::error_already_set>(std::move(e));
+                        return false;
+                    }
+                }
+                return true;
+            };
+            RenderOutput out;
+            {
+                py::gil_scoped_release nogil;
+                out = rm::render(scene, *integrator, opts, poll);
+            }
+            if (callback_error) throw *callback_error;
+            py::ssize_t H = out.height, W = out.width;
+            py::dict r;
+            r["image"] = to_numpy(std::move(out.image), {H, W, 3});
+            r["variance"] = to_numpy(std::move(out.variance), {H, W, 3});
+            py::dict eff;
+            for (int k = 0; k < kNumEffects; ++k) eff[effect_name(k)] = to_numpy(std::move(out.effects[k]), {H, W, 3});
+            r["effects"] = eff;
+            r["spp"] = out.spp;
+            r["seconds"] = out.seconds;
+            r["cancelled"] = out.cancelled;
+            r["interrupted"] = interrupted;
+            r["threads"] = out.threads;
+            py::dict st;
+            st["rays"] = out.stats.rays;
+            st["shadow_rays"] = out.stats.shadow_rays;
+            st["paths"] = out.stats.paths;
+            st["nan_samples"] = out.stats.nan_samples;
+            st["inf_samples"] = out.stats.inf_samples;
+            r["stats"] = st;
+            py::list cps;
+            for (auto& c : out.checkpoints)
+                cps.append(py::make_tuple(c.spp, c.seconds, to_numpy(std::move(c.image), {H, W, 3}),
+                                          to_numpy(std::move(c.variance), {H, W, 3})));
+            r["checkpoints"] = cps;
+            return r;
+        },
+        py::arg("scene"), py::arg("integrator"), py::arg("effects"), py::arg("spp"), py::arg("seconds"),
+        py::arg("seed"), py::arg("threads"), py::arg("checkpoints"), py::arg("progress"));
+}

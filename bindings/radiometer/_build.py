@@ -1,0 +1,99 @@
+"""Turns a SceneDesc (the loader's output) into the C++ scene."""
+from __future__ import annotations
+
+import numpy as np
+
+from . import _core
+from .scene_desc import BsdfDesc, SceneDesc, SceneError
+
+
+def _bsdf(d: BsdfDesc) -> "_core.BsdfDesc":
+    c = _core.BsdfDesc()
+    c.type = d.type
+    c.id = d.id
+    for name in ("reflectance", "diffuse_reflectance", "specular_reflectance", "specular_transmittance", "eta", "k"):
+        setattr(c, name, tuple(float(x) for x in getattr(d, name)))
+    c.int_ior = float(d.int_ior)
+    c.ext_ior = float(d.ext_ior)
+    c.alpha_u = float(d.alpha_u)
+    c.alpha_v = float(d.alpha_v)
+    c.distribution = d.distribution
+    c.sample_visible = bool(d.sample_visible)
+    c.nonlinear = bool(d.nonlinear)
+    c.nested = [_bsdf(n) for n in d.nested]
+    return c
+
+
+def _emitter(e) -> "_core.EmitterDesc":
+    c = _core.EmitterDesc()
+    c.type = e.type
+    c.id = e.id
+    c.radiance = tuple(float(x) for x in e.radiance)
+    c.intensity = tuple(float(x) for x in e.intensity)
+    c.irradiance = tuple(float(x) for x in e.irradiance)
+    c.to_world = np.asarray(e.to_world, dtype=np.float64)
+    c.cutoff_angle = float(e.cutoff_angle)
+    c.beam_width = float(e.beam_width)
+    return c
+
+
+def build_scene(desc: SceneDesc) -> "_core.Scene":
+    """Builds and commits the C++ scene. C++ errors about a part are re-raised
+    as SceneError naming that part."""
+    scene = _core.Scene()
+    default_bsdf = None
+    sensor_shape = -1
+    for i, s in enumerate(desc.shapes):
+        where = s.id or f"shape #{i}"
+        try:
+            if s.bsdf is None:
+                if default_bsdf is None:
+                    default_bsdf = scene.add_bsdf(_bsdf(BsdfDesc(id="default diffuse")))
+                b = default_bsdf
+            else:
+                b = scene.add_bsdf(_bsdf(s.bsdf))
+            if s.type == "mesh":
+                idx = scene.add_mesh(where, np.asarray(s.positions, np.float32), np.asarray(s.indices, np.uint32),
+                                     None if s.normals is None else np.asarray(s.normals, np.float32),
+                                     None if s.uvs is None else np.asarray(s.uvs, np.float32), b, bool(s.flip_normals))
+            elif s.type == "sphere":
+                idx = scene.add_sphere(where, tuple(float(x) for x in s.center), float(s.radius), b,
+                                       bool(s.flip_normals))
+            elif s.type == "disk":
+                idx = scene.add_disk(where, np.asarray(s.to_world, np.float64), b, bool(s.flip_normals))
+            else:
+                raise SceneError(f"{desc.source}: {where}: unknown shape type '{s.type}'")
+            if s.emitter is not None:
+                scene.add_area_emitter(idx, _emitter(s.emitter))
+            if s.sensor is not None:
+                sensor_shape = idx
+        except (ValueError, RuntimeError) as e:
+            if isinstance(e, SceneError):
+                raise
+            raise SceneError(f"{desc.source}: {where}: {e}") from None
+    for e in desc.emitters:
+        try:
+            scene.add_emitter(_emitter(e))
+        except ValueError as err:
+            raise SceneError(f"{desc.source}: emitter {e.id or e.type}: {err}") from None
+    sd = desc.sensor
+    c = _core.SensorDesc()
+    c.type = sd.type
+    c.to_world = np.asarray(sd.to_world, np.float64)
+    c.fov_x = float(sd.fov_x)
+    c.near_clip = float(sd.near_clip)
+    c.far_clip = float(sd.far_clip)
+    c.width = int(sd.width)
+    c.height = int(sd.height)
+    c.rfilter = sd.rfilter
+    c.filter_radius = float(sd.filter_radius)
+    c.filter_stddev = float(sd.filter_stddev)
+    c.shape = sensor_shape
+    if sd.type == "irradiancemeter" and sensor_shape < 0:
+        raise SceneError(f"{desc.source}: sensor 'irradiancemeter' must be nested in a shape")
+    try:
+        scene.set_sensor(c)
+        scene.commit()
+    except ValueError as e:
+        raise SceneError(f"{desc.source}: sensor: {e}") from None
+    return scene

@@ -1,0 +1,187 @@
+"""`radiometer.render`: the Python face of the C++ render driver."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+import numpy as np
+
+from .scene_desc import IntegratorDesc, SceneDesc, SceneError
+
+EFFECTS = ("emission", "direct", "indirect", "caustic", "specular", "volume", "subsurface")
+
+# Parameters each implemented estimator takes, with Mitsuba 3's defaults.
+_COMMON = {"max_depth": (int, -1), "rr_depth": (int, 5), "hide_emitters": (bool, False)}
+INTEGRATOR_PARAMS = {
+    "path": dict(_COMMON),
+    "volpath": dict(_COMMON),
+    "direct": {"emitter_samples": (int, 1), "bsdf_samples": (int, 1), "hide_emitters": (bool, False),
+               "shading_samples": (int, None)},
+}
+# Known to the scene format, arriving in later issues.
+PLANNED_INTEGRATORS = ("ptracer", "bdpt", "photonmapper", "sppm", "vcm", "pssmlt", "vpl", "irrcache", "radiosity")
+
+
+class RenderCancelled(KeyboardInterrupt):
+    """Ctrl-C stopped a render. `.result` holds the finished passes (its `spp`
+    says how many samples per pixel they are), so nothing finished is lost."""
+
+    def __init__(self, result: "RenderResult"):
+        super().__init__(f"render cancelled after {result.spp} spp")
+        self.result = result
+
+
+@dataclass
+class RenderResult:
+    image: np.ndarray  # (H, W, 3) float32, linear RGB
+    variance: np.ndarray  # (H, W, 3) float32, variance of the per-pixel estimate
+    effects: dict  # effect class -> (H, W, 3) float32; they sum to image
+    spp: int
+    seconds: float
+    stats: dict
+    checkpoints: list = field(default_factory=list)  # [(spp, seconds, image, variance)]
+    integrator: dict = field(default_factory=dict)
+    seed: int = 0
+
+    def write_exr(self, path, **metadata):
+        from .exr import write_exr
+
+        write_exr(path, self, **metadata)
+
+
+def _integrator_desc(spec, scene_integrator: IntegratorDesc):
+    """Resolves `integrator=` (None, a name or a dict like the XML's) into
+    (type, params), checking every parameter."""
+    if spec is None:
+        itype, params, where = scene_integrator.type, dict(scene_integrator.params), "scene integrator"
+    elif isinstance(spec, str):
+        itype, params, where = spec, {}, f"integrator '{spec}'"
+    elif isinstance(spec, dict):
+        params = dict(spec)
+        if "type" not in params:
+            raise SceneError("integrator: dict needs a 'type'")
+        itype = params.pop("type")
+        where = "integrator"
+    else:
+        raise SceneError(f"integrator: expected None, a name or a dict, got {type(spec).__name__}")
+    if itype not in INTEGRATOR_PARAMS:
+        if itype in PLANNED_INTEGRATORS:
+            raise SceneError(f"{where}: estimator '{itype}' is not implemented yet")
+        raise SceneError(f"{where}: unknown estimator '{itype}' (known: {', '.join(sorted(INTEGRATOR_PARAMS))})")
+    schema = INTEGRATOR_PARAMS[itype]
+    resolved = {}
+    for k, v in params.items():
+        if k not in schema:
+            raise SceneError(f"{where}['{k}']: unknown parameter for '{itype}' (known: {', '.join(sorted(schema))})")
+        typ = schema[k][0]
+        if typ is bool:
+            if not isinstance(v, (bool, np.bool_)):
+                raise SceneError(f"{where}['{k}']: expected a boolean, got {v!r}")
+            v = bool(v)
+        else:
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                raise SceneError(f"{where}['{k}']: expected an integer, got {v!r}")
+            v = int(v)
+        resolved[k] = v
+    out = {"type": itype}
+    for k, (typ, default) in schema.items():
+        val = resolved.get(k, default)
+        if val is not None:
+            out[k] = val
+    if itype in ("path", "volpath"):
+        if out["max_depth"] == 0 or out["max_depth"] < -1:
+            raise SceneError(f"{where}['max_depth']: must be -1 (unbounded) or >= 1, got {out['max_depth']}")
+        if out["rr_depth"] < 1:
+            raise SceneError(f"{where}['rr_depth']: must be >= 1, got {out['rr_depth']}")
+    if itype == "direct":
+        if "shading_samples" in out:  # Mitsuba: sets both counts
+            out["emitter_samples"] = out["bsdf_samples"] = out.pop("shading_samples")
+        if out["emitter_samples"] < 0 or out["bsdf_samples"] < 0 or out["emitter_samples"] + out["bsdf_samples"] == 0:
+            raise SceneError(f"{where}: emitter_samples and bsdf_samples must be >= 0 and not both 0")
+    return out
+
+
+def _core_integrator(spec: dict):
+    from . import _core
+
+    c = _core.IntegratorDesc()
+    c.type = spec["type"]
+    for k in ("max_depth", "rr_depth", "hide_emitters", "emitter_samples", "bsdf_samples"):
+        if k in spec:
+            setattr(c, k, spec[k])
+    return c
+
+
+def _effects_mask(effects):
+    if effects is None:
+        return [True] * len(EFFECTS)
+    if isinstance(effects, str):
+        effects = [effects]
+    mask = [False] * len(EFFECTS)
+    for e in effects:
+        if e not in EFFECTS:
+            raise ValueError(f"effects: unknown effect class '{e}' (known: {', '.join(EFFECTS)})")
+        mask[EFFECTS.index(e)] = True
+    if not any(mask):
+        raise ValueError("effects: empty list; name at least one effect class")
+    return mask
+
+
+def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0,
+           threads: int = 0, checkpoints=None, effects=None,
+           progress: Optional[Callable[[int, int], None]] = None) -> RenderResult:
+    """Renders `scene` (from load_file/load_dict) and returns a RenderResult.
+
+    integrator: None (the scene's), a name, or a dict like the XML's.
+    spp: samples per pixel (default: the scene sampler's sample_count); with
+        `seconds` it caps the render.
+    seconds: wall-clock budget (steady clock).
+    seed: fixes the result bit for bit, whatever `threads` is.
+    checkpoints: spp counts at which to keep (spp, seconds, image, variance);
+        True for every power of two.
+    effects: simulate only these effect classes (see EFFECTS).
+    progress: called with (done, total) samples; total is 0 under a time budget.
+    Ctrl-C raises RenderCancelled carrying the finished passes.
+    """
+    from . import _core
+    from .scene import Scene
+
+    if not isinstance(scene, Scene):
+        raise TypeError(f"render: expected a radiometer Scene (from load_file/load_dict), got {type(scene).__name__}")
+    spec = _integrator_desc(integrator, scene.desc.integrator)
+    if seconds is not None:
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds) or seconds <= 0:
+            raise ValueError(f"seconds: expected a positive finite number, got {seconds!r}")
+    if spp is None:
+        spp = 0 if seconds is not None else scene.desc.sensor.spp
+    if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 0 or spp > 1 << 24:
+        raise ValueError(f"spp: expected an integer in 1..{1 << 24}, got {spp!r}")
+    if spp == 0 and seconds is None:
+        raise ValueError("spp: must be >= 1 when no seconds budget is given")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 1 << 64:
+        raise ValueError(f"seed: expected an integer in [0, 2^64), got {seed!r}")
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 0 <= threads <= 1024:
+        raise ValueError(f"threads: expected an integer in 0..1024 (0 = all cores), got {threads!r}")
+    if checkpoints is True:
+        top = spp if spp > 0 else 1 << 20
+        checkpoints = [1 << k for k in range(0, 31) if (1 << k) <= top]
+    elif checkpoints is None or checkpoints is False:
+        checkpoints = []
+    else:
+        checkpoints = [int(c) for c in checkpoints]
+        if any(c < 1 for c in checkpoints):
+            raise ValueError("checkpoints: spp counts must be >= 1")
+    mask = _effects_mask(effects)
+    core_scene = scene.core()
+    r = _core.render(core_scene, _core_integrator(spec), mask, int(spp), float(seconds or 0.0), int(seed),
+                     int(threads), checkpoints, progress)
+    stats = dict(r["stats"])
+    stats.update(threads=r["threads"], cancelled=r["cancelled"], features=core_scene.features,
+                 effects_simulated=[e for e, m in zip(EFFECTS, mask) if m])
+    result = RenderResult(image=r["image"], variance=r["variance"], effects=dict(r["effects"]), spp=r["spp"],
+                          seconds=r["seconds"], stats=stats, checkpoints=list(r["checkpoints"]), integrator=spec,
+                          seed=int(seed))
+    if r["interrupted"]:
+        raise RenderCancelled(result)
+    return result

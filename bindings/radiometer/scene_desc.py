@@ -1,0 +1,107 @@
+"""Plain-Python description of a scene, the loader's output.
+
+`load_dict` / `load_file` resolve everything Mitsuba leaves implicit (defaults,
+named IORs, `ref`s, transforms, fov_axis) into these dataclasses; `_build.py`
+turns them into the C++ scene. Every field mirrors `renderer/scene/desc.h`.
+All geometry is in world space; matrices are row-major 4x4 numpy float64.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+
+def _rgb(v=0.5):
+    return (float(v), float(v), float(v))
+
+
+def _eye():
+    return np.eye(4, dtype=np.float64)
+
+
+class SceneError(ValueError):
+    """A scene (file or dict) uses something outside the supported subset, or a
+    bad value. The message names the element and its place (file:line or key
+    path)."""
+
+
+@dataclass
+class BsdfDesc:
+    type: str = "diffuse"  # diffuse conductor roughconductor dielectric roughdielectric
+    #                        thindielectric plastic twosided null
+    id: str = ""  # the place it came from, for error messages
+    reflectance: tuple = field(default_factory=lambda: _rgb(0.5))
+    diffuse_reflectance: tuple = field(default_factory=lambda: _rgb(0.5))
+    specular_reflectance: tuple = field(default_factory=lambda: _rgb(1.0))
+    specular_transmittance: tuple = field(default_factory=lambda: _rgb(1.0))
+    eta: tuple = field(default_factory=lambda: _rgb(0.0))  # conductor, relative to ext_ior
+    k: tuple = field(default_factory=lambda: _rgb(1.0))
+    int_ior: float = 1.5046
+    ext_ior: float = 1.000277
+    alpha_u: float = 0.1
+    alpha_v: float = 0.1
+    distribution: str = "beckmann"
+    sample_visible: bool = True
+    nonlinear: bool = False
+    nested: list = field(default_factory=list)  # twosided: [bsdf] or [front, back]
+
+
+@dataclass
+class EmitterDesc:
+    type: str = "area"  # area point spot directional constant
+    id: str = ""
+    radiance: tuple = field(default_factory=lambda: _rgb(1.0))  # area, constant (scale applied)
+    intensity: tuple = field(default_factory=lambda: _rgb(1.0))  # point, spot (scale applied)
+    irradiance: tuple = field(default_factory=lambda: _rgb(1.0))  # directional (scale applied)
+    to_world: np.ndarray = field(default_factory=_eye)  # point/spot position+frame; directional: +z is the direction
+    cutoff_angle: float = 20.0
+    beam_width: float = -1.0
+
+
+@dataclass
+class ShapeDesc:
+    type: str = "mesh"  # mesh sphere disk (rectangle, cube, obj, ply become meshes)
+    id: str = ""
+    positions: Optional[np.ndarray] = None  # (N, 3) float32, world space
+    indices: Optional[np.ndarray] = None  # (M, 3) uint32
+    normals: Optional[np.ndarray] = None  # (N, 3) float32 world space, or None (face normals)
+    uvs: Optional[np.ndarray] = None  # (N, 2) float32 or None
+    to_world: np.ndarray = field(default_factory=_eye)  # sphere, disk
+    center: tuple = (0.0, 0.0, 0.0)  # sphere, world space
+    radius: float = 1.0  # sphere, world space
+    flip_normals: bool = False
+    bsdf: Optional[BsdfDesc] = None  # None: diffuse 0.5 (Mitsuba's default)
+    emitter: Optional[EmitterDesc] = None  # an area emitter attached to this shape
+    sensor: Optional["SensorDesc"] = None  # an irradiancemeter attached to this shape
+
+
+@dataclass
+class SensorDesc:
+    type: str = "perspective"  # perspective orthographic radiancemeter irradiancemeter
+    to_world: np.ndarray = field(default_factory=_eye)
+    fov_x: float = 39.3077  # degrees, horizontal (fov_axis already resolved)
+    near_clip: float = 1e-2
+    far_clip: float = 1e4
+    width: int = 256
+    height: int = 256
+    rfilter: str = "gaussian"  # box tent gaussian
+    filter_radius: float = 2.0
+    filter_stddev: float = 0.5
+    spp: int = 4  # from the sampler's sample_count
+
+
+@dataclass
+class IntegratorDesc:
+    type: str = "path"
+    params: dict = field(default_factory=dict)  # validated by the renderer facade
+
+
+@dataclass
+class SceneDesc:
+    shapes: list = field(default_factory=list)  # [ShapeDesc]
+    emitters: list = field(default_factory=list)  # [EmitterDesc], non-area
+    sensor: SensorDesc = field(default_factory=SensorDesc)
+    integrator: IntegratorDesc = field(default_factory=IntegratorDesc)
+    source: str = "<dict>"  # file path or "<dict>", for messages

@@ -1,0 +1,56 @@
+// PCG32 random number generator (O'Neill 2014, "PCG: A Family of Simple Fast
+// Space-Efficient Statistically Good Algorithms for Random Number Generation",
+// the pcg32 XSH-RR 64/32 variant). A generator is seeded per (seed, pixel,
+// sample) so results are identical whatever the thread count or tile order.
+#pragma once
+#include <cstdint>
+#include "core/math.h"
+
+namespace rm {
+
+class Pcg32 {
+public:
+    Pcg32() { seed(0x853c49e6748fea9bULL, 0xda3e39cb94b95bdbULL); }
+    Pcg32(uint64_t initstate, uint64_t initseq) { seed(initstate, initseq); }
+    void seed(uint64_t initstate, uint64_t initseq) {
+        state_ = 0u;
+        inc_ = (initseq << 1u) | 1u;
+        next_u32();
+        state_ += initstate;
+        next_u32();
+    }
+    uint32_t next_u32() {
+        uint64_t old = state_;
+        state_ = old * 6364136223846793005ULL + inc_;
+        uint32_t xorshifted = uint32_t(((old >> 18u) ^ old) >> 27u);
+        uint32_t rot = uint32_t(old >> 59u);
+        return (xorshifted >> rot) | (xorshifted << ((~rot + 1u) & 31));
+    }
+    // Uniform float in [0, 1): 24 random mantissa bits, never returns 1.
+    float next_float() { return float(next_u32() >> 8) * 0x1p-24f; }
+
+private:
+    uint64_t state_, inc_;
+};
+
+// SplitMix64 finaliser, used to decorrelate seeds (Steele et al. 2014).
+inline uint64_t mix64(uint64_t z) {
+    z += 0x9e3779b97f4a7c15ULL;
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return z ^ (z >> 31);
+}
+
+// Sampler: thin wrapper so integrators ask for 1D/2D samples by name.
+class Sampler {
+public:
+    Sampler(uint64_t seed, uint64_t pixel, uint64_t sample_index)
+        : rng_(mix64(seed ^ mix64(sample_index + 0x632be59bd9b4e019ULL)), mix64(pixel + (seed << 1))) {}
+    float next_1d() { return rng_.next_float(); }
+    Vec2 next_2d() { float a = rng_.next_float(); float b = rng_.next_float(); return {a, b}; }
+
+private:
+    Pcg32 rng_;
+};
+
+}  // namespace rm

@@ -1,0 +1,34 @@
+#include "integrators/common.h"
+
+namespace rm {
+
+Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsdf, const Vec3& wi_local,
+                      Sampler& sampler, ThreadStats& stats, float light_frac, float bsdf_frac) {
+    size_t n = scene.emitters.size();
+    float u_pick = sampler.next_1d();
+    Vec2 u = sampler.next_2d();
+    float u_extra = sampler.next_1d();
+    if (n == 0) return Color(0.f);
+    size_t idx = std::min(size_t(u_pick * float(n)), n - 1);
+    const Emitter& e = *scene.emitters[idx];
+    DirectSample ds = e.sample_direct(it.p, u, u_extra);
+    if (!(ds.pdf_w > 0.f) || is_black(ds.radiance)) return Color(0.f);
+    BsdfContext ctx;
+    Vec3 wo = it.to_local(ds.d);
+    Color f = bsdf.eval(ctx, wi_local, wo);
+    if (is_black(f)) return Color(0.f);
+    ++stats.shadow_rays;
+    if (!scene.visible(it, ds)) return Color(0.f);
+    float light_pdf = ds.pdf_w * emitter_pick_prob(scene);
+    float w = ds.is_delta ? 1.f : mis_power(light_pdf * light_frac, bsdf.pdf_w(ctx, wi_local, wo) * bsdf_frac);
+    return f * ds.radiance * (w / light_pdf);
+}
+
+float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
+                       float bsdf_pdf_w, float light_frac, float bsdf_frac) {
+    float light_pdf = it ? e.pdf_direct(prev_p, it->p, it->n) : e.pdf_direct(prev_p, Vec3(0.f), Vec3(0.f));
+    light_pdf *= emitter_pick_prob(scene);
+    return mis_power(bsdf_pdf_w * bsdf_frac, light_pdf * light_frac);
+}
+
+}  // namespace rm

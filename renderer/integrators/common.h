@@ -1,0 +1,23 @@
+// Pieces shared by the surface estimators: emitter selection, next event
+// estimation with MIS, emission found by BSDF sampling.
+#pragma once
+#include "integrators/integrator.h"
+
+namespace rm {
+
+// Uniform emitter selection, as Mitsuba 3's Scene::sample_emitter_direction.
+inline float emitter_pick_prob(const Scene& s) { return s.emitters.empty() ? 0.f : 1.f / float(s.emitters.size()); }
+
+// Next event estimation at `it` (Veach 1997, sec. 9.2: light sample weighted by
+// the power heuristic against BSDF sampling). Returns the contribution before
+// the path throughput; `light_frac`/`bsdf_frac` are the one-sample-model
+// fractions of Mitsuba's `direct` integrator (1, 1 for `path`).
+Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsdf, const Vec3& wi_local,
+                      Sampler& sampler, ThreadStats& stats, float light_frac = 1.f, float bsdf_frac = 1.f);
+
+// MIS weight of emission reached by a BSDF sample of density bsdf_pdf_w from
+// `prev`, landing on `it` (an area emitter) or escaping along d.
+float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
+                       float bsdf_pdf_w, float light_frac = 1.f, float bsdf_frac = 1.f);
+
+}  // namespace rm

@@ -1,0 +1,77 @@
+// Estimator interface and the per-path effect classification of DESIGN
+// section 3 (Heckbert's path notation).
+#pragma once
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "core/rng.h"
+#include "film/film.h"
+#include "scene/desc.h"
+#include "scene/scene.h"
+
+namespace rm {
+
+struct ThreadStats {
+    uint64_t rays = 0, shadow_rays = 0, paths = 0, nan_samples = 0, inf_samples = 0;
+    void merge(const ThreadStats& o) {
+        rays += o.rays; shadow_rays += o.shadow_rays; paths += o.paths;
+        nan_samples += o.nan_samples; inf_samples += o.inf_samples;
+    }
+};
+
+using EffectMask = std::array<bool, kNumEffects>;
+inline EffectMask all_effects() { EffectMask m; m.fill(true); return m; }
+
+// Tracks a camera path's vertex string E v1 v2 ... to file each contribution
+// under exactly one class: emission = LE, direct = LDE, caustic = LS+DE,
+// specular = L(anything)SE, indirect = every other surface path.
+struct PathClass {
+    int scatter_vertices = 0;  // v1..vk so far
+    bool first_specular = false;
+    bool rest_specular = true;  // v2..vk all specular
+    // Class of a contribution from an emitter reached right after the vertices
+    // pushed so far (E v1 .. vk L). For next event estimation at v_{k+1},
+    // classify a copy after push(false).
+    int classify() const {
+        if (scatter_vertices == 0) return kEmission;
+        if (first_specular) return kSpecular;
+        if (scatter_vertices == 1) return kDirect;
+        return rest_specular ? kCaustic : kIndirect;
+    }
+    void push(bool is_delta) {
+        ++scatter_vertices;
+        if (scatter_vertices == 1) first_specular = is_delta;
+        else rest_specular = rest_specular && is_delta;
+    }
+    // Can any class in `mask` still be produced by extending this path?
+    bool can_reach(const EffectMask& m) const {
+        if (scatter_vertices == 0) return true;
+        if (first_specular) return m[kSpecular];
+        if (scatter_vertices == 1) return m[kDirect] || m[kCaustic] || m[kIndirect];
+        return m[kIndirect] || (rest_specular && m[kCaustic]);
+    }
+};
+
+class Integrator {
+public:
+    virtual ~Integrator() = default;
+    // Radiance along one camera ray, split by effect class, into `out`.
+    virtual void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
+                        ThreadStats& stats) const = 0;
+    EffectMask mask = all_effects();
+};
+
+// Throws std::invalid_argument for an unknown type or a bad parameter.
+std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& desc, const EffectMask& mask);
+
+// Power heuristic with beta = 2 (Veach 1997, eq. 9.13), for one sample per strategy.
+inline float mis_power(float pdf_a, float pdf_b) {
+    float a = pdf_a * pdf_a, b = pdf_b * pdf_b;
+    if (!(a > 0.f)) return 0.f;
+    if (std::isinf(a)) return 1.f;
+    return a / (a + b);
+}
+
+}  // namespace rm

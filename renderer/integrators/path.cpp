@@ -1,0 +1,106 @@
+// `path`: unidirectional path tracing (Kajiya 1986) with next event estimation
+// and BSDF sampling combined by the power heuristic (Veach 1997, ch. 9), and
+// Russian roulette. Parameters, as Mitsuba 3's `path` plugin:
+//   max_depth      longest path in segments; -1 = unbounded; 1 = only emitters
+//                  seen directly; 2 = direct illumination
+//   rr_depth       path depth from which Russian roulette may stop a path
+//   hide_emitters  directly visible emitters appear black
+// Structure after pbrt-v4's PathIntegrator::Li (integrators.cpp): one loop,
+// direct lighting in its own helper (common.cpp).
+#include "integrators/common.h"
+
+namespace rm {
+
+class PathIntegrator final : public Integrator {
+public:
+    explicit PathIntegrator(const IntegratorDesc& d) : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters) {}
+
+    void sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
+                ThreadStats& stats) const override {
+        Ray ray = camera_ray;
+        Color beta(1.f);
+        float eta_scale = 1.f;  // undoes radiance scaling by eta^2 for Russian roulette
+        PathClass pc;
+        float prev_pdf_w = 0.f;
+        bool prev_delta = true;
+        Vec3 prev_p;
+        BsdfContext ctx;
+        for (int depth = 0;; ++depth) {
+            // 1. Find the next vertex.
+            Interaction it;
+            ++stats.rays;
+            bool hit = scene.intersect(ray, it);
+            bool count_emission = !(depth == 0 && hide_);
+            int cls = pc.classify();
+
+            // 2. Emission reached by the previous BSDF sample (or the camera ray),
+            //    weighted against next event estimation unless that sample was delta.
+            if (!hit) {
+                if (count_emission && mask[cls])
+                    for (const Emitter* e : scene.environment) {
+                        float w = (depth == 0 || prev_delta) ? 1.f : mis_emission_hit(scene, *e, prev_p, nullptr, prev_pdf_w);
+                        out.add(cls, beta * e->eval_environment(ray.d) * w);
+                    }
+                break;
+            }
+            const Shape& shape = *scene.shapes[it.shape];
+            if (shape.emitter >= 0 && count_emission && mask[cls]) {
+                const Emitter& e = *scene.emitters[shape.emitter];
+                Color le = e.eval(it, it.wi);
+                if (!is_black(le)) {
+                    float w = (depth == 0 || prev_delta) ? 1.f : mis_emission_hit(scene, e, prev_p, &it, prev_pdf_w);
+                    out.add(cls, beta * le * w);
+                }
+            }
+
+            // 3. Stop at max_depth (Mitsuba's meaning: depth + 1 segments so far),
+            //    or when no requested effect class is reachable any more.
+            if (max_depth_ >= 0 && depth + 1 >= max_depth_) break;
+            if (!pc.can_reach(mask)) break;
+            const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
+            Vec3 wi = it.to_local(it.wi);
+
+            // 4. Next event estimation (smooth lobes only).
+            if (bsdf.has_smooth() && !scene.emitters.empty()) {
+                PathClass pn = pc;
+                pn.push(false);
+                int ncls = pn.classify();
+                if (mask[ncls]) {
+                    Color ld = estimate_direct(scene, it, bsdf, wi, sampler, stats);
+                    out.add(ncls, beta * ld);
+                } else {
+                    // Keep the random-number stream aligned whatever the mask is.
+                    sampler.next_1d(); sampler.next_2d(); sampler.next_1d();
+                }
+            }
+
+            // 5. Sample the BSDF for the next direction.
+            BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+            if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
+            beta *= bs.weight;
+            eta_scale *= sqr(bs.eta);
+            pc.push(bs.is_delta);
+            prev_pdf_w = bs.pdf_w;
+            prev_delta = bs.is_delta;
+            ray = it.spawn(it.to_world(bs.wo));
+            // MIS densities of what this ray hits are taken from where it starts.
+            prev_p = ray.o;
+
+            // 6. Russian roulette (Mitsuba: q = min(max(beta) * eta^2, 0.95)).
+            float rr_u = sampler.next_1d();
+            if (depth + 1 >= rr_depth_) {
+                float q = std::min(max_component(beta) * eta_scale, 0.95f);
+                if (!(rr_u < q)) break;
+                beta /= q;
+            }
+        }
+    }
+
+private:
+    int max_depth_, rr_depth_;
+    bool hide_;
+};
+
+std::unique_ptr<Integrator> make_path_integrator(const IntegratorDesc& d) { return std::make_unique<PathIntegrator>(d); }
+
+}  // namespace rm

@@ -1,0 +1,217 @@
+#include "integrators/render.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+
+namespace rm {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+constexpr int kTile = 16;
+
+struct PassJob {
+    const Scene* scene;
+    const Integrator* integrator;
+    const FilterSampler* filter;
+    Film* film;
+    uint64_t seed;
+    int s0, s1;  // sample indices [s0, s1) of this pass
+    int tiles_x, tiles_y;
+    std::atomic<int> next_tile{0};
+    std::atomic<uint64_t> done{0};
+    std::atomic<bool>* cancel;
+    std::vector<ThreadStats> stats;
+};
+
+void render_tile(PassJob& job, int tile, ThreadStats& stats) {
+    const Scene& scene = *job.scene;
+    const Sensor& sensor = *scene.sensor;
+    int W = sensor.width, H = sensor.height;
+    int tx = tile % job.tiles_x, ty = tile / job.tiles_x;
+    int x0 = tx * kTile, y0 = ty * kTile;
+    int x1 = std::min(x0 + kTile, W), y1 = std::min(y0 + kTile, H);
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x) {
+            if (job.cancel->load(std::memory_order_relaxed)) return;
+            int pixel = y * W + x;
+            for (int s = job.s0; s < job.s1; ++s) {
+                Sampler sampler(job.seed, uint64_t(pixel), uint64_t(s));
+                // Filter importance sampling, kept inside the film.
+                float fx = job.filter->sample(sampler.next_1d(), -float(x) - 0.5f, float(W - x) - 0.5f);
+                float fy = job.filter->sample(sampler.next_1d(), -float(y) - 0.5f, float(H - y) - 0.5f);
+                Vec2 film_pos(float(x) + 0.5f + fx, float(y) + 0.5f + fy);
+                float u1 = sampler.next_1d();
+                Vec2 u2 = sampler.next_2d(), u3 = sampler.next_2d();
+                SensorRay sr = sensor.sample_ray(film_pos, u1, u2, u3);
+                EffectRadiance er;
+                ++stats.paths;
+                job.integrator->sample(scene, sampler, sr.ray, er, stats);
+                Color total(0.f);
+                for (int k = 0; k < kNumEffects; ++k) {
+                    er.by_effect[k] *= sr.weight;
+                    total += er.by_effect[k];
+                }
+                // A NaN or Inf sample is counted and dropped, never written.
+                if (!is_finite(total)) {
+                    bool nan = std::isnan(total.x) || std::isnan(total.y) || std::isnan(total.z);
+                    if (nan) ++stats.nan_samples; else ++stats.inf_samples;
+                    er = EffectRadiance();
+                }
+                job.film->add(pixel, er);
+            }
+            job.done.fetch_add(uint64_t(job.s1 - job.s0), std::memory_order_relaxed);
+        }
+}
+
+}  // namespace
+
+RenderOutput render(const Scene& scene, const Integrator& integrator, const RenderOptions& opts, const PollFn& poll) {
+    if (!scene.committed()) throw std::logic_error("render: scene is not committed");
+    if (opts.spp < 0) throw std::invalid_argument("render: spp must be >= 0");
+    if (!(opts.seconds >= 0)) throw std::invalid_argument("render: seconds must be >= 0");
+    if (opts.spp == 0 && opts.seconds <= 0) throw std::invalid_argument("render: give spp or seconds");
+    const Sensor& sensor = *scene.sensor;
+    const SensorDesc& sd = scene.sensor_desc;
+    int W = sensor.width, H = sensor.height;
+    FilterSampler filter(sd.rfilter, sd.filter_radius, sd.filter_stddev);
+    Film film(W, H);       // finished passes
+    Film pass_film(W, H);  // the pass in flight; merged only when complete
+
+    int threads = opts.threads > 0 ? opts.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+    RenderOutput out;
+    out.width = W;
+    out.height = H;
+    out.threads = threads;
+    std::atomic<bool> cancel{false};
+    auto t0 = Clock::now();
+    std::vector<int> cps = opts.checkpoints;
+    std::sort(cps.begin(), cps.end());
+    cps.erase(std::unique(cps.begin(), cps.end()), cps.end());
+
+    int tiles_x = (W + kTile - 1) / kTile, tiles_y = (H + kTile - 1) / kTile;
+    uint64_t pixels = uint64_t(W) * uint64_t(H);
+    uint64_t total = opts.seconds > 0 ? 0 : pixels * uint64_t(opts.spp);
+    uint64_t done_before = 0;
+    int spp_done = 0;
+    double sec_per_spp = 0;
+    ThreadStats stats;
+
+    while (true) {
+        // Decide this pass. Under an spp budget the passes are fixed by the
+        // budget alone (1/16 of it, at checkpoints too), so the summation order
+        // and hence the bytes do not depend on timing; a cancel keeps every
+        // finished pass. Under a time budget, passes take ~1/8 of what is left.
+        int cap = opts.spp > 0 ? opts.spp : (1 << 30);
+        if (spp_done >= cap) break;
+        int s1 = cap;
+        for (int c : cps)
+            if (c > spp_done) { s1 = std::min(s1, c); break; }
+        if (opts.seconds > 0) {
+            double left = opts.seconds - since(t0);
+            if (left <= 0) break;
+            if (spp_done == 0) {
+                s1 = std::min(s1, 1);
+            } else {
+                if (sec_per_spp > left) break;  // one more sample per pixel would overrun the budget
+                int n = int(std::min(1e6, std::max(1.0, std::floor(left / 8.0 / std::max(sec_per_spp, 1e-9)))));
+                s1 = std::min(s1, spp_done + n);
+            }
+        } else {
+            int chunk = std::max(1, (opts.spp + 15) / 16);
+            s1 = std::min(s1, (spp_done / chunk + 1) * chunk);
+        }
+        PassJob job;
+        job.scene = &scene;
+        job.integrator = &integrator;
+        job.filter = &filter;
+        job.film = &pass_film;
+        job.seed = opts.seed;
+        job.s0 = spp_done;
+        job.s1 = s1;
+        job.tiles_x = tiles_x;
+        job.tiles_y = tiles_y;
+        job.cancel = &cancel;
+        job.stats.resize(threads);
+        int n_tiles = tiles_x * tiles_y;
+        std::mutex mu;
+        std::condition_variable cv;
+        std::atomic<int> running{threads};
+        auto pass_t0 = Clock::now();
+        auto worker = [&](int t) {
+            for (;;) {
+                int tile = job.next_tile.fetch_add(1);
+                if (tile >= n_tiles || cancel.load()) break;
+                render_tile(job, tile, job.stats[t]);
+            }
+            if (running.fetch_sub(1) == 1) {
+                std::lock_guard<std::mutex> lk(mu);
+                cv.notify_all();
+            }
+        };
+        std::vector<std::thread> pool;
+        std::exception_ptr error;
+        try {
+            for (int t = 0; t < threads; ++t) pool.emplace_back(worker, t);
+        } catch (...) {
+            error = std::current_exception();
+            cancel = true;
+        }
+        // The calling thread polls progress and cancellation while workers run.
+        {
+            std::unique_lock<std::mutex> lk(mu);
+            while (running.load() > 0 && !error) {
+                cv.wait_for(lk, std::chrono::milliseconds(50));
+                if (running.load() == 0) break;
+                lk.unlock();
+                bool go_on = true;
+                try {
+                    go_on = !poll || poll(done_before + job.done.load(), total);
+                } catch (...) {
+                    error = std::current_exception();
+                    go_on = false;
+                }
+                if (!go_on) cancel = true;
+                lk.lock();
+            }
+        }
+        for (auto& th : pool) th.join();
+        if (error) std::rethrow_exception(error);
+        for (auto& s : job.stats) stats.merge(s);
+        if (cancel.load()) {
+            out.cancelled = true;
+            break;  // the unfinished pass is dropped; finished passes stand
+        }
+        film.merge_and_clear(pass_film);
+        double pass_sec = since(pass_t0);
+        done_before += job.done.load();
+        int n = s1 - spp_done;
+        sec_per_spp = pass_sec / n;
+        spp_done = s1;
+        if (poll && !poll(done_before, total)) {
+            out.cancelled = true;
+        }
+        if (std::binary_search(cps.begin(), cps.end(), spp_done)) {
+            Checkpoint cp;
+            cp.spp = spp_done;
+            cp.seconds = since(t0);
+            film.develop(spp_done, cp.image, cp.variance, nullptr);
+            out.checkpoints.push_back(std::move(cp));
+        }
+        if (out.cancelled) break;
+    }
+    out.spp = spp_done;
+    out.seconds = since(t0);
+    out.stats = stats;
+    film.develop(spp_done, out.image, out.variance, &out.effects);
+    return out;
+}
+
+}  // namespace rm

@@ -1,0 +1,48 @@
+// The render driver: tiles over threads, passes over samples, wall-clock
+// budgets, checkpoints, progress and cancellation. Results are identical for
+// a given seed whatever the thread count: every (pixel, sample) has its own
+// random stream and each pixel's samples are accumulated in order.
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "integrators/integrator.h"
+
+namespace rm {
+
+struct RenderOptions {
+    int spp = 16;              // samples per pixel; with seconds > 0 an upper bound (0: none)
+    double seconds = 0;        // wall-clock budget (steady clock); 0 = none
+    uint64_t seed = 0;
+    int threads = 0;           // 0 = all hardware threads
+    std::vector<int> checkpoints;  // spp counts at which to keep a snapshot
+};
+
+struct Checkpoint {
+    int spp = 0;
+    double seconds = 0;
+    std::vector<float> image, variance;
+};
+
+struct RenderOutput {
+    int width = 0, height = 0, spp = 0;
+    double seconds = 0;
+    bool cancelled = false;
+    std::vector<float> image, variance;
+    std::vector<std::vector<float>> effects;  // kNumEffects images
+    std::vector<Checkpoint> checkpoints;
+    ThreadStats stats;
+    int threads = 0;
+    double setup_seconds = 0;
+};
+
+// Called about every 50 ms from the calling thread with (done, total) sample
+// counts (total 0 when only a time budget bounds the render); returning false
+// cancels the render, which then returns what it finished.
+using PollFn = std::function<bool(uint64_t done, uint64_t total)>;
+
+RenderOutput render(const Scene& scene, const Integrator& integrator, const RenderOptions& opts, const PollFn& poll);
+
+}  // namespace rm

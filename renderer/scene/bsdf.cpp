@@ -1,0 +1,612 @@
+// The BSDF plugins, with Mitsuba 3's names, parameters and semantics (the
+// suite compares our images with Mitsuba's per pixel). All directions are in
+// the local shading frame, pointing away from the surface; eval() includes
+// |cos theta_o|; a sample's weight is eval / pdf_w, or for a delta lobe its
+// Fresnel/albedo factor over the lobe's selection probability (pdf_w).
+//
+// Parameters (BsdfDesc fields; the Python loader resolves Mitsuba's defaults
+// and named IORs, so e.g. plastic's default int_ior, polypropylene = 1.49,
+// arrives here already filled in):
+//  diffuse          reflectance. One-sided: 0 unless wi.z > 0 and wo.z > 0.
+//  conductor        eta, k (complex IOR relative to the exterior; (0, 1) is
+//                   Mitsuba's material "none", a perfect mirror, F = 1),
+//                   specular_reflectance. One-sided (wi.z > 0).
+//  roughconductor   as conductor + distribution (beckmann | ggx), alpha_u,
+//                   alpha_v, sample_visible. One-sided.
+//  dielectric       int_ior, ext_ior, specular_reflectance,
+//                   specular_transmittance. Two-sided: wi.z < 0 is inside.
+//  roughdielectric  as dielectric + distribution, alpha_u, alpha_v,
+//                   sample_visible. Two-sided. int_ior == ext_ior is rejected
+//                   (as Mitsuba does): the transmission lobe would be a delta.
+//  thindielectric   int_ior, ext_ior, specular_reflectance,
+//                   specular_transmittance. Two-sided; transmission goes straight
+//                   through and is flagged kNull, as in Mitsuba.
+//  plastic          int_ior, ext_ior, diffuse_reflectance, specular_reflectance,
+//                   nonlinear. One-sided smooth coating over a diffuse base.
+//  twosided         nested: 1 BSDF used on both sides, or 2 (front, back). The
+//                   nested BSDFs must not transmit (as Mitsuba).
+//  null             none. Passes light unchanged (medium boundaries).
+// Alphas below 1e-4 are clamped to 1e-4 (Mitsuba does the same); negative or
+// non-finite values of any parameter are rejected.
+#include "scene/bsdf.h"
+
+#include <stdexcept>
+#include <string>
+
+#include "core/warp.h"
+#include "scene/fresnel.h"
+#include "scene/microfacet.h"
+
+namespace rm {
+
+namespace {
+
+// ---------------------------------------------------------------------------
+// Helpers
+
+// a with the sign of b flipped in (Mitsuba's mulsign: negative zero counts as negative).
+inline float mulsign(float a, float b) { return std::signbit(b) ? -a : a; }
+
+// The last line of defence of "no NaN, no Inf": a sample that is not finite
+// and positive in every part becomes a failed sample.
+BsdfSample sanitize(BsdfSample bs) {
+    if (!(bs.pdf_w > 0.f) || !std::isfinite(bs.pdf_w) || !is_finite(bs.weight) || !is_finite(bs.wo) ||
+        !std::isfinite(bs.eta) || min_component(bs.weight) < 0.f)
+        return BsdfSample{};
+    return bs;
+}
+inline Color finite_or_zero(const Color& c) { return is_finite(c) ? c : Color(0.f); }
+inline float finite_or_zero(float v) { return std::isfinite(v) ? v : 0.f; }
+
+[[noreturn]] void fail(const BsdfDesc& d, const std::string& param, const std::string& why) {
+    throw std::invalid_argument("bsdf '" + d.id + "' (type '" + d.type + "'): parameter '" + param + "' " + why);
+}
+
+void check_color(const BsdfDesc& d, const char* name, const Color& c) {
+    if (!is_finite(c) || min_component(c) < 0.f) fail(d, name, "must be finite and non-negative");
+}
+
+// Relative IOR int_ior / ext_ior, validated.
+float relative_ior(const BsdfDesc& d) {
+    if (!std::isfinite(d.int_ior) || !(d.int_ior > 0.f)) fail(d, "int_ior", "must be finite and positive");
+    if (!std::isfinite(d.ext_ior) || !(d.ext_ior > 0.f)) fail(d, "ext_ior", "must be finite and positive");
+    return d.int_ior / d.ext_ior;
+}
+
+MicrofacetDistribution make_distribution(const BsdfDesc& d) {
+    MicrofacetType type;
+    if (d.distribution == "beckmann")
+        type = MicrofacetType::Beckmann;
+    else if (d.distribution == "ggx")
+        type = MicrofacetType::GGX;
+    else
+        fail(d, "distribution", "must be \"beckmann\" or \"ggx\", got \"" + d.distribution + "\"");
+    if (!std::isfinite(d.alpha_u) || d.alpha_u < 0.f) fail(d, "alpha_u", "must be finite and >= 0");
+    if (!std::isfinite(d.alpha_v) || d.alpha_v < 0.f) fail(d, "alpha_v", "must be finite and >= 0");
+    return MicrofacetDistribution(type, d.alpha_u, d.alpha_v, d.sample_visible);
+}
+
+// ---------------------------------------------------------------------------
+// diffuse: Lambertian, f = reflectance / pi, cosine-weighted sampling
+// (PBR4 sec. 9.2; Mitsuba src/bsdfs/diffuse.cpp).
+
+class DiffuseBsdf final : public Bsdf {
+public:
+    explicit DiffuseBsdf(const Color& reflectance) : reflectance_(reflectance) { flags_ = kDiffuseReflection; }
+
+    BsdfSample sample(const BsdfContext&, const Vec3& wi, float, Vec2 u2) const override {
+        BsdfSample bs;
+        if (!(wi.z > 0.f)) return bs;
+        bs.wo = warp::square_to_cosine_hemisphere(u2);
+        bs.pdf_w = warp::square_to_cosine_hemisphere_pdf_w(bs.wo);
+        bs.weight = reflectance_;  // (rho / pi) cos / (cos / pi)
+        bs.sampled_flags = kDiffuseReflection;
+        return sanitize(bs);
+    }
+    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+        if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
+        return reflectance_ * (wo.z * kInvPi);
+    }
+    float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+        if (!(wi.z > 0.f) || !(wo.z > 0.f)) return 0.f;
+        return warp::square_to_cosine_hemisphere_pdf_w(wo);
+    }
+
+private:
+    Color reflectance_;
+};
+
+// ---------------------------------------------------------------------------
+// conductor: smooth metal, a single delta reflection weighted by the exact
+// complex Fresnel reflectance (Mitsuba src/bsdfs/conductor.cpp).
+
+class ConductorBsdf final : public Bsdf {
+public:
+    ConductorBsdf(const Color& eta, const Color& k, const Color& specular)
+        : eta_(eta), k_(k), specular_(specular) {
+        flags_ = kDeltaReflection;
+    }
+
+    BsdfSample sample(const BsdfContext&, const Vec3& wi, float, Vec2) const override {
+        BsdfSample bs;
+        if (!(wi.z > 0.f)) return bs;
+        bs.wo = reflect_local(wi);
+        bs.pdf_w = 1.f;
+        bs.is_delta = true;
+        bs.sampled_flags = kDeltaReflection;
+        bs.weight = specular_ * fresnel_conductor(wi.z, eta_, k_);
+        return sanitize(bs);
+    }
+    Color eval(const BsdfContext&, const Vec3&, const Vec3&) const override { return Color(0.f); }
+    float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
+
+private:
+    Color eta_, k_, specular_;
+};
+
+// ---------------------------------------------------------------------------
+// roughconductor: Torrance-Sparrow microfacet reflection,
+// f = F(wi.h) D(h) G(wi, wo, h) / (4 cos_i cos_o) (Walter et al. 2007, eq. 20),
+// eval includes cos_o. Sampling: m from the VNDF (or D cos), wo = reflect(wi, m),
+// pdf_w(wo) = pdf(m) / (4 wo.m) (Walter et al. 2007, eq. 14).
+// Mitsuba src/bsdfs/roughconductor.cpp.
+
+class RoughConductorBsdf final : public Bsdf {
+public:
+    RoughConductorBsdf(const MicrofacetDistribution& distr, const Color& eta, const Color& k,
+                       const Color& specular)
+        : distr_(distr), eta_(eta), k_(k), specular_(specular) {
+        flags_ = kGlossyReflection;
+    }
+
+    BsdfSample sample(const BsdfContext&, const Vec3& wi, float, Vec2 u2) const override {
+        BsdfSample bs;
+        if (!(wi.z > 0.f)) return bs;
+        MicrofacetSample ms = distr_.sample(wi, u2);
+        if (!(ms.pdf_w > 0.f)) return bs;
+        const Vec3 m = ms.m;
+        bs.wo = reflect(wi, m);
+        const float wo_m = dot(bs.wo, m);
+        if (!(bs.wo.z > 0.f) || !(wo_m > 0.f)) return BsdfSample{};
+        bs.pdf_w = ms.pdf_w / (4.f * wo_m);
+        bs.sampled_flags = kGlossyReflection;
+        // eval / pdf: with visible normals D G1(wi) cancels, leaving G1(wo)
+        // (Heitz & d'Eon 2014, sec. 5); otherwise Walter et al. 2007, eq. 41.
+        float w;
+        if (distr_.sample_visible())
+            w = distr_.G1(bs.wo, m);
+        else
+            w = distr_.G(wi, bs.wo, m) * dot(wi, m) / (wi.z * m.z);
+        bs.weight = specular_ * fresnel_conductor(dot(wi, m), eta_, k_) * w;
+        return sanitize(bs);
+    }
+
+    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+        if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
+        const Vec3 h = wi + wo;
+        const float len = length(h);
+        if (!(len > 0.f)) return Color(0.f);
+        const Vec3 m = h / len;
+        const float D = distr_.D(m);
+        if (D == 0.f) return Color(0.f);
+        const float G = distr_.G(wi, wo, m);
+        const float value = D * G / (4.f * wi.z);
+        return finite_or_zero(specular_ * fresnel_conductor(dot(wi, m), eta_, k_) * value);
+    }
+
+    float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+        if (!(wi.z > 0.f) || !(wo.z > 0.f)) return 0.f;
+        const Vec3 h = wi + wo;
+        const float len = length(h);
+        if (!(len > 0.f)) return 0.f;
+        const Vec3 m = h / len;
+        // The side checks G1 applies in sample() must hold here too.
+        const float wo_m = dot(wo, m);
+        if (!(dot(wi, m) > 0.f) || !(wo_m > 0.f)) return 0.f;
+        return finite_or_zero(distr_.pdf_w(wi, m) / (4.f * wo_m));
+    }
+
+private:
+    MicrofacetDistribution distr_;
+    Color eta_, k_, specular_;
+};
+
+// ---------------------------------------------------------------------------
+// dielectric: smooth interface, delta reflection and refraction chosen with
+// probability F and 1 - F, so the weight is the lobe's albedo alone (Mitsuba
+// src/bsdfs/dielectric.cpp). Radiance transport through the interface is
+// scaled by (eta_i / eta_t)^2 = eta_ti^2 (Veach 1997, "Robust Monte Carlo
+// Methods for Light Transport Simulation", sec. 5.2); importance transport is not.
+
+class DielectricBsdf final : public Bsdf {
+public:
+    DielectricBsdf(float eta, const Color& spec_r, const Color& spec_t) : eta_(eta), spec_r_(spec_r), spec_t_(spec_t) {
+        flags_ = kDeltaReflection | kDeltaTransmission;
+    }
+
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2) const override {
+        const FresnelDielectric fr = fresnel_dielectric(wi.z, eta_);
+        BsdfSample bs;
+        bs.is_delta = true;
+        // Strict '<' so that a lobe of probability 0 is never picked.
+        if (u1 < fr.F) {
+            bs.wo = reflect_local(wi);
+            bs.pdf_w = fr.F;
+            bs.weight = spec_r_;
+            bs.sampled_flags = kDeltaReflection;
+        } else {
+            bs.wo = refract_local(wi, fr.cos_theta_t, fr.eta_ti);
+            bs.pdf_w = 1.f - fr.F;
+            bs.weight = spec_t_;
+            if (ctx.mode == TransportMode::Radiance) bs.weight *= sqr(fr.eta_ti);
+            bs.eta = fr.eta_it;
+            bs.sampled_flags = kDeltaTransmission;
+        }
+        return sanitize(bs);
+    }
+    Color eval(const BsdfContext&, const Vec3&, const Vec3&) const override { return Color(0.f); }
+    float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
+
+private:
+    float eta_;
+    Color spec_r_, spec_t_;
+};
+
+// ---------------------------------------------------------------------------
+// roughdielectric: Walter et al. 2007, "Microfacet Models for Refraction
+// through Rough Surfaces". Reflection f_r (eq. 20) with h_r (eq. 13), refraction
+// f_t (eq. 21) with h_t = -(wi + eta wo) (eq. 16); the half-vector Jacobians
+// are eqs. 14 and 17. The lobe is chosen with probability F(wi.m) after m is
+// sampled (as Mitsuba). In Radiance mode f_t carries the extra 1/eta^2 of
+// radiance compression that the paper leaves out (Mitsuba
+// src/bsdfs/roughdielectric.cpp; Veach 1997, sec. 5.2).
+
+class RoughDielectricBsdf final : public Bsdf {
+public:
+    RoughDielectricBsdf(const MicrofacetDistribution& distr, float eta, const Color& spec_r, const Color& spec_t)
+        : distr_(distr), eta_(eta), spec_r_(spec_r), spec_t_(spec_t) {
+        flags_ = kGlossyReflection | kGlossyTransmission;
+    }
+
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
+        BsdfSample bs;
+        const float cos_i = wi.z;
+        if (cos_i == 0.f || !std::isfinite(cos_i)) return bs;  // perfectly grazing
+
+        // Sample m on the side of wi (microfacets face the macro normal's side).
+        const MicrofacetDistribution sdistr = sampling_distribution(cos_i);
+        const Vec3 wi_up = wi * mulsign(1.f, cos_i);
+        const MicrofacetSample ms = sdistr.sample(wi_up, u2);
+        if (!(ms.pdf_w > 0.f)) return bs;
+        const Vec3 m = ms.m;
+
+        const float wi_m = dot(wi, m);
+        const FresnelDielectric fr = fresnel_dielectric(wi_m, eta_);
+        float dwh_dwo;
+        Color weight;
+        if (u1 < fr.F) {
+            bs.wo = reflect(wi, m);
+            bs.sampled_flags = kGlossyReflection;
+            bs.pdf_w = ms.pdf_w * fr.F;
+            dwh_dwo = 1.f / (4.f * dot(bs.wo, m));  // eq. 14
+            weight = spec_r_;
+        } else {
+            bs.wo = refract(wi, m, fr.cos_theta_t, fr.eta_ti);
+            bs.sampled_flags = kGlossyTransmission;
+            bs.eta = fr.eta_it;
+            bs.pdf_w = ms.pdf_w * (1.f - fr.F);
+            const float wo_m = dot(bs.wo, m);
+            dwh_dwo = sqr(fr.eta_it) * wo_m / sqr(wi_m + fr.eta_it * wo_m);  // eq. 17
+            weight = spec_t_;
+            if (ctx.mode == TransportMode::Radiance) weight *= sqr(fr.eta_ti);
+        }
+        bs.pdf_w *= std::fabs(dwh_dwo);
+
+        // eval / pdf. With visible normals, D G1(wi) |wi.m| / |cos_i| cancels and
+        // G1(wo) is left (Heitz & d'Eon 2014, sec. 5). Sampling D cos from a widened
+        // distribution leaves G |wi.m| / (|cos_i| cos_m) (Walter eq. 41) times
+        // D / D_widened; Mitsuba omits the latter ratio (its weights there are not
+        // eval / pdf), we keep it so that weight == eval / pdf always holds.
+        float geometric;
+        if (distr_.sample_visible()) {
+            geometric = distr_.G1(bs.wo, m);
+        } else {
+            const float Ds = sdistr.D(m);
+            if (!(Ds > 0.f)) return BsdfSample{};
+            geometric = distr_.G(wi, bs.wo, m) * std::fabs(wi_m) / (std::fabs(cos_i) * m.z) * (distr_.D(m) / Ds);
+        }
+        // G1 = 0: wo left on the wrong side of the macro surface (e.g. a reflection
+        // through it). pdf_w() is 0 there too, so the sample is a failure.
+        if (!(geometric > 0.f)) return BsdfSample{};
+        bs.weight = weight * geometric;
+        return sanitize(bs);
+    }
+
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
+        Color value;
+        float pdf;
+        eval_pdf(ctx, wi, wo, &value, &pdf);
+        return value;
+    }
+    float pdf_w(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
+        Color value;
+        float pdf;
+        eval_pdf(ctx, wi, wo, &value, &pdf);
+        return pdf;
+    }
+
+private:
+    // Walter et al. 2007 widen the lobe for D cos sampling (end of sec. 5.3).
+    MicrofacetDistribution sampling_distribution(float cos_i) const {
+        MicrofacetDistribution d = distr_;
+        if (!distr_.sample_visible()) d.scale_alpha(1.2f - 0.2f * std::sqrt(std::fabs(cos_i)));
+        return d;
+    }
+
+    void eval_pdf(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo, Color* value, float* pdf) const {
+        *value = Color(0.f);
+        *pdf = 0.f;
+        const float cos_i = wi.z, cos_o = wo.z;
+        if (cos_i == 0.f) return;
+        const bool is_reflect = cos_i * cos_o > 0.f;
+        // Relative IOR across the interface in the direction wi -> wo.
+        const float eta = cos_i > 0.f ? eta_ : 1.f / eta_;
+
+        // Generalised half vector (eqs. 13 and 16), oriented like the macro normal.
+        Vec3 h = is_reflect ? wi + wo : wi + wo * eta;
+        const float len = length(h);
+        if (!(len > 0.f) || !std::isfinite(len)) return;
+        Vec3 m = h / len;
+        m = m * mulsign(1.f, m.z);
+
+        const float wi_m = dot(wi, m), wo_m = dot(wo, m);
+        // Micro- and macro-surface must agree on the side of each direction
+        // (the condition G1 checks; needed in the pdf as well).
+        if (!(wi_m * cos_i > 0.f) || !(wo_m * cos_o > 0.f)) return;
+
+        const float D = distr_.D(m);
+        if (D == 0.f) return;
+        const float F = fresnel_dielectric(wi_m, eta_).F;
+        const float G = distr_.G(wi, wo, m);
+
+        const MicrofacetDistribution sdistr = sampling_distribution(cos_i);
+        const Vec3 wi_up = wi * mulsign(1.f, cos_i);
+        const float pdf_m = sdistr.pdf_w(wi_up, m);
+
+        if (is_reflect) {
+            *value = spec_r_ * (F * D * G / (4.f * std::fabs(cos_i)));  // eq. 20 times |cos_o|
+            *pdf = pdf_m * F / (4.f * std::fabs(wo_m));                 // eq. 14
+        } else {
+            const float denom = sqr(wi_m + eta * wo_m);
+            if (!(denom > 0.f)) return;
+            const float scale = ctx.mode == TransportMode::Radiance ? 1.f / sqr(eta) : 1.f;
+            // eq. 21 times |cos_o|.
+            const float ft = std::fabs(scale * (1.f - F) * D * G * sqr(eta) * wi_m * wo_m / (cos_i * denom));
+            *value = spec_t_ * ft;
+            *pdf = pdf_m * (1.f - F) * std::fabs(sqr(eta) * wo_m / denom);  // eq. 17
+        }
+        *value = finite_or_zero(*value);
+        *pdf = finite_or_zero(*pdf);
+    }
+
+    MicrofacetDistribution distr_;
+    float eta_;
+    Color spec_r_, spec_t_;
+};
+
+// ---------------------------------------------------------------------------
+// thindielectric: a thin slab with two parallel smooth interfaces. Summing the
+// internal bounces, R' = R + T^2 R / (1 - R^2) = 2R / (1 + R), T' = 1 - R'
+// (no absorption); transmission leaves along -wi (the two refractions undo each
+// other) and is a kNull lobe, as Mitsuba's (src/bsdfs/thindielectric.cpp).
+
+class ThinDielectricBsdf final : public Bsdf {
+public:
+    ThinDielectricBsdf(float eta, const Color& spec_r, const Color& spec_t) : eta_(eta), spec_r_(spec_r), spec_t_(spec_t) {
+        flags_ = kDeltaReflection | kNull;
+    }
+
+    BsdfSample sample(const BsdfContext&, const Vec3& wi, float u1, Vec2) const override {
+        float R = fresnel_dielectric(std::fabs(wi.z), eta_).F;
+        R = 2.f * R / (1.f + R);
+        BsdfSample bs;
+        bs.is_delta = true;
+        if (u1 < R) {
+            bs.wo = reflect_local(wi);
+            bs.pdf_w = R;
+            bs.weight = spec_r_;
+            bs.sampled_flags = kDeltaReflection;
+        } else {
+            bs.wo = -wi;
+            bs.pdf_w = 1.f - R;
+            bs.weight = spec_t_;
+            bs.sampled_flags = kNull;
+        }
+        return sanitize(bs);
+    }
+    Color eval(const BsdfContext&, const Vec3&, const Vec3&) const override { return Color(0.f); }
+    float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
+
+private:
+    float eta_;
+    Color spec_r_, spec_t_;
+};
+
+// ---------------------------------------------------------------------------
+// plastic: smooth dielectric coating over a Lambertian base, with the coating's
+// internal reflections summed in closed form (Weidlich & Wilkie 2007,
+// "Arbitrarily Layered Micro-Facet Surfaces"; Mitsuba src/bsdfs/plastic.cpp):
+// f_d = rho / (1 - Fdr_int) (or rho / (1 - rho Fdr_int) when nonlinear)
+//       * (1 - F(cos_i)) (1 - F(cos_o)) / eta^2 / pi.
+// The specular lobe is picked with probability proportional to
+// F(cos_i) s against (1 - F(cos_i)) (1 - s), s = mean(spec) / (mean(diffuse) + mean(spec)).
+
+class PlasticBsdf final : public Bsdf {
+public:
+    PlasticBsdf(float eta, const Color& diffuse, const Color& specular, bool nonlinear)
+        : eta_(eta), specular_(specular) {
+        flags_ = kDeltaReflection | kDiffuseReflection;
+        inv_eta2_ = 1.f / (eta * eta);
+        fdr_int_ = fresnel_diffuse_reflectance(1.f / eta);
+        const float d_mean = average(diffuse), s_mean = average(specular);
+        specular_sampling_weight_ = (d_mean + s_mean) > 0.f ? s_mean / (d_mean + s_mean) : 0.5f;
+        // The diffuse albedo including the internal-reflection normalisation.
+        const Color denom = nonlinear ? Color(1.f) - diffuse * fdr_int_ : Color(1.f - fdr_int_);
+        diffuse_norm_ = finite_or_zero(diffuse / denom);
+    }
+
+    BsdfSample sample(const BsdfContext&, const Vec3& wi, float u1, Vec2 u2) const override {
+        BsdfSample bs;
+        if (!(wi.z > 0.f)) return bs;
+        const float f_i = fresnel_dielectric(wi.z, eta_).F;
+        const float p_spec = prob_specular(f_i), p_diff = 1.f - p_spec;
+        if (u1 < p_spec) {
+            bs.wo = reflect_local(wi);
+            bs.pdf_w = p_spec;
+            bs.is_delta = true;
+            bs.sampled_flags = kDeltaReflection;
+            bs.weight = specular_ * (f_i / p_spec);
+        } else {
+            bs.wo = warp::square_to_cosine_hemisphere(u2);
+            bs.pdf_w = p_diff * warp::square_to_cosine_hemisphere_pdf_w(bs.wo);
+            bs.sampled_flags = kDiffuseReflection;
+            const float f_o = fresnel_dielectric(bs.wo.z, eta_).F;
+            bs.weight = diffuse_norm_ * (inv_eta2_ * (1.f - f_i) * (1.f - f_o) / p_diff);
+        }
+        return sanitize(bs);
+    }
+    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+        if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
+        const float f_i = fresnel_dielectric(wi.z, eta_).F, f_o = fresnel_dielectric(wo.z, eta_).F;
+        return finite_or_zero(diffuse_norm_ * (wo.z * kInvPi * inv_eta2_ * (1.f - f_i) * (1.f - f_o)));
+    }
+    float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+        if (!(wi.z > 0.f) || !(wo.z > 0.f)) return 0.f;
+        const float f_i = fresnel_dielectric(wi.z, eta_).F;
+        return warp::square_to_cosine_hemisphere_pdf_w(wo) * (1.f - prob_specular(f_i));
+    }
+
+private:
+    float prob_specular(float f_i) const {
+        const float ps = f_i * specular_sampling_weight_;
+        const float pd = (1.f - f_i) * (1.f - specular_sampling_weight_);
+        return ps + pd > 0.f ? ps / (ps + pd) : 0.5f;
+    }
+
+    float eta_, inv_eta2_, fdr_int_, specular_sampling_weight_;
+    Color specular_, diffuse_norm_;  // diffuse_norm_: rho / (1 - Fdr_int) or rho / (1 - rho Fdr_int)
+};
+
+// ---------------------------------------------------------------------------
+// twosided: makes a one-sided BRDF two-sided (Mitsuba src/bsdfs/twosided.cpp).
+// One nested BSDF: wi is mirrored to the front (z -> |z|) and wo follows.
+// Two: the front one for wi.z > 0, the back one for wi.z < 0 with wi.z and
+// wo.z negated (only z: tangents, hence anisotropy axes, are kept, as Mitsuba).
+
+class TwoSidedBsdf final : public Bsdf {
+public:
+    TwoSidedBsdf(std::unique_ptr<Bsdf> front, std::unique_ptr<Bsdf> back)
+        : front_(std::move(front)), back_(std::move(back)) {
+        flags_ = front_->flags() | (back_ ? back_->flags() : 0u);
+    }
+
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
+        if (!back_) {
+            const Vec3 w(wi.x, wi.y, std::fabs(wi.z));
+            BsdfSample bs = front_->sample(ctx, w, u1, u2);
+            bs.wo.z = mulsign(bs.wo.z, wi.z);
+            return bs;
+        }
+        if (wi.z > 0.f) return front_->sample(ctx, wi, u1, u2);
+        if (wi.z < 0.f) {
+            BsdfSample bs = back_->sample(ctx, Vec3(wi.x, wi.y, -wi.z), u1, u2);
+            bs.wo.z = -bs.wo.z;
+            return bs;
+        }
+        return BsdfSample{};
+    }
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
+        if (!back_) return front_->eval(ctx, Vec3(wi.x, wi.y, std::fabs(wi.z)), Vec3(wo.x, wo.y, mulsign(wo.z, wi.z)));
+        if (wi.z > 0.f) return front_->eval(ctx, wi, wo);
+        if (wi.z < 0.f) return back_->eval(ctx, Vec3(wi.x, wi.y, -wi.z), Vec3(wo.x, wo.y, -wo.z));
+        return Color(0.f);
+    }
+    float pdf_w(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
+        if (!back_) return front_->pdf_w(ctx, Vec3(wi.x, wi.y, std::fabs(wi.z)), Vec3(wo.x, wo.y, mulsign(wo.z, wi.z)));
+        if (wi.z > 0.f) return front_->pdf_w(ctx, wi, wo);
+        if (wi.z < 0.f) return back_->pdf_w(ctx, Vec3(wi.x, wi.y, -wi.z), Vec3(wo.x, wo.y, -wo.z));
+        return 0.f;
+    }
+
+private:
+    std::unique_ptr<Bsdf> front_, back_;  // back_ == nullptr: front_ on both sides
+};
+
+// ---------------------------------------------------------------------------
+// null: an invisible surface (medium boundaries); a forward delta of weight 1
+// (Mitsuba src/bsdfs/null.cpp).
+
+class NullBsdf final : public Bsdf {
+public:
+    NullBsdf() { flags_ = kNull; }
+
+    BsdfSample sample(const BsdfContext&, const Vec3& wi, float, Vec2) const override {
+        BsdfSample bs;
+        bs.wo = -wi;
+        bs.weight = Color(1.f);
+        bs.pdf_w = 1.f;
+        bs.is_delta = true;
+        bs.sampled_flags = kNull;
+        return bs;
+    }
+    Color eval(const BsdfContext&, const Vec3&, const Vec3&) const override { return Color(0.f); }
+    float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
+};
+
+}  // namespace
+
+std::unique_ptr<Bsdf> make_bsdf(const BsdfDesc& d) {
+    if (d.type == "diffuse") {
+        check_color(d, "reflectance", d.reflectance);
+        return std::make_unique<DiffuseBsdf>(d.reflectance);
+    }
+    if (d.type == "conductor" || d.type == "roughconductor") {
+        check_color(d, "eta", d.eta);
+        check_color(d, "k", d.k);
+        check_color(d, "specular_reflectance", d.specular_reflectance);
+        if (d.type == "conductor") return std::make_unique<ConductorBsdf>(d.eta, d.k, d.specular_reflectance);
+        return std::make_unique<RoughConductorBsdf>(make_distribution(d), d.eta, d.k, d.specular_reflectance);
+    }
+    if (d.type == "dielectric" || d.type == "roughdielectric" || d.type == "thindielectric") {
+        const float eta = relative_ior(d);
+        check_color(d, "specular_reflectance", d.specular_reflectance);
+        check_color(d, "specular_transmittance", d.specular_transmittance);
+        if (d.type == "dielectric")
+            return std::make_unique<DielectricBsdf>(eta, d.specular_reflectance, d.specular_transmittance);
+        if (d.type == "thindielectric")
+            return std::make_unique<ThinDielectricBsdf>(eta, d.specular_reflectance, d.specular_transmittance);
+        if (d.int_ior == d.ext_ior)
+            fail(d, "int_ior", "must differ from ext_ior (index-matched rough interface; use dielectric or null)");
+        return std::make_unique<RoughDielectricBsdf>(make_distribution(d), eta, d.specular_reflectance,
+                                                     d.specular_transmittance);
+    }
+    if (d.type == "plastic") {
+        const float eta = relative_ior(d);
+        check_color(d, "diffuse_reflectance", d.diffuse_reflectance);
+        check_color(d, "specular_reflectance", d.specular_reflectance);
+        return std::make_unique<PlasticBsdf>(eta, d.diffuse_reflectance, d.specular_reflectance, d.nonlinear);
+    }
+    if (d.type == "twosided") {
+        if (d.nested.empty() || d.nested.size() > 2)
+            fail(d, "nested", "must hold 1 or 2 BSDFs, got " + std::to_string(d.nested.size()));
+        std::unique_ptr<Bsdf> front = make_bsdf(d.nested[0]);
+        std::unique_ptr<Bsdf> back = d.nested.size() == 2 ? make_bsdf(d.nested[1]) : nullptr;
+        if ((front->flags() & kTransmission) || (back && (back->flags() & kTransmission)))
+            fail(d, "nested", "must not transmit light (only reflective BSDFs can be made two-sided)");
+        return std::make_unique<TwoSidedBsdf>(std::move(front), std::move(back));
+    }
+    if (d.type == "null") return std::make_unique<NullBsdf>();
+    throw std::invalid_argument("bsdf '" + d.id + "': unknown type '" + d.type + "'");
+}
+
+}  // namespace rm

@@ -1,0 +1,197 @@
+#include "scene/emitter.h"
+
+#include <stdexcept>
+
+#include "core/warp.h"
+#include "scene/shape.h"
+
+namespace rm {
+
+namespace {
+
+void check_color(const Color& c, const std::string& id, const char* name) {
+    if (!is_finite(c) || min_component(c) < 0.f)
+        throw std::invalid_argument("emitter '" + id + "': " + name + " must be finite and non-negative");
+}
+
+class AreaEmitter final : public Emitter {
+public:
+    AreaEmitter(const EmitterDesc& d, const Shape* shape) : shape_(shape), radiance_(d.radiance) {
+        check_color(radiance_, d.id, "radiance");
+        if (!(shape_->area() > 0.f))
+            throw std::invalid_argument("emitter '" + d.id + "': its shape '" + shape_->id + "' has zero area");
+    }
+    DirectSample sample_direct(const Vec3& ref, Vec2 u, float u_extra) const override {
+        DirectSample ds;
+        PositionSample ps = shape_->sample_position(u, u_extra);
+        Vec3 v = ps.p - ref;
+        float d2 = length_sq(v);
+        if (!(d2 > 0.f) || ps.pdf_a <= 0.f) return ds;
+        float dist = std::sqrt(d2);
+        ds.p = ps.p;
+        ds.n = ps.n;
+        ds.d = v / dist;
+        ds.dist = dist;
+        float cos_l = -dot(ps.n, ds.d);  // > 0 when the emitting side faces ref
+        if (cos_l <= 0.f) return ds;     // back side: emits nothing (pdf_w 0 marks a failed sample)
+        // Area to solid angle: p_w = p_a d^2 / |cos theta_l| (Veach 1997, eq. 8.10).
+        ds.pdf_w = ps.pdf_a * d2 / cos_l;
+        ds.radiance = radiance_;
+        return ds;
+    }
+    float pdf_direct(const Vec3& ref, const Vec3& p, const Vec3& n) const override {
+        Vec3 v = p - ref;
+        float d2 = length_sq(v);
+        float cos_l = -dot(n, v) / std::sqrt(d2);
+        if (cos_l <= 0.f || !(d2 > 0.f)) return 0.f;
+        return d2 / (cos_l * shape_->area());
+    }
+    Color eval(const Interaction& it, const Vec3& w) const override {
+        return dot(it.sh.n, w) > 0.f ? radiance_ : Color(0.f);
+    }
+
+private:
+    const Shape* shape_;
+    Color radiance_;
+};
+
+class PointEmitter final : public Emitter {
+public:
+    explicit PointEmitter(const EmitterDesc& d) : intensity_(d.intensity) {
+        check_color(intensity_, d.id, "intensity");
+        Transform xf;
+        if (!xf.set(d.to_world.data())) throw std::invalid_argument("emitter '" + d.id + "': singular to_world");
+        pos_ = xf.point(Vec3(0.f));
+        delta_ = true;
+    }
+    DirectSample sample_direct(const Vec3& ref, Vec2, float) const override {
+        DirectSample ds;
+        Vec3 v = pos_ - ref;
+        float d2 = length_sq(v);
+        if (!(d2 > 0.f)) return ds;
+        ds.dist = std::sqrt(d2);
+        ds.d = v / ds.dist;
+        ds.p = pos_;
+        ds.pdf_w = 1.f;
+        ds.is_delta = true;
+        ds.radiance = intensity_ / d2;
+        return ds;
+    }
+
+private:
+    Color intensity_;
+    Vec3 pos_;
+};
+
+class SpotEmitter final : public Emitter {
+public:
+    explicit SpotEmitter(const EmitterDesc& d) : intensity_(d.intensity) {
+        check_color(intensity_, d.id, "intensity");
+        if (!xf_.set(d.to_world.data())) throw std::invalid_argument("emitter '" + d.id + "': singular to_world");
+        if (!(d.cutoff_angle > 0.f && d.cutoff_angle <= 180.f))
+            throw std::invalid_argument("emitter '" + d.id + "': cutoff_angle must be in (0, 180] degrees");
+        float beam = d.beam_width < 0.f ? 0.75f * d.cutoff_angle : d.beam_width;
+        cutoff_ = d.cutoff_angle * kPi / 180.f;
+        beam_ = std::min(beam * kPi / 180.f, cutoff_);
+        cos_cutoff_ = std::cos(cutoff_);
+        cos_beam_ = std::cos(beam_);
+        pos_ = xf_.point(Vec3(0.f));
+        delta_ = true;
+    }
+    // Mitsuba 3 spot falloff: 1 inside the beam, linear in angle to 0 at the cutoff.
+    float falloff(const Vec3& local) const {
+        float c = local.z;
+        if (c < cos_cutoff_) return 0.f;
+        if (c >= cos_beam_ || cutoff_ <= beam_) return 1.f;
+        return (cutoff_ - std::acos(clamp(c, -1.f, 1.f))) / (cutoff_ - beam_);
+    }
+    DirectSample sample_direct(const Vec3& ref, Vec2, float) const override {
+        DirectSample ds;
+        Vec3 v = pos_ - ref;
+        float d2 = length_sq(v);
+        if (!(d2 > 0.f)) return ds;
+        ds.dist = std::sqrt(d2);
+        ds.d = v / ds.dist;
+        ds.p = pos_;
+        ds.pdf_w = 1.f;
+        ds.is_delta = true;
+        Vec3 local = normalize(xf_.inv_vector(-ds.d));
+        ds.radiance = intensity_ * (falloff(local) / d2);
+        return ds;
+    }
+
+private:
+    Color intensity_;
+    Transform xf_;
+    Vec3 pos_;
+    float cutoff_, beam_, cos_cutoff_, cos_beam_;
+};
+
+class DirectionalEmitter final : public Emitter {
+public:
+    explicit DirectionalEmitter(const EmitterDesc& d) : irradiance_(d.irradiance) {
+        check_color(irradiance_, d.id, "irradiance");
+        Transform xf;
+        if (!xf.set(d.to_world.data())) throw std::invalid_argument("emitter '" + d.id + "': singular to_world");
+        dir_ = normalize(xf.vector(Vec3(0, 0, 1)));
+        if (!is_finite(dir_)) throw std::invalid_argument("emitter '" + d.id + "': direction is zero");
+        delta_ = true;
+    }
+    DirectSample sample_direct(const Vec3&, Vec2, float) const override {
+        DirectSample ds;
+        ds.d = -dir_;
+        ds.dist = kInf;
+        ds.pdf_w = 1.f;
+        ds.is_delta = true;
+        ds.radiance = irradiance_;
+        return ds;
+    }
+
+private:
+    Color irradiance_;
+    Vec3 dir_;
+};
+
+class ConstantEmitter final : public Emitter {
+public:
+    explicit ConstantEmitter(const EmitterDesc& d) : radiance_(d.radiance) {
+        check_color(radiance_, d.id, "radiance");
+        environment_ = true;
+    }
+    DirectSample sample_direct(const Vec3&, Vec2 u, float) const override {
+        DirectSample ds;
+        ds.d = warp::square_to_uniform_sphere(u);
+        ds.dist = kInf;
+        ds.pdf_w = warp::square_to_uniform_sphere_pdf_w();
+        ds.radiance = radiance_;
+        return ds;
+    }
+    float pdf_direct(const Vec3&, const Vec3&, const Vec3&) const override {
+        return warp::square_to_uniform_sphere_pdf_w();
+    }
+    Color eval_environment(const Vec3&) const override { return radiance_; }
+
+private:
+    Color radiance_;
+};
+
+}  // namespace
+
+std::unique_ptr<Emitter> make_area_emitter(const EmitterDesc& desc, const Shape* shape) {
+    auto e = std::make_unique<AreaEmitter>(desc, shape);
+    e->id = desc.id;
+    return e;
+}
+
+std::unique_ptr<Emitter> make_emitter(const EmitterDesc& desc) {
+    std::unique_ptr<Emitter> e;
+    if (desc.type == "point") e = std::make_unique<PointEmitter>(desc);
+    else if (desc.type == "spot") e = std::make_unique<SpotEmitter>(desc);
+    else if (desc.type == "directional") e = std::make_unique<DirectionalEmitter>(desc);
+    else if (desc.type == "constant") e = std::make_unique<ConstantEmitter>(desc);
+    else throw std::invalid_argument("emitter '" + desc.id + "': unknown type '" + desc.type + "'");
+    e->id = desc.id;
+    return e;
+}
+
+}  // namespace rm

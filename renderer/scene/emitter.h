@@ -1,0 +1,50 @@
+// Emitters: area (on any shape), point, spot, directional, constant. Names and
+// parameter meanings follow Mitsuba 3's plugins of the same names.
+#pragma once
+#include <memory>
+
+#include "core/math.h"
+#include "core/spectrum.h"
+#include "scene/desc.h"
+#include "scene/records.h"
+
+namespace rm {
+
+class Shape;
+
+// A point on (or direction to) an emitter, sampled from a reference point.
+struct DirectSample {
+    Vec3 p, n;            // position on the emitter and its normal (unused for delta/infinite)
+    Vec3 d;               // unit direction from the reference point towards the emitter
+    float dist = kInf;    // distance to p; infinite for directional and constant
+    float pdf_w = 0.f;    // solid-angle density at the reference point; 1 for delta emitters
+    bool is_delta = false;
+    Color radiance{0.f};  // radiance arriving along -d (for point/spot: intensity / dist^2)
+};
+
+class Emitter {
+public:
+    virtual ~Emitter() = default;
+    std::string id;
+    // u: 2D sample on the emitter, u_extra: picks a triangle on meshes.
+    virtual DirectSample sample_direct(const Vec3& ref, Vec2 u, float u_extra) const = 0;
+    // Solid-angle density that sample_direct from `ref` produces the point p
+    // (normal n) with; 0 for delta emitters.
+    virtual float pdf_direct(const Vec3& ref, const Vec3& p, const Vec3& n) const { return 0.f; }
+    // Radiance leaving a surface point of an area emitter towards w (world).
+    virtual Color eval(const Interaction& it, const Vec3& w) const { return Color(0.f); }
+    // Radiance arriving from direction -d for rays that leave the scene (constant).
+    virtual Color eval_environment(const Vec3& d) const { return Color(0.f); }
+    bool is_delta() const { return delta_; }
+    bool is_environment() const { return environment_; }
+
+protected:
+    bool delta_ = false, environment_ = false;
+};
+
+// Area light on `shape`, radiance on the side its normal points to (one-sided, like Mitsuba).
+std::unique_ptr<Emitter> make_area_emitter(const EmitterDesc& desc, const Shape* shape);
+// point, spot, directional, constant. scene_radius bounds the scene (constant).
+std::unique_ptr<Emitter> make_emitter(const EmitterDesc& desc);
+
+}  // namespace rm

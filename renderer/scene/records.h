@@ -1,0 +1,46 @@
+// Rays and interaction records shared by every estimator. The records carry
+// a vertex kind and medium slots from the start, so participating media and
+// subsurface vertices arrive later without changing their layout.
+#pragma once
+#include <cstdint>
+
+#include "core/math.h"
+#include "core/spectrum.h"
+
+namespace rm {
+
+struct Ray {
+    Vec3 o, d;
+    float tmin = 0.f;
+    float tmax = kInf;
+};
+
+enum class VertexKind : uint8_t { Surface, Medium, Subsurface, Emitter, Sensor };
+
+struct Interaction {
+    VertexKind kind = VertexKind::Surface;
+    bool valid = false;
+    float t = kInf;
+    Vec3 p;          // position, world space
+    Vec3 n;          // geometric normal, oriented as the shape declares (flip_normals applied)
+    Frame sh;        // shading frame (z = shading normal, same side as n)
+    Vec2 uv;
+    Vec3 wi;         // direction towards the previous vertex, world space
+    int shape = -1;  // index in Scene::shapes
+    int prim = -1;
+    float eps = 0.f; // ray-origin offset that clears this hit's floating-point error
+    // Medium slots (filled by the medium-aware estimators; -1 = vacuum).
+    int medium_inside = -1, medium_outside = -1;
+
+    Vec3 to_local(const Vec3& w) const { return sh.to_local(w); }
+    Vec3 to_world(const Vec3& w) const { return sh.to_world(w); }
+    // A ray leaving the surface towards d, its origin pushed off the side d is on.
+    Ray spawn(const Vec3& d) const {
+        Ray r;
+        r.o = p + n * (dot(d, n) >= 0.f ? eps : -eps);
+        r.d = d;
+        return r;
+    }
+};
+
+}  // namespace rm

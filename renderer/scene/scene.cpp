@@ -1,0 +1,204 @@
+#include "scene/scene.h"
+
+#include <mutex>
+#include <stdexcept>
+
+namespace rm {
+
+namespace {
+// Embree reports errors through a C callback; remember the last one so the
+// next API call can raise it as an exception (never abort on user input).
+thread_local std::string g_embree_error;
+void embree_error(void*, RTCError code, const char* str) {
+    if (code != RTC_ERROR_NONE) g_embree_error = std::string("Embree error: ") + (str ? str : "unknown");
+}
+void check_embree() {
+    if (!g_embree_error.empty()) {
+        std::string e = g_embree_error;
+        g_embree_error.clear();
+        throw std::runtime_error(e);
+    }
+}
+}  // namespace
+
+Scene::Scene() {
+    device_ = rtcNewDevice(nullptr);
+    if (!device_) throw std::runtime_error("could not create an Embree device");
+    rtcSetDeviceErrorFunction(device_, embree_error, nullptr);
+    scene_ = rtcNewScene(device_);
+    rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+    rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
+}
+
+Scene::~Scene() {
+    if (scene_) rtcReleaseScene(scene_);
+    if (device_) rtcReleaseDevice(device_);
+}
+
+int Scene::add_bsdf(const BsdfDesc& desc) {
+    bsdfs.push_back(make_bsdf(desc));
+    uint32_t f = bsdfs.back()->flags();
+    return int(bsdfs.size()) - 1;
+    (void)f;
+}
+
+int Scene::add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals) {
+    if (committed_) throw std::logic_error("scene is already committed");
+    if (bsdf < 0 || bsdf >= int(bsdfs.size()))
+        throw std::invalid_argument("shape '" + s->id + "': bsdf index out of range");
+    s->bsdf = bsdf;
+    s->flip_normals = flip_normals;
+    Vec3 lo = s->bbox_min(), hi = s->bbox_max();
+    if (!is_finite(lo) || !is_finite(hi)) throw std::invalid_argument("shape '" + s->id + "': non-finite geometry");
+    bbox_lo = vmin(bbox_lo, lo);
+    bbox_hi = vmax(bbox_hi, hi);
+    unsigned geom_id = unsigned(shapes.size());
+    RTCGeometry g = s->create_geometry(device_, geom_id);
+    check_embree();
+    rtcAttachGeometryByID(scene_, g, geom_id);
+    rtcReleaseGeometry(g);
+    check_embree();
+    shapes.push_back(std::move(s));
+    return int(geom_id);
+}
+
+int Scene::add_mesh(const std::string& id, std::vector<float> positions, std::vector<uint32_t> indices,
+                    std::vector<float> normals, std::vector<float> uvs, int bsdf, bool flip_normals) {
+    size_t nv = positions.size() / 3;
+    if (positions.size() % 3 != 0 || indices.size() % 3 != 0)
+        throw std::invalid_argument("shape '" + id + "': positions and indices must come in triples");
+    if (indices.empty()) throw std::invalid_argument("shape '" + id + "': mesh has no triangles");
+    for (float v : positions)
+        if (!std::isfinite(v)) throw std::invalid_argument("shape '" + id + "': non-finite vertex position");
+    for (uint32_t i : indices)
+        if (i >= nv) throw std::invalid_argument("shape '" + id + "': vertex index " + std::to_string(i) + " out of range");
+    if (!normals.empty() && normals.size() != positions.size())
+        throw std::invalid_argument("shape '" + id + "': normals must match positions");
+    if (!uvs.empty() && uvs.size() != 2 * nv) throw std::invalid_argument("shape '" + id + "': uvs must match positions");
+    auto m = std::make_unique<Mesh>(std::move(positions), std::move(indices), std::move(normals), std::move(uvs));
+    m->id = id;
+    return add_shape(std::move(m), bsdf, flip_normals);
+}
+
+int Scene::add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals) {
+    if (!(radius > 0.f) || !std::isfinite(radius) || !is_finite(center))
+        throw std::invalid_argument("shape '" + id + "': sphere needs a finite centre and a positive radius");
+    auto s = std::make_unique<Sphere>(center, radius);
+    s->id = id;
+    return add_shape(std::move(s), bsdf, flip_normals);
+}
+
+int Scene::add_disk(const std::string& id, const Matrix4& to_world, int bsdf, bool flip_normals) {
+    std::unique_ptr<Disk> d;
+    try {
+        d = std::make_unique<Disk>(to_world);
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument("shape '" + id + "': " + e.what());
+    }
+    d->id = id;
+    return add_shape(std::move(d), bsdf, flip_normals);
+}
+
+void Scene::add_area_emitter(int shape, const EmitterDesc& desc) {
+    if (shape < 0 || shape >= int(shapes.size())) throw std::invalid_argument("area emitter: shape index out of range");
+    if (shapes[shape]->emitter >= 0)
+        throw std::invalid_argument("shape '" + shapes[shape]->id + "' already has an emitter");
+    emitters.push_back(make_area_emitter(desc, shapes[shape].get()));
+    shapes[shape]->emitter = int(emitters.size()) - 1;
+    features.has_area_emitters = true;
+}
+
+void Scene::add_emitter(const EmitterDesc& desc) {
+    emitters.push_back(make_emitter(desc));
+    const Emitter* e = emitters.back().get();
+    if (e->is_environment()) {
+        environment.push_back(e);
+        features.has_environment = true;
+    }
+    if (e->is_delta()) features.has_delta_emitters = true;
+}
+
+void Scene::set_sensor(const SensorDesc& desc) {
+    sensor_desc = desc;
+    const Shape* s = nullptr;
+    if (desc.type == "irradiancemeter") {
+        if (desc.shape < 0 || desc.shape >= int(shapes.size()))
+            throw std::invalid_argument("sensor: irradiancemeter shape index out of range");
+        s = shapes[desc.shape].get();
+    }
+    sensor = make_sensor(desc, s);
+    sensor_shape_ = desc.shape;
+}
+
+void Scene::commit() {
+    if (!sensor) throw std::invalid_argument("scene has no sensor");
+    rtcCommitScene(scene_);
+    check_embree();
+    for (const auto& s : shapes) {
+        uint32_t f = bsdfs[s->bsdf]->flags();
+        if (f & (kDeltaReflection | kDeltaTransmission)) features.has_delta_bsdf = true;
+        if (f & kSmooth) features.has_smooth_bsdf = true;
+    }
+    committed_ = true;
+}
+
+bool Scene::intersect(const Ray& ray, Interaction& it) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRayHit rh;
+    rh.ray.org_x = ray.o.x; rh.ray.org_y = ray.o.y; rh.ray.org_z = ray.o.z;
+    rh.ray.dir_x = ray.d.x; rh.ray.dir_y = ray.d.y; rh.ray.dir_z = ray.d.z;
+    rh.ray.tnear = ray.tmin;
+    rh.ray.tfar = ray.tmax;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.flags = 0;
+    rh.ray.time = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(scene_, &ctx, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
+        it.valid = false;
+        return false;
+    }
+    const Shape& s = *shapes[rh.hit.geomID];
+    it = Interaction();
+    it.valid = true;
+    it.t = rh.ray.tfar;
+    it.shape = int(rh.hit.geomID);
+    it.prim = int(rh.hit.primID);
+    it.wi = -ray.d;
+    s.fill_interaction(ray, rh.hit, rh.ray.tfar, it);
+    return true;
+}
+
+bool Scene::occluded(const Ray& ray) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRay r;
+    r.org_x = ray.o.x; r.org_y = ray.o.y; r.org_z = ray.o.z;
+    r.dir_x = ray.d.x; r.dir_y = ray.d.y; r.dir_z = ray.d.z;
+    r.tnear = ray.tmin;
+    r.tfar = ray.tmax;
+    r.mask = 0xFFFFFFFFu;
+    r.flags = 0;
+    r.time = 0;
+    rtcOccluded1(scene_, &ctx, &r);
+    return r.tfar < 0.f;
+}
+
+bool Scene::visible(const Interaction& from, const DirectSample& ds) const {
+    Ray r = from.spawn(ds.d);
+    if (std::isinf(ds.dist)) {
+        r.tmax = kInf;
+    } else {
+        // Stop short of the emitter by its own floating-point error bound.
+        Vec3 to = ds.p;
+        float eps_to = hit_epsilon(to, max_component(abs(to)));
+        float dist = length(to - r.o);
+        r.tmax = dist - std::max(eps_to, from.eps);
+        if (!(r.tmax > 0.f)) return true;
+    }
+    return !occluded(r);
+}
+
+}  // namespace rm

@@ -1,0 +1,73 @@
+// The scene: shapes in an Embree 3 BVH, their BSDFs and emitters, one sensor,
+// and what the scene can physically produce (used to build and trace nothing
+// the scene cannot show).
+#pragma once
+#include <embree3/rtcore.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "scene/bsdf.h"
+#include "scene/desc.h"
+#include "scene/emitter.h"
+#include "scene/records.h"
+#include "scene/sensor.h"
+#include "scene/shape.h"
+
+namespace rm {
+
+// What light transport the scene can produce; estimators skip the rest.
+struct SceneFeatures {
+    bool has_delta_bsdf = false;     // some surface is specular (caustic/specular classes possible)
+    bool has_smooth_bsdf = false;    // some surface is diffuse or glossy
+    bool has_area_emitters = false;
+    bool has_delta_emitters = false;
+    bool has_environment = false;
+    bool has_media = false;          // always false until media land
+};
+
+class Scene {
+public:
+    Scene();
+    ~Scene();
+    Scene(const Scene&) = delete;
+    Scene& operator=(const Scene&) = delete;
+
+    int add_bsdf(const BsdfDesc& desc);
+    // positions (3N), indices (3M), normals (3N or empty), uvs (2N or empty); world space.
+    int add_mesh(const std::string& id, std::vector<float> positions, std::vector<uint32_t> indices,
+                 std::vector<float> normals, std::vector<float> uvs, int bsdf, bool flip_normals);
+    int add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals);
+    int add_disk(const std::string& id, const Matrix4& to_world, int bsdf, bool flip_normals);
+    void add_area_emitter(int shape, const EmitterDesc& desc);
+    void add_emitter(const EmitterDesc& desc);
+    void set_sensor(const SensorDesc& desc);
+    void commit();  // builds the BVH; the scene is read-only afterwards
+
+    // Closest hit in (ray.tmin, ray.tmax); fills `it` (wi = -ray.d).
+    bool intersect(const Ray& ray, Interaction& it) const;
+    // True when anything blocks the open segment (tmin, tmax).
+    bool occluded(const Ray& ray) const;
+    // Shadow ray from `from` to the point p (or to infinity along d).
+    bool visible(const Interaction& from, const DirectSample& ds) const;
+
+    std::vector<std::unique_ptr<Shape>> shapes;
+    std::vector<std::unique_ptr<Bsdf>> bsdfs;
+    std::vector<std::unique_ptr<Emitter>> emitters;
+    std::vector<const Emitter*> environment;  // emitters hit by escaping rays
+    std::unique_ptr<Sensor> sensor;
+    SensorDesc sensor_desc;
+    SceneFeatures features;
+    Vec3 bbox_lo{kInf}, bbox_hi{-kInf};
+    bool committed() const { return committed_; }
+
+private:
+    int add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals);
+    RTCDevice device_ = nullptr;
+    RTCScene scene_ = nullptr;
+    bool committed_ = false;
+    int sensor_shape_ = -1;
+};
+
+}  // namespace rm

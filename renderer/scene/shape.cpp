@@ -1,0 +1,289 @@
+#include "scene/shape.h"
+
+#include <stdexcept>
+
+#include "core/warp.h"
+
+namespace rm {
+
+// ---------------------------------------------------------------- mesh
+Mesh::Mesh(std::vector<float> positions, std::vector<uint32_t> indices, std::vector<float> normals,
+           std::vector<float> uvs)
+    : pos_(std::move(positions)), indices_(std::move(indices)), normals_(std::move(normals)), uvs_(std::move(uvs)) {
+    size_t nv = pos_.size() / 3;
+    lo_ = Vec3(kInf);
+    hi_ = Vec3(-kInf);
+    for (size_t i = 0; i < nv; ++i) {
+        lo_ = vmin(lo_, vertex(uint32_t(i)));
+        hi_ = vmax(hi_, vertex(uint32_t(i)));
+    }
+    // Triangle areas in double for the sampling CDF; degenerate triangles get
+    // zero area, so they are never sampled (and never produce a 1/0 pdf).
+    area_cdf_.resize(triangle_count());
+    double acc = 0;
+    for (size_t f = 0; f < triangle_count(); ++f) {
+        Vec3 a = vertex(indices_[3 * f]), b = vertex(indices_[3 * f + 1]), c = vertex(indices_[3 * f + 2]);
+        double ar = 0.5 * double(length(cross(b - a, c - a)));
+        if (!std::isfinite(ar)) ar = 0;
+        acc += ar;
+        area_cdf_[f] = float(acc);
+    }
+    total_area_ = float(acc);
+    num_vertices_ = nv;
+    pos_.push_back(0.f);  // Embree reads the last vertex with a 16-byte load
+}
+
+RTCGeometry Mesh::create_geometry(RTCDevice device, unsigned geom_id) {
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, pos_.data(), 0, 3 * sizeof(float),
+                               num_vertices_);
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices_.data(), 0,
+                               3 * sizeof(uint32_t), triangle_count());
+    rtcCommitGeometry(g);
+    return g;
+}
+
+void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const {
+    uint32_t f = hit.primID;
+    uint32_t i0 = indices_[3 * f], i1 = indices_[3 * f + 1], i2 = indices_[3 * f + 2];
+    Vec3 p0 = vertex(i0), p1 = vertex(i1), p2 = vertex(i2);
+    float b1 = hit.u, b2 = hit.v, b0 = 1.f - b1 - b2;
+    // Barycentric interpolation is more accurate than o + t d far from the origin.
+    it.p = p0 * b0 + p1 * b1 + p2 * b2;
+    Vec3 n = normalize(cross(p1 - p0, p2 - p0));
+    if (flip_normals) n = -n;
+    it.n = n;
+    Vec3 ns = n;
+    if (!normals_.empty()) {
+        auto nv = [&](uint32_t i) { return Vec3(normals_[3 * i], normals_[3 * i + 1], normals_[3 * i + 2]); };
+        Vec3 s = nv(i0) * b0 + nv(i1) * b1 + nv(i2) * b2;
+        float l = length(s);
+        if (l > 0 && std::isfinite(l)) ns = flip_normals ? -(s / l) : s / l;
+    }
+    it.sh = Frame(ns);
+    if (!uvs_.empty()) {
+        auto uv = [&](uint32_t i) { return Vec2(uvs_[2 * i], uvs_[2 * i + 1]); };
+        it.uv = uv(i0) * b0 + uv(i1) * b1 + uv(i2) * b2;
+    } else {
+        it.uv = Vec2(b1, b2);
+    }
+    float scale = std::max(max_component(abs(p0)), std::max(max_component(abs(p1)), max_component(abs(p2))));
+    it.eps = hit_epsilon(it.p, std::max(scale, max_component(abs(ray.o))));
+}
+
+PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
+    PositionSample ps;
+    if (total_area_ <= 0) return ps;
+    float target = u_extra * total_area_;
+    size_t f = size_t(std::upper_bound(area_cdf_.begin(), area_cdf_.end(), target) - area_cdf_.begin());
+    if (f >= triangle_count()) f = triangle_count() - 1;
+    Vec3 p0 = vertex(indices_[3 * f]), p1 = vertex(indices_[3 * f + 1]), p2 = vertex(indices_[3 * f + 2]);
+    Vec2 b = warp::square_to_uniform_triangle(u);
+    ps.p = p0 * (1.f - b.x - b.y) + p1 * b.x + p2 * b.y;
+    Vec3 n = normalize(cross(p1 - p0, p2 - p0));
+    ps.n = flip_normals ? -n : n;
+    ps.pdf_a = 1.f / total_area_;
+    return ps;
+}
+
+// ---------------------------------------------------------------- analytic shapes through Embree user geometry
+namespace {
+
+// Embree calls these with N == 1 for rtcIntersect1/rtcOccluded1, the only
+// queries the renderer makes.
+template <class S>
+void user_bounds(const RTCBoundsFunctionArguments* args) {
+    const S* s = static_cast<const S*>(args->geometryUserPtr);
+    Vec3 lo = s->bbox_min(), hi = s->bbox_max();
+    args->bounds_o->lower_x = lo.x; args->bounds_o->lower_y = lo.y; args->bounds_o->lower_z = lo.z;
+    args->bounds_o->upper_x = hi.x; args->bounds_o->upper_y = hi.y; args->bounds_o->upper_z = hi.z;
+}
+
+// Sphere roots in double, after Haines et al., "Precision Improvements for
+// Ray/Sphere Intersection", Ray Tracing Gems (2019), ch. 7, eqs. 8 and 10.
+bool sphere_roots(const Sphere& s, const RTCRay& r, double& t0, double& t1) {
+    double ox = r.org_x - s.cx_, oy = r.org_y - s.cy_, oz = r.org_z - s.cz_;
+    double dx = r.dir_x, dy = r.dir_y, dz = r.dir_z;
+    double a = dx * dx + dy * dy + dz * dz;
+    double b = -(ox * dx + oy * dy + oz * dz);  // -b/2 in the usual notation
+    double fx = ox + (b / a) * dx, fy = oy + (b / a) * dy, fz = oz + (b / a) * dz;
+    double disc = a * (s.r_ * s.r_ - (fx * fx + fy * fy + fz * fz));
+    if (disc < 0) return false;
+    double q = b + std::copysign(std::sqrt(disc), b);
+    t0 = q / a;
+    // c / q with c = |o|^2 - r^2 (eq. 10): the second root without cancellation.
+    double c = ox * ox + oy * oy + oz * oz - s.r_ * s.r_;
+    t1 = (q != 0) ? c / q : t0;
+    if (t0 > t1) std::swap(t0, t1);
+    return true;
+}
+
+template <bool kOccluded>
+void sphere_intersect_impl(const Sphere& s, RTCRay& ray, RTCHit* hit, unsigned geom_id, int* valid) {
+    if (!valid[0]) return;
+    double t0, t1;
+    if (!sphere_roots(s, ray, t0, t1)) return;
+    double t = t0;
+    if (t <= ray.tnear || t >= ray.tfar) {
+        t = t1;
+        if (t <= ray.tnear || t >= ray.tfar) return;
+    }
+    if (kOccluded) {
+        ray.tfar = -kInf;
+        return;
+    }
+    ray.tfar = float(t);
+    double px = ray.org_x + t * ray.dir_x - s.cx_, py = ray.org_y + t * ray.dir_y - s.cy_,
+           pz = ray.org_z + t * ray.dir_z - s.cz_;
+    hit->Ng_x = float(px); hit->Ng_y = float(py); hit->Ng_z = float(pz);
+    hit->u = 0; hit->v = 0;
+    hit->primID = 0;
+    hit->geomID = geom_id;
+    hit->instID[0] = RTC_INVALID_GEOMETRY_ID;
+}
+
+void sphere_intersect(const RTCIntersectFunctionNArguments* args) {
+    const Sphere* s = static_cast<const Sphere*>(args->geometryUserPtr);
+    RTCRayHit* rh = reinterpret_cast<RTCRayHit*>(args->rayhit);
+    sphere_intersect_impl<false>(*s, rh->ray, &rh->hit, args->geomID, args->valid);
+}
+void sphere_occluded(const RTCOccludedFunctionNArguments* args) {
+    const Sphere* s = static_cast<const Sphere*>(args->geometryUserPtr);
+    RTCRay* r = reinterpret_cast<RTCRay*>(args->ray);
+    sphere_intersect_impl<true>(*s, *r, nullptr, args->geomID, args->valid);
+}
+
+template <bool kOccluded>
+void disk_intersect_impl(const Disk& d, RTCRay& ray, RTCHit* hit, unsigned geom_id, int* valid) {
+    if (!valid[0]) return;
+    const auto& M = d.xf_.inv;
+    double o[3] = {ray.org_x, ray.org_y, ray.org_z}, v[3] = {ray.dir_x, ray.dir_y, ray.dir_z};
+    double lo[3], lv[3];
+    for (int i = 0; i < 3; ++i) {
+        lo[i] = M[i][0] * o[0] + M[i][1] * o[1] + M[i][2] * o[2] + M[i][3];
+        lv[i] = M[i][0] * v[0] + M[i][1] * v[1] + M[i][2] * v[2];
+    }
+    if (lv[2] == 0) return;
+    double t = -lo[2] / lv[2];
+    if (!(t > ray.tnear && t < ray.tfar)) return;
+    double x = lo[0] + t * lv[0], y = lo[1] + t * lv[1];
+    if (x * x + y * y > 1.0) return;
+    if (kOccluded) {
+        ray.tfar = -kInf;
+        return;
+    }
+    ray.tfar = float(t);
+    hit->u = float(x);
+    hit->v = float(y);
+    hit->Ng_x = 0; hit->Ng_y = 0; hit->Ng_z = 1;
+    hit->primID = 0;
+    hit->geomID = geom_id;
+    hit->instID[0] = RTC_INVALID_GEOMETRY_ID;
+}
+void disk_intersect(const RTCIntersectFunctionNArguments* args) {
+    const Disk* d = static_cast<const Disk*>(args->geometryUserPtr);
+    RTCRayHit* rh = reinterpret_cast<RTCRayHit*>(args->rayhit);
+    disk_intersect_impl<false>(*d, rh->ray, &rh->hit, args->geomID, args->valid);
+}
+void disk_occluded(const RTCOccludedFunctionNArguments* args) {
+    const Disk* d = static_cast<const Disk*>(args->geometryUserPtr);
+    RTCRay* r = reinterpret_cast<RTCRay*>(args->ray);
+    disk_intersect_impl<true>(*d, *r, nullptr, args->geomID, args->valid);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------- sphere
+Sphere::Sphere(Vec3 center, float radius) : cx_(center.x), cy_(center.y), cz_(center.z), r_(radius) {}
+Vec3 Sphere::bbox_min() const { return Vec3(float(cx_ - r_), float(cy_ - r_), float(cz_ - r_)) - abs(Vec3(float(cx_), float(cy_), float(cz_))) * 1e-6f - Vec3(float(r_) * 1e-6f); }
+Vec3 Sphere::bbox_max() const { return Vec3(float(cx_ + r_), float(cy_ + r_), float(cz_ + r_)) + abs(Vec3(float(cx_), float(cy_), float(cz_))) * 1e-6f + Vec3(float(r_) * 1e-6f); }
+
+RTCGeometry Sphere::create_geometry(RTCDevice device, unsigned geom_id) {
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
+    rtcSetGeometryUserPrimitiveCount(g, 1);
+    rtcSetGeometryUserData(g, this);
+    rtcSetGeometryBoundsFunction(g, user_bounds<Sphere>, nullptr);
+    rtcSetGeometryIntersectFunction(g, sphere_intersect);
+    rtcSetGeometryOccludedFunction(g, sphere_occluded);
+    rtcCommitGeometry(g);
+    return g;
+}
+
+void Sphere::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const {
+    // Re-project the hit onto the sphere (double) so it lies on the surface.
+    double px = double(ray.o.x) + double(t) * ray.d.x - cx_, py = double(ray.o.y) + double(t) * ray.d.y - cy_,
+           pz = double(ray.o.z) + double(t) * ray.d.z - cz_;
+    double l = std::sqrt(px * px + py * py + pz * pz);
+    if (l > 0) { px /= l; py /= l; pz /= l; } else { px = 0; py = 0; pz = 1; }
+    it.p = Vec3(float(cx_ + r_ * px), float(cy_ + r_ * py), float(cz_ + r_ * pz));
+    Vec3 n{float(px), float(py), float(pz)};
+    // Mitsuba's sphere uv: (phi / 2pi, theta / pi) in the local frame.
+    float phi = std::atan2(n.y, n.x);
+    if (phi < 0) phi += 2 * kPi;
+    it.uv = Vec2(phi * kInv2Pi, std::acos(clamp(n.z, -1.f, 1.f)) * kInvPi);
+    if (flip_normals) n = -n;
+    it.n = n;
+    it.sh = Frame(n);
+    float scale = float(std::max(std::max(std::fabs(cx_), std::fabs(cy_)), std::max(std::fabs(cz_), r_)));
+    it.eps = hit_epsilon(it.p, std::max(scale, max_component(abs(ray.o))));
+}
+
+PositionSample Sphere::sample_position(Vec2 u, float) const {
+    PositionSample ps;
+    Vec3 d = warp::square_to_uniform_sphere(u);
+    ps.p = Vec3(float(cx_ + r_ * d.x), float(cy_ + r_ * d.y), float(cz_ + r_ * d.z));
+    ps.n = flip_normals ? -d : d;
+    ps.pdf_a = 1.f / area();
+    return ps;
+}
+
+// ---------------------------------------------------------------- disk
+Disk::Disk(const Matrix4& to_world) {
+    if (!xf_.set(to_world.data())) throw std::invalid_argument("disk: to_world is singular");
+    Vec3 ex = xf_.vector(Vec3(1, 0, 0)), ey = xf_.vector(Vec3(0, 1, 0));
+    Vec3 c = cross(ex, ey);
+    area_ = kPi * length(c);
+    normal_ = normalize(xf_.normal(Vec3(0, 0, 1)));
+    Vec3 o = xf_.point(Vec3(0, 0, 0));
+    // Bounding box of an ellipse: centre +- sqrt(ex_i^2 + ey_i^2) per axis.
+    Vec3 ext(std::sqrt(ex.x * ex.x + ey.x * ey.x), std::sqrt(ex.y * ex.y + ey.y * ey.y),
+             std::sqrt(ex.z * ex.z + ey.z * ey.z));
+    ext = ext * 1.0001f + Vec3(1e-6f * max_component(abs(o)));
+    lo_ = o - ext;
+    hi_ = o + ext;
+}
+
+RTCGeometry Disk::create_geometry(RTCDevice device, unsigned geom_id) {
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
+    rtcSetGeometryUserPrimitiveCount(g, 1);
+    rtcSetGeometryUserData(g, this);
+    rtcSetGeometryBoundsFunction(g, user_bounds<Disk>, nullptr);
+    rtcSetGeometryIntersectFunction(g, disk_intersect);
+    rtcSetGeometryOccludedFunction(g, disk_occluded);
+    rtcCommitGeometry(g);
+    return g;
+}
+
+void Disk::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const {
+    it.p = xf_.point(Vec3(hit.u, hit.v, 0.f));
+    Vec3 n = flip_normals ? -normal_ : normal_;
+    it.n = n;
+    it.sh = Frame(n);
+    float r = std::sqrt(hit.u * hit.u + hit.v * hit.v);
+    float phi = std::atan2(hit.v, hit.u);
+    if (phi < 0) phi += 2 * kPi;
+    it.uv = Vec2(r, phi * kInv2Pi);
+    float scale = std::max(max_component(abs(hi_)), max_component(abs(lo_)));
+    it.eps = hit_epsilon(it.p, std::max(scale, max_component(abs(ray.o))));
+}
+
+PositionSample Disk::sample_position(Vec2 u, float) const {
+    PositionSample ps;
+    Vec2 d = warp::square_to_uniform_disk_concentric(u);
+    ps.p = xf_.point(Vec3(d.x, d.y, 0.f));
+    ps.n = flip_normals ? -normal_ : normal_;
+    ps.pdf_a = 1.f / area_;
+    return ps;
+}
+
+}  // namespace rm

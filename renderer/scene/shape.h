@@ -1,0 +1,97 @@
+// Shapes: triangle meshes (rectangle, cube, OBJ, PLY) and the analytic sphere
+// and disk (Embree user geometry, intersected in double precision so scene
+// scales from 1e-4 to 1e4 keep their hits). Each can carry a BSDF, an area
+// emitter and an irradiance meter.
+#pragma once
+#include <embree3/rtcore.h>
+
+#include <string>
+#include <vector>
+
+#include "core/math.h"
+#include "scene/desc.h"
+#include "scene/records.h"
+
+namespace rm {
+
+struct PositionSample {
+    Vec3 p, n;        // point on the shape and its (oriented) normal
+    float pdf_a = 0;  // per unit area
+};
+
+class Shape {
+public:
+    virtual ~Shape() = default;
+    std::string id;
+    int bsdf = -1;     // index into Scene::bsdfs
+    int emitter = -1;  // index into Scene::emitters, area light attached to this shape
+    bool flip_normals = false;
+
+    virtual RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) = 0;
+    // Fills the geometric part of `it` for a hit reported by Embree.
+    virtual void fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const = 0;
+    virtual PositionSample sample_position(Vec2 u, float u_extra) const = 0;
+    virtual float area() const = 0;
+    virtual Vec3 bbox_min() const = 0;
+    virtual Vec3 bbox_max() const = 0;
+};
+
+class Mesh final : public Shape {
+public:
+    Mesh(std::vector<float> positions, std::vector<uint32_t> indices, std::vector<float> normals,
+         std::vector<float> uvs);
+    RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) override;
+    void fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const override;
+    PositionSample sample_position(Vec2 u, float u_extra) const override;
+    float area() const override { return total_area_; }
+    Vec3 bbox_min() const override { return lo_; }
+    Vec3 bbox_max() const override { return hi_; }
+    size_t triangle_count() const { return indices_.size() / 3; }
+
+private:
+    Vec3 vertex(uint32_t i) const { return {pos_[3 * i], pos_[3 * i + 1], pos_[3 * i + 2]}; }
+    std::vector<float> pos_;
+    std::vector<uint32_t> indices_;
+    std::vector<float> normals_, uvs_;
+    std::vector<float> area_cdf_;  // cumulative triangle areas, for uniform area sampling
+    float total_area_ = 0;
+    size_t num_vertices_ = 0;
+    Vec3 lo_, hi_;
+};
+
+class Sphere final : public Shape {
+public:
+    Sphere(Vec3 center, float radius);
+    RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) override;
+    void fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const override;
+    PositionSample sample_position(Vec2 u, float u_extra) const override;
+    float area() const override { return 4.f * kPi * float(r_ * r_); }
+    Vec3 bbox_min() const override;
+    Vec3 bbox_max() const override;
+    double cx_, cy_, cz_, r_;
+};
+
+class Disk final : public Shape {
+public:
+    explicit Disk(const Matrix4& to_world);
+    RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) override;
+    void fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const override;
+    PositionSample sample_position(Vec2 u, float u_extra) const override;
+    float area() const override { return area_; }
+    Vec3 bbox_min() const override { return lo_; }
+    Vec3 bbox_max() const override { return hi_; }
+    Transform xf_;
+
+private:
+    Vec3 normal_;
+    float area_;
+    Vec3 lo_, hi_;
+};
+
+// Offset that clears floating-point error of a hit at p whose geometry has
+// coordinates of magnitude `scale` (relative float error bound, generously).
+inline float hit_epsilon(const Vec3& p, float scale) {
+    return 1e-6f * std::max(max_component(abs(p)), scale) + 1e-30f;
+}
+
+}  // namespace rm
