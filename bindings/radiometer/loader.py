@@ -364,14 +364,17 @@ def _dict_value(v, keys):
         return _Prop("float", float(v), place)
     if isinstance(v, str):
         return _Prop("string", v, place)
-    if hasattr(v, "matrix"):  # a Mitsuba (Scalar)(Affine)Transform4f, duck-typed
+    # A Mitsuba (Scalar)(Affine)Transform4f, duck-typed: a 4x4 `matrix`
+    # attribute (Dr.Jit vectors have a `matrix` attribute too, of another shape).
+    m = getattr(v, "matrix", None) if not isinstance(v, np.ndarray) else None
+    if m is not None:
         try:
-            m = np.squeeze(np.array(v.matrix, dtype=np.float64))
-        except (TypeError, ValueError) as e:
-            raise SceneError(f"{place}: cannot read the transform's matrix ({e})") from None
-        if m.shape != (4, 4):
-            raise SceneError(f"{place}: transform matrix has shape {m.shape}, expected (4, 4)")
-        return _Prop("transform", m, place)
+            m = np.squeeze(np.array(m, dtype=np.float64))
+        except (TypeError, ValueError):
+            m = None
+        if m is not None and m.shape == (4, 4):
+            _check_inverse_transpose(v, m, place)
+            return _Prop("transform", m, place)
     try:
         a = np.asarray(v, dtype=np.float64)
     except (TypeError, ValueError):
@@ -382,6 +385,27 @@ def _dict_value(v, keys):
         return _Prop("transform", a, place)
     raise SceneError(f"{place}: unsupported value {v!r} (expected a number, string, "
                      f"3-vector, 4x4 matrix, transform or plugin dict)")
+
+
+def _check_inverse_transpose(t, m, place):
+    """Mitsuba keeps a transform's inverse transpose (used for normals) apart
+    from its matrix and composes both; its rotate() neither normalises the axis
+    nor inverts the rotation part, so a non-unit axis leaves the two
+    inconsistent and Mitsuba's normals disagree with its geometry. Refuse such
+    a transform rather than reproduce only half of it."""
+    it = getattr(t, "inverse_transpose", None)
+    if it is None or np.isscalar(it):
+        return
+    try:
+        it = np.squeeze(np.array(it, dtype=np.float64))
+        expected = np.linalg.inv(m).T
+    except (TypeError, ValueError, np.linalg.LinAlgError):
+        return  # a singular matrix is reported where the transform is used
+    if it.shape == (4, 4) and not np.allclose(it, expected, rtol=1e-4,
+                                              atol=1e-4 * max(1.0, np.abs(expected).max())):
+        raise SceneError(f"{place}: the transform's inverse_transpose does not match its "
+                         f"matrix (a rotate() about a non-unit axis?); give rotation axes "
+                         f"of unit length")
 
 
 def _dict_colour(v, keys):
@@ -687,8 +711,12 @@ class _XmlReader:
                 self.attrs(op, ("x", "y", "z", "value", "angle"), ("angle",))
                 axis = np.array(self._xyz(op, 0.0))
                 angle = _numbers(a["angle"], place, "<rotate> angle", (1,))[0]
-                if not np.linalg.norm(axis) > 0:
-                    raise SceneError(f"{place}: <rotate>: zero rotation axis")
+                # Mitsuba 3.9.1 uses the axis as given: a non-unit axis makes
+                # a non-rigid matrix whose normals Mitsuba then gets wrong
+                # (see _check_inverse_transpose), so insist on a unit axis.
+                if abs(np.linalg.norm(axis) - 1.0) > 1e-5:
+                    raise SceneError(f"{place}: <rotate>: the axis {axis.tolist()} must have "
+                                     f"unit length (Mitsuba does not normalise it)")
                 step = _rotate(axis, angle)
             elif op.tag == "matrix":
                 self.attrs(op, ("value",), ("value",))
@@ -732,8 +760,9 @@ def _translate(t):
 
 
 def _rotate(axis, angle_deg):
-    """Rotation by angle_deg about axis, right-handed (Rodrigues' formula)."""
-    a = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    """Rotation by angle_deg about the unit axis, right-handed (Rodrigues'
+    formula)."""
+    a = np.asarray(axis, dtype=np.float64)
     th = math.radians(angle_deg)
     c, s = math.cos(th), math.sin(th)
     k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace rm {
@@ -50,8 +51,9 @@ float FilterSampler::sample(float u, float lo, float hi) const {
         int i = int(f);
         return cdf_[i] + (cdf_[i + 1] - cdf_[i]) * (f - i);
     };
-    double c0 = cdf_at(std::max(double(lo), -double(radius_)));
-    double c1 = cdf_at(std::min(double(hi), double(radius_)));
+    // Interior pixels (the common case) use the whole filter.
+    double c0 = lo <= -radius_ ? 0.0 : cdf_at(double(lo));
+    double c1 = hi >= radius_ ? cdf_.back() : cdf_at(double(hi));
     if (!(c1 > c0)) return 0.5f * (std::max(lo, -radius_) + std::min(hi, radius_));
     double target = c0 + u * (c1 - c0);
     int i = int(std::upper_bound(cdf_.begin(), cdf_.end(), target) - cdf_.begin()) - 1;
@@ -105,9 +107,12 @@ void Film::develop(int spp, std::vector<float>& image, std::vector<float>& varia
         double mean = sum_[i] * inv;
         image[i] = float(mean);
         // Unbiased sample variance divided by n: the variance of the mean.
+        // One sample says nothing about its variance: NaN, never a fake 0.
         if (spp > 1) {
             double var = std::max(0.0, (sum_sq_[i] - spp * mean * mean) / (spp - 1.0));
             variance[i] = float(var * inv);
+        } else {
+            variance[i] = std::numeric_limits<float>::quiet_NaN();
         }
     }
     if (effects)

@@ -45,11 +45,12 @@ struct PathClass {
         if (scatter_vertices == 1) first_specular = is_delta;
         else rest_specular = rest_specular && is_delta;
     }
-    // Can any class in `mask` still be produced by extending this path?
+    // Can any class in `mask` still be produced once the current vertex
+    // (the next one to be pushed) scatters or samples a light?
     bool can_reach(const EffectMask& m) const {
-        if (scatter_vertices == 0) return true;
+        if (scatter_vertices == 0) return m[kDirect] || m[kSpecular] || m[kCaustic] || m[kIndirect];
         if (first_specular) return m[kSpecular];
-        if (scatter_vertices == 1) return m[kDirect] || m[kCaustic] || m[kIndirect];
+        if (scatter_vertices == 1) return m[kCaustic] || m[kIndirect];
         return m[kIndirect] || (rest_specular && m[kCaustic]);
     }
 };

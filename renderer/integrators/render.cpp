@@ -67,8 +67,8 @@ void render_tile(PassJob& job, int tile, ThreadStats& stats) {
                 }
                 job.film->add(pixel, er);
             }
-            job.done.fetch_add(uint64_t(job.s1 - job.s0), std::memory_order_relaxed);
         }
+    job.done.fetch_add(uint64_t(job.s1 - job.s0) * uint64_t((x1 - x0) * (y1 - y0)), std::memory_order_relaxed);
 }
 
 }  // namespace
@@ -106,7 +106,7 @@ RenderOutput render(const Scene& scene, const Integrator& integrator, const Rend
 
     while (true) {
         // Decide this pass. Under an spp budget the passes are fixed by the
-        // budget alone (1/16 of it, at checkpoints too), so the summation order
+        // budget and checkpoints alone (below), so the summation order
         // and hence the bytes do not depend on timing; a cancel keeps every
         // finished pass. Under a time budget, passes take ~1/8 of what is left.
         int cap = opts.spp > 0 ? opts.spp : (1 << 30);
@@ -125,8 +125,9 @@ RenderOutput render(const Scene& scene, const Integrator& integrator, const Rend
                 s1 = std::min(s1, spp_done + n);
             }
         } else {
-            int chunk = std::max(1, (opts.spp + 15) / 16);
-            s1 = std::min(s1, (spp_done / chunk + 1) * chunk);
+            // 1, 2, 4, ... 64, then 64 more at a time: early passes are quick,
+            // so a cancel soon keeps something, and the plan ignores timing.
+            s1 = std::min(s1, spp_done == 0 ? 1 : spp_done + std::min(spp_done, 64));
         }
         PassJob job;
         job.scene = &scene;
@@ -146,11 +147,13 @@ RenderOutput render(const Scene& scene, const Integrator& integrator, const Rend
         std::atomic<int> running{threads};
         auto pass_t0 = Clock::now();
         auto worker = [&](int t) {
+            ThreadStats local;  // thread-local: shared counters would ping-pong cache lines
             for (;;) {
                 int tile = job.next_tile.fetch_add(1);
                 if (tile >= n_tiles || cancel.load()) break;
-                render_tile(job, tile, job.stats[t]);
+                render_tile(job, tile, local);
             }
+            job.stats[t] = local;
             if (running.fetch_sub(1) == 1) {
                 std::lock_guard<std::mutex> lk(mu);
                 cv.notify_all();

@@ -452,7 +452,9 @@ public:
         specular_sampling_weight_ = (d_mean + s_mean) > 0.f ? s_mean / (d_mean + s_mean) : 0.5f;
         // The diffuse albedo including the internal-reflection normalisation.
         const Color denom = nonlinear ? Color(1.f) - diffuse * fdr_int_ : Color(1.f - fdr_int_);
-        diffuse_norm_ = finite_or_zero(diffuse / denom);
+        // Non-physical albedos (rho Fdr_int >= 1 with nonlinear) would make it
+        // infinite or negative: those become 0 rather than NaN/negative weights.
+        diffuse_norm_ = vmax(finite_or_zero(diffuse / denom), Color(0.f));
     }
 
     BsdfSample sample(const BsdfContext&, const Vec3& wi, float u1, Vec2 u2) const override {

@@ -177,8 +177,10 @@ MicrofacetSample MicrofacetDistribution::sample_all(Vec2 u) const {
         tan2 = -alpha2 * std::log1p(-ux);
     else
         tan2 = alpha2 * ux / (1.f - ux);
+    // sin from tan, not sqrt(1 - cos^2): for alpha ~ 1e-4, cos rounds to 1 and
+    // the latter would collapse every normal onto the macro normal.
     const float cos_theta = 1.f / std::sqrt(1.f + tan2);
-    const float sin_theta = safe_sqrt(1.f - cos_theta * cos_theta);
+    const float sin_theta = std::isfinite(tan2) ? std::sqrt(tan2) * cos_theta : 1.f;
 
     MicrofacetSample s;
     s.m = Vec3(cos_phi * sin_theta, sin_phi * sin_theta, cos_theta);
