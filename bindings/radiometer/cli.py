@@ -46,8 +46,9 @@ class _Progress:
                 return
             from tqdm import tqdm
 
-            self.bar = tqdm(total=total or None, desc=self.desc, unit="spl", unit_scale=True, file=sys.stderr,
-                            leave=False)
+            # disable=None: no bar when stderr is not a terminal (CI logs).
+            self.bar = tqdm(total=total or None, initial=done, desc=self.desc, unit="spl", unit_scale=True,
+                            file=sys.stderr, leave=False, disable=None, mininterval=0.25)
         self.bar.n = done
         self.bar.refresh()
 

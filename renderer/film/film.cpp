@@ -29,6 +29,24 @@ FilterSampler::FilterSampler(const std::string& type, float radius, float stddev
         cdf_[i + 1] = cdf_[i] + std::max(0.0, double(eval(float(x)))) * dx;
     }
     if (!(cdf_[n] > 0)) throw std::invalid_argument("rfilter: filter integrates to zero");
+    // Guide table (Chen & Wu 1996 style cutpoints): a starting bin per cdf interval.
+    const int g = 1024;
+    guide_.resize(g + 1);
+    int bin = 0;
+    for (int j = 0; j <= g; ++j) {
+        double t = cdf_[n] * j / g;
+        while (bin < n - 1 && cdf_[bin + 1] <= t) ++bin;
+        guide_[j] = bin;
+    }
+}
+
+int FilterSampler::find_bin(double target) const {
+    const int n = int(cdf_.size()) - 1;
+    const int g = int(guide_.size()) - 1;
+    int j = std::clamp(int(target / cdf_[n] * g), 0, g);
+    int i = guide_[j];
+    while (i < n - 1 && cdf_[i + 1] <= target) ++i;
+    return i;
 }
 
 float FilterSampler::eval(float x) const {
@@ -56,8 +74,7 @@ float FilterSampler::sample(float u, float lo, float hi) const {
     double c1 = hi >= radius_ ? cdf_.back() : cdf_at(double(hi));
     if (!(c1 > c0)) return 0.5f * (std::max(lo, -radius_) + std::min(hi, radius_));
     double target = c0 + u * (c1 - c0);
-    int i = int(std::upper_bound(cdf_.begin(), cdf_.end(), target) - cdf_.begin()) - 1;
-    i = std::clamp(i, 0, n - 1);
+    int i = find_bin(target);
     double width = cdf_[i + 1] - cdf_[i];
     double t = width > 0 ? (target - cdf_[i]) / width : 0.5;
     double x = -radius_ + (i + t) * dx;

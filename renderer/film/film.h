@@ -40,6 +40,8 @@ private:
     std::string type_;
     float radius_, stddev_;
     std::vector<double> cdf_;  // tabulated on [-radius, radius]
+    std::vector<int> guide_;   // guide_[j]: first bin whose cdf reaches j / guide size (O(1) inversion)
+    int find_bin(double target) const;
 };
 
 class Film {

@@ -1,0 +1,79 @@
+"""EXR files (image, variance and effects as layers of one file) and the
+`radiometer render` command."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import radiometer as rm
+
+
+def test_exr_round_trip_keeps_every_layer_and_metadata(tmp_path, small_cornell):
+    res = rm.render(small_cornell, spp=4, seed=3)
+    path = tmp_path / "r.exr"
+    rm.write_exr(path, res, scene="cornell")
+    back = rm.read_exr(path)
+    np.testing.assert_array_equal(back.image, res.image)
+    np.testing.assert_array_equal(back.variance, res.variance)
+    assert set(back.effects) == set(rm.EFFECTS)
+    for k in rm.EFFECTS:
+        np.testing.assert_array_equal(back.effects[k], res.effects[k])
+    assert back.metadata["spp"] == 4
+    assert back.metadata["seed"] == 3
+    assert back.metadata["seconds"] == pytest.approx(res.seconds, rel=0, abs=0)
+    assert back.metadata["scene"] == "cornell"
+    assert '"type": "path"' in back.metadata["integrator"]
+
+
+def test_exr_non_contiguous_and_bad_input(tmp_path):
+    a = np.random.default_rng(0).random((6, 5, 3), dtype=np.float32)
+    v = np.asfortranarray(a * 2)  # a strided layout must still land right
+    rm.write_exr(tmp_path / "a.exr", None, image=a[:, :, :], variance=v)
+    back = rm.read_exr(tmp_path / "a.exr")
+    np.testing.assert_array_equal(back.image, a)
+    np.testing.assert_array_equal(back.variance, v)
+    with pytest.raises(ValueError, match="image must have shape"):
+        rm.write_exr(tmp_path / "b.exr", None, image=np.zeros((4, 4)))
+    with pytest.raises(FileNotFoundError):
+        rm.read_exr(tmp_path / "missing.exr")
+    (tmp_path / "junk.exr").write_bytes(b"not an exr")
+    with pytest.raises(ValueError, match="not a readable EXR"):
+        rm.read_exr(tmp_path / "junk.exr")
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        rm.write_exr(tmp_path / "no" / "dir.exr", None, image=a)
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "radiometer.cli", *args], capture_output=True, text=True,
+                          cwd=cwd, timeout=300)
+
+
+def test_cli_render_writes_exr(tmp_path, cornell_path):
+    small = tmp_path / "small.xml"
+    small.write_text(cornell_path.read_text().replace('value="256"', 'value="16"'))
+    out = tmp_path / "o.exr"
+    r = _cli("render", str(small), "--spp", "4", "-i", '{"type": "path", "max_depth": 3}', "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "4 spp" in r.stdout and "NaN samples 0" in r.stdout
+    img = rm.read_exr(out)
+    assert img.image.shape == (16, 16, 3) and img.metadata["spp"] == 4
+    assert '"max_depth": 3' in img.metadata["integrator"]
+
+
+@pytest.mark.parametrize("args,match", [
+    (["render", "no_such_scene"], "not a canonical scene"),
+    (["render", "cornell-box", "-i", "nosuch"], "unknown estimator"),
+    (["render", "cornell-box", "--spp", "-4"], "spp"),
+    (["render", "cornell-box", "--effects", "glow"], "unknown effect class 'glow'"),
+])
+def test_cli_errors_are_clear(tmp_path, args, match):
+    r = _cli(*args, "-o", str(tmp_path / "x.exr"))
+    assert r.returncode == 2
+    assert match in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_cli_later_commands_say_so():
+    r = _cli("bench")
+    assert r.returncode == 2 and "issue 7" in r.stderr
