@@ -5,6 +5,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include "film/film.h"
 #include "integrators/render.h"
 #include "scene/scene.h"
 
@@ -161,6 +162,92 @@ PYBIND11_MODULE(_core, m) {
             d["has_media"] = s.features.has_media;
             return d;
         });
+
+
+    // ---- Components, vectorised for statistical tests (chi-square etc.).
+    py::class_<Bsdf>(m, "Bsdf")
+        .def(py::init([](const BsdfDesc& d) { return make_bsdf(d); }))
+        .def_property_readonly("flags", &Bsdf::flags)
+        .def("eval",
+             [](const Bsdf& b, py::object wi, py::object wo, bool adjoint) {
+                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
+                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
+                 size_t n = a.size() / 3;
+                 std::vector<float> out(3 * n);
+                 BsdfContext ctx;
+                 ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                 {
+                     py::gil_scoped_release nogil;
+                     for (size_t i = 0; i < n; ++i) {
+                         Color f = b.eval(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
+                                          Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
+                         out[3 * i] = f.x; out[3 * i + 1] = f.y; out[3 * i + 2] = f.z;
+                     }
+                 }
+                 return to_numpy(std::move(out), {py::ssize_t(n), 3});
+             },
+             py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false,
+             "f(wi, wo) |cos theta_o| for (N, 3) local directions")
+        .def("pdf",
+             [](const Bsdf& b, py::object wi, py::object wo, bool adjoint) {
+                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
+                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
+                 size_t n = a.size() / 3;
+                 std::vector<float> out(n);
+                 BsdfContext ctx;
+                 ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                 for (size_t i = 0; i < n; ++i)
+                     out[i] = b.pdf_w(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
+                                      Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
+                 return to_numpy(std::move(out), {py::ssize_t(n)});
+             },
+             py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, "solid-angle pdf of sampling wo given wi")
+        .def("sample",
+             [](const Bsdf& b, py::object wi, py::object u1, py::object u2, bool adjoint) {
+                 auto a = flat<float>(wi, 3, "wi");
+                 auto uu1 = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(u1);
+                 auto uu2 = flat<float>(u2, 2, "u2");
+                 size_t n = a.size() / 3;
+                 if (!uu1 || size_t(uu1.size()) != n || uu2.size() != 2 * n)
+                     throw py::value_error("u1 must be (N,) and u2 (N, 2) for N directions wi");
+                 std::vector<float> wo(3 * n), weight(3 * n), pdf(n), eta(n), delta(n), flags(n);
+                 BsdfContext ctx;
+                 ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                 const float* pu1 = uu1.data();
+                 for (size_t i = 0; i < n; ++i) {
+                     BsdfSample bs = b.sample(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), pu1[i],
+                                              Vec2(uu2[2 * i], uu2[2 * i + 1]));
+                     for (int k = 0; k < 3; ++k) { wo[3 * i + k] = bs.wo[k]; weight[3 * i + k] = bs.weight[k]; }
+                     pdf[i] = bs.pdf_w; eta[i] = bs.eta; delta[i] = bs.is_delta ? 1.f : 0.f;
+                     flags[i] = float(bs.sampled_flags);
+                 }
+                 py::dict r;
+                 py::ssize_t N = py::ssize_t(n);
+                 r["wo"] = to_numpy(std::move(wo), {N, 3});
+                 r["weight"] = to_numpy(std::move(weight), {N, 3});
+                 r["pdf"] = to_numpy(std::move(pdf), {N});
+                 r["eta"] = to_numpy(std::move(eta), {N});
+                 r["is_delta"] = to_numpy(std::move(delta), {N});
+                 r["sampled_flags"] = to_numpy(std::move(flags), {N});
+                 return r;
+             },
+             py::arg("wi"), py::arg("u1"), py::arg("u2"), py::arg("adjoint") = false);
+
+    m.def(
+        "filter_sample",
+        [](const std::string& type, float radius, float stddev, py::object u, float lo, float hi) {
+            FilterSampler f(type, radius, stddev);
+            auto uu = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(u);
+            if (!uu) throw py::value_error("u must be an array");
+            std::vector<float> out(size_t(uu.size()));
+            for (size_t i = 0; i < out.size(); ++i) out[i] = f.sample(uu.data()[i], lo, hi);
+            return to_numpy(std::move(out), {py::ssize_t(out.size())});
+        },
+        py::arg("type"), py::arg("radius"), py::arg("stddev"), py::arg("u"), py::arg("lo") = -1e30f,
+        py::arg("hi") = 1e30f, "pixel offsets sampled from a reconstruction filter, restricted to [lo, hi]");
+    m.def("filter_eval", [](const std::string& type, float radius, float stddev, float x) {
+        return FilterSampler(type, radius, stddev).eval(x);
+    });
 
     m.attr("EFFECTS") = [] {
         py::list l;

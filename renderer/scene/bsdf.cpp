@@ -44,7 +44,7 @@ namespace {
 // ---------------------------------------------------------------------------
 // Helpers
 
-// a with the sign of b flipped in (Mitsuba's mulsign: negative zero counts as negative).
+// a, negated when b's sign bit is set (Mitsuba's mulsign: -0 counts as negative).
 inline float mulsign(float a, float b) { return std::signbit(b) ? -a : a; }
 
 // The last line of defence of "no NaN, no Inf": a sample that is not finite
