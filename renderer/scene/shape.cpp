@@ -34,6 +34,18 @@ Mesh::Mesh(std::vector<float> positions, std::vector<uint32_t> indices, std::vec
 }
 
 RTCGeometry Mesh::create_geometry(RTCDevice device, unsigned geom_id) {
+    // Per-face data the hit and sampling code would otherwise recompute.
+    size_t nf = triangle_count();
+    face_n_.resize(nf);
+    face_scale_.resize(nf);
+    for (size_t f = 0; f < nf; ++f) {
+        Vec3 p0 = vertex(indices_[3 * f]), p1 = vertex(indices_[3 * f + 1]), p2 = vertex(indices_[3 * f + 2]);
+        Vec3 c = cross(p1 - p0, p2 - p0);
+        float l = length(c);
+        Vec3 n = (l > 0 && std::isfinite(l)) ? c / l : Vec3(0, 0, 1);
+        face_n_[f] = flip_normals ? -n : n;
+        face_scale_[f] = std::max(max_component(abs(p0)), std::max(max_component(abs(p1)), max_component(abs(p2))));
+    }
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, pos_.data(), 0, 3 * sizeof(float),
                                num_vertices_);
@@ -50,8 +62,7 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     float b1 = hit.u, b2 = hit.v, b0 = 1.f - b1 - b2;
     // Barycentric interpolation is more accurate than o + t d far from the origin.
     it.p = p0 * b0 + p1 * b1 + p2 * b2;
-    Vec3 n = normalize(cross(p1 - p0, p2 - p0));
-    if (flip_normals) n = -n;
+    Vec3 n = face_n_[f];
     it.n = n;
     Vec3 ns = n;
     if (!normals_.empty()) {
@@ -67,8 +78,7 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     } else {
         it.uv = Vec2(b1, b2);
     }
-    float scale = std::max(max_component(abs(p0)), std::max(max_component(abs(p1)), max_component(abs(p2))));
-    it.eps = hit_epsilon(it.p, std::max(scale, max_component(abs(ray.o))));
+    it.eps = hit_epsilon(it.p, std::max(face_scale_[f], max_component(abs(ray.o))));
 }
 
 PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
@@ -80,8 +90,7 @@ PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
     Vec3 p0 = vertex(indices_[3 * f]), p1 = vertex(indices_[3 * f + 1]), p2 = vertex(indices_[3 * f + 2]);
     Vec2 b = warp::square_to_uniform_triangle(u);
     ps.p = p0 * (1.f - b.x - b.y) + p1 * b.x + p2 * b.y;
-    Vec3 n = normalize(cross(p1 - p0, p2 - p0));
-    ps.n = flip_normals ? -n : n;
+    ps.n = face_n_[f];
     ps.pdf_a = 1.f / total_area_;
     return ps;
 }

@@ -54,6 +54,8 @@ private:
     std::vector<uint32_t> indices_;
     std::vector<float> normals_, uvs_;
     std::vector<float> area_cdf_;  // cumulative triangle areas, for uniform area sampling
+    std::vector<Vec3> face_n_;     // unit face normals, flip_normals applied at create_geometry
+    std::vector<float> face_scale_;  // largest |coordinate| of each triangle (for ray offsets)
     float total_area_ = 0;
     size_t num_vertices_ = 0;
     Vec3 lo_, hi_;
