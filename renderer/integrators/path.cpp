@@ -79,7 +79,9 @@ public:
             if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
             beta *= bs.weight;
             eta_scale *= sqr(bs.eta);
-            pc.push(bs.is_delta);
+            // An index-matched boundary (null) passes light unchanged: it is no
+            // vertex of the path's class, though it counts towards max_depth as in Mitsuba's `path`.
+            if (bsdf.flags() != kNull) pc.push(bs.is_delta);
             prev_pdf_w = bs.pdf_w;
             prev_delta = bs.is_delta;
             ray = it.spawn(it.to_world(bs.wo));
