@@ -164,7 +164,9 @@ bool Scene::intersect(const Ray& ray, Interaction& it) const {
         return false;
     }
     const Shape& s = *shapes[rh.hit.geomID];
-    it = Interaction();
+    // Every field is set here or by fill_interaction (no second zeroing).
+    it.kind = VertexKind::Surface;
+    it.medium_inside = it.medium_outside = -1;
     it.valid = true;
     it.t = rh.ray.tfar;
     it.shape = int(rh.hit.geomID);
