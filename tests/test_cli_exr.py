@@ -77,3 +77,17 @@ def test_cli_errors_are_clear(tmp_path, args, match):
 def test_cli_later_commands_say_so():
     r = _cli("bench")
     assert r.returncode == 2 and "issue 7" in r.stderr
+
+
+def test_cli_refs_regenerates_a_reference(tmp_path):
+    pytest.importorskip("mitsuba", reason="the references are made with Mitsuba 3")
+    r = _cli("refs", "cornell_box", "--runs", "2", "--spp", "2", "--out-dir", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    ref = rm.read_exr(tmp_path / "cornell_box" / "reference.exr")
+    assert ref.image.shape == (64, 64, 3) and ref.variance is not None
+    assert ref.metadata["runs"] == 2 and ref.metadata["total_spp"] == 4
+    assert ref.metadata["mitsuba_version"].startswith("3.")
+    listing = _cli("refs", "--list")
+    assert "cornell_box" in listing.stdout
+    bad = _cli("refs", "no_such_scene")
+    assert bad.returncode == 2 and "no Mitsuba reference is defined for no_such_scene" in bad.stderr

@@ -108,6 +108,41 @@ def cmd_render(a) -> int:
     return 0
 
 
+def cmd_refs(a) -> int:
+    """Regenerates the Mitsuba 3 references of the canonical scenes."""
+    from .reference_scenes.make_reference import HERE, SCENES, make_mitsuba_reference
+
+    names = a.scenes or sorted(SCENES)
+    unknown = [n for n in names if n not in SCENES]
+    if unknown:
+        raise SceneError(f"refs: no Mitsuba reference is defined for {', '.join(unknown)} "
+                         f"(known: {', '.join(sorted(SCENES))})")
+    if a.list:
+        for n in names:
+            cfg = SCENES[n]
+            ref = HERE / n / "reference.exr"
+            state = "missing"
+            if ref.exists():
+                from . import read_exr
+
+                m = read_exr(ref).metadata
+                state = (f"{m.get('total_spp', '?')} spp, Mitsuba {m.get('mitsuba_version', '?')} "
+                         f"{m.get('variant', '?')}, {m.get('date', '?')}")
+            print(f"{n}: {cfg['runs']} runs x {cfg['spp']} spp, params {cfg['params']} -- {state}")
+        return 0
+    out_dir = Path(a.out_dir) if a.out_dir else None
+    for n in names:
+        cfg = SCENES[n]
+        runs, spp = a.runs or cfg["runs"], a.spp or cfg["spp"]
+        out = (out_dir / n / "reference.exr") if out_dir else HERE / n / "reference.exr"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        print(f"{n}: {runs} runs x {spp} spp with Mitsuba {a.variant} -> {out}", file=sys.stderr)
+        _, var, meta = make_mitsuba_reference(HERE / n / "scene.xml", out, runs=runs, spp=spp, variant=a.variant,
+                                              **cfg["params"])
+        print(f"  wrote {out} in {meta['seconds']:.0f} s ({meta['variant']}); mean variance {var.mean():.3g}")
+    return 0
+
+
 def _not_yet(what, issue):
     def run(a) -> int:
         print(f"radiometer {what}: not implemented yet (tracked in issue {issue})", file=sys.stderr)
@@ -131,7 +166,15 @@ def main(argv=None) -> int:
     r.add_argument("--effects", help=f"comma-separated subset of: {','.join(EFFECTS)}")
     r.add_argument("-o", "--output", default="out.exr")
     r.set_defaults(func=cmd_render)
-    for name, issue in (("bench", 7), ("compare", 7), ("report", 7), ("refs", 3)):
+    f = sub.add_parser("refs", help="regenerate the Mitsuba 3 references of the canonical scenes")
+    f.add_argument("scenes", nargs="*", help="scene folders (default: every scene with a Mitsuba reference)")
+    f.add_argument("--runs", type=int, help="independent Mitsuba renders (default: the scene's)")
+    f.add_argument("--spp", type=int, help="samples per pixel per run (default: the scene's)")
+    f.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (falls back to scalar_rgb)")
+    f.add_argument("--out-dir", help="write under this folder instead of reference_scenes/")
+    f.add_argument("--list", action="store_true", help="list the references and how they were made")
+    f.set_defaults(func=cmd_refs)
+    for name, issue in (("bench", 7), ("compare", 7), ("report", 7)):
         s = sub.add_parser(name, help=f"(issue {issue}, not yet)")
         s.add_argument("args", nargs="*")
         s.set_defaults(func=_not_yet(name, issue))
