@@ -435,7 +435,7 @@ def _unpack(ret, n):
 
 def chi2_test(sample_func, pdf_func, n_samples: int = 200_000, grid: SphereGrid | None = None, seed: int = 0,
               level: float = 0.01, min_expected: float = 5.0, label: str = "", order: int = 3,
-              max_depth: int = 7, atol: float = 1e-3, rtol: float = 1e-4) -> Chi2Result:
+              max_depth: int = 7, atol: float = 1e-3, rtol: float = 1e-4, min_depth: int = 1) -> Chi2Result:
     """Samples n_samples directions with sample_func(rng, n) (rng a numpy
     Generator seeded with `seed`; returns wo, or (wo, is_delta), or (wo,
     is_delta, valid)), histograms the valid non-delta ones on `grid`, integrates
@@ -463,7 +463,8 @@ def chi2_test(sample_func, pdf_func, n_samples: int = 200_000, grid: SphereGrid 
     n_delta = int(np.count_nonzero(valid & is_delta))
     n_failed = n - n_hist - n_delta
 
-    expected, int_err = integrate_pdf(pdf_func, grid, scale=float(n), order=order, max_depth=max_depth,
+    expected, int_err = integrate_pdf(pdf_func, grid, scale=float(n), order=order, min_depth=min_depth,
+                                      max_depth=max_depth,
                                       atol=atol, rtol=rtol, points=wo[hist_sel], seed=seed + 1)
     if not np.all(np.isfinite(expected)):
         messages.append(f"the pdf is NaN or Inf in {int(np.count_nonzero(~np.isfinite(expected)))} cells")
@@ -474,7 +475,11 @@ def chi2_test(sample_func, pdf_func, n_samples: int = 200_000, grid: SphereGrid 
     # Expected delta + failed samples. A pdf integrating to more than 1 (beyond
     # the integration error) is an error of its own; within it, clamp to 0.
     off_expected = n - float(expected.sum())
-    if off_expected < -max(3.0 * int_err, 1e-6 * n, 1.0):
+    # The cubature's own error estimate is optimistic where a light's outline
+    # or a support edge cuts cells (measured: a rectangle light integrated to
+    # 1.0020 at min_depth 1 and 1.00002 at min_depth 4, both claiming ~0.05
+    # samples): allow 1e-4 N, far below the counting noise sqrt(N).
+    if off_expected < -max(3.0 * int_err, 1e-4 * n, 1.0):
         messages.append(f"the pdf integrates to {integral:.6f} > 1")
     off_expected = max(off_expected, 0.0)
     n_off = n_delta + n_failed

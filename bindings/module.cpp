@@ -152,6 +152,65 @@ PYBIND11_MODULE(_core, m) {
         .def_property_readonly("bbox", [](const Scene& s) {
             return py::make_tuple(color_tuple(s.bbox_lo), color_tuple(s.bbox_hi));
         })
+        .def("sample_emitter_direction",
+             [](const Scene& s, py::object ref, py::object u) {
+                 // Next event estimation's light sample, as estimate_direct takes it:
+                 // u columns = (pick, u.x, u.y, u_extra).
+                 if (!s.committed()) throw py::value_error("scene is not committed");
+                 auto r = flat<float>(ref, 3, "ref");
+                 auto uu = flat<float>(u, 4, "u");
+                 size_t n = r.size() / 3;
+                 if (uu.size() != 4 * n) throw py::value_error("u must be (N, 4) for N reference points");
+                 std::vector<float> d(3 * n), pdf(n), rad(3 * n), delta(n);
+                 size_t ne = s.emitters.size();
+                 for (size_t i = 0; i < n; ++i) {
+                     if (ne == 0) continue;
+                     size_t idx = std::min(size_t(uu[4 * i] * float(ne)), ne - 1);
+                     DirectSample ds = s.emitters[idx]->sample_direct(Vec3(r[3 * i], r[3 * i + 1], r[3 * i + 2]),
+                                                                      Vec2(uu[4 * i + 1], uu[4 * i + 2]), uu[4 * i + 3]);
+                     for (int k = 0; k < 3; ++k) { d[3 * i + k] = ds.d[k]; rad[3 * i + k] = ds.radiance[k]; }
+                     pdf[i] = ds.pdf_w / float(ne);
+                     delta[i] = ds.is_delta ? 1.f : 0.f;
+                 }
+                 py::dict out;
+                 py::ssize_t N = py::ssize_t(n);
+                 out["d"] = to_numpy(std::move(d), {N, 3});
+                 out["pdf"] = to_numpy(std::move(pdf), {N});
+                 out["radiance"] = to_numpy(std::move(rad), {N, 3});
+                 out["is_delta"] = to_numpy(std::move(delta), {N});
+                 return out;
+             },
+             py::arg("ref"), py::arg("u"))
+        .def("pdf_emitter_direction",
+             [](const Scene& s, py::object ref, py::object dirs) {
+                 // The light-sampling density that MIS assigns to a ray leaving ref along d.
+                 if (!s.committed()) throw py::value_error("scene is not committed");
+                 auto r = flat<float>(ref, 3, "ref");
+                 auto dd = flat<float>(dirs, 3, "d");
+                 size_t n = dd.size() / 3;
+                 bool one_ref = r.size() == 3;
+                 if (!one_ref && r.size() != dd.size()) throw py::value_error("ref must be (1, 3) or match d");
+                 std::vector<float> out(n, 0.f);
+                 float pick = s.emitters.empty() ? 0.f : 1.f / float(s.emitters.size());
+                 {
+                     py::gil_scoped_release nogil;
+                     for (size_t i = 0; i < n; ++i) {
+                         size_t j = one_ref ? 0 : i;
+                         Ray ray;
+                         ray.o = Vec3(r[3 * j], r[3 * j + 1], r[3 * j + 2]);
+                         ray.d = normalize(Vec3(dd[3 * i], dd[3 * i + 1], dd[3 * i + 2]));
+                         Interaction it;
+                         if (s.intersect(ray, it)) {
+                             int e = s.shapes[it.shape]->emitter;
+                             if (e >= 0) out[i] = pick * s.emitters[e]->pdf_direct(ray.o, it.p, it.n);
+                         } else {
+                             for (const Emitter* env : s.environment) out[i] += pick * env->pdf_direct(ray.o, Vec3(0.f), Vec3(0.f));
+                         }
+                     }
+                 }
+                 return to_numpy(std::move(out), {py::ssize_t(n)});
+             },
+             py::arg("ref"), py::arg("d"))
         .def_property_readonly("features", [](const Scene& s) {
             py::dict d;
             d["has_delta_bsdf"] = s.features.has_delta_bsdf;

@@ -1,0 +1,94 @@
+"""Emitter sampling for next event estimation: the directions an emitter
+sample takes from a reference point follow the density that MIS assigns to
+the same directions when a BSDF sample finds the emitter (Pearson chi-square,
+analysis/chi2.py), for every emitter type that has a density."""
+import numpy as np
+import pytest
+
+import radiometer as rm
+from radiometer.analysis.chi2 import SphereGrid, chi2_test, sidak_level
+
+CASES = {
+    # name: (shape dict with an area emitter, or a non-area emitter dict, reference point)
+    "sphere": ({"type": "sphere", "center": [0.0, 0.0, 2.0], "radius": 0.8}, [0.1, -0.2, 0.0]),
+    "sphere_close": ({"type": "sphere", "center": [0.0, 0.0, 1.0], "radius": 0.9}, [0.0, 0.0, 0.0]),
+    "disk": ({"type": "disk", "to_world": [[0.7, 0, 0, 0.3], [0, -0.7, 0, 0], [0, 0, -1, 1.0], [0, 0, 0, 1]]},
+             [0.0, 0.0, 0.0]),
+    # rotated 135 degrees about x (faces the origin), scaled 0.707 along its y
+    "rectangle": ({"type": "rectangle", "to_world": [[1.0, 0, 0, 0], [0, -0.5, -0.7071, 0.2], [0, 0.5, -0.7071, 1.5],
+                                                     [0, 0, 0, 1]]}, [0.0, 0.0, 0.0]),
+    "cube": ({"type": "cube", "to_world": [[0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, 0.5, 2.0], [0, 0, 0, 1]]},
+             [0.3, 0.0, 0.0]),
+    "constant": (None, [0.0, 0.0, 0.0]),
+}
+LEVEL = sidak_level(0.01, len(CASES))  # overall significance 0.01 across this file's chi-square tests
+
+
+def _scene(shape):
+    d = {"type": "scene",
+         "sensor": {"type": "radiancemeter", "origin": [0, 0, -5], "direction": [0, 0, 1],
+                    "film": {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"}}}}
+    if shape is None:
+        d["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": [1, 1, 1]}}
+    else:
+        s = dict(shape)
+        if "to_world" in s:
+            s["to_world"] = np.array(s["to_world"], float)
+        s["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": [1, 2, 3]}}
+        d["light"] = s
+    return rm.load_dict(d).core()
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_emitter_direction_sampling_chi2(name):
+    shape, ref = CASES[name]
+    core = _scene(shape)
+    ref = np.asarray(ref, np.float32)
+
+    def sample(rng, n):
+        s = core.sample_emitter_direction(np.broadcast_to(ref, (n, 3)), rng.random((n, 4), dtype=np.float32))
+        return s["d"], s["is_delta"] > 0, s["pdf"] > 0
+
+    def pdf(d):
+        return core.pdf_emitter_direction(ref[None, :], np.asarray(d, np.float32))
+
+    # The densities are indicator-like (a light's outline cuts through cells):
+    # deeper refinement keeps the cell integrals' error well under the noise.
+    r = chi2_test(sample, pdf, n_samples=100_000, grid=SphereGrid(n_theta=20, n_phi=40), seed=7, level=LEVEL,
+                  label=name, min_depth=4, max_depth=10, rtol=1e-5, atol=1e-4)
+    assert r.passed, r.summary()
+
+
+def test_emitter_sample_pdf_matches_pdf_of_its_direction():
+    """The density a sample reports equals the density of its direction
+    (what MIS uses for BSDF-sampled hits), and the radiance it carries is
+    the emitter's."""
+    core = _scene(CASES["rectangle"][0])
+    n = 2000
+    ref = np.zeros((n, 3), np.float32)
+    s = core.sample_emitter_direction(ref, np.random.default_rng(0).random((n, 4), dtype=np.float32))
+    ok = s["pdf"] > 0
+    assert ok.mean() > 0.9
+    p = core.pdf_emitter_direction(ref[:1], s["d"][ok])
+    np.testing.assert_allclose(p, s["pdf"][ok], rtol=2e-3)
+    np.testing.assert_array_equal(s["radiance"][ok], np.broadcast_to([1, 2, 3], (int(ok.sum()), 3)))
+
+
+def test_wrong_emitter_pdf_is_rejected():
+    """The test can fail: uniform area sampling of a sphere judged against a
+    density 10 % too high on one side is rejected."""
+    shape, ref = CASES["sphere"]
+    core = _scene(shape)
+    ref = np.asarray(ref, np.float32)
+
+    def sample(rng, n):
+        s = core.sample_emitter_direction(np.broadcast_to(ref, (n, 3)), rng.random((n, 4), dtype=np.float32))
+        return s["d"], s["is_delta"] > 0, s["pdf"] > 0
+
+    def wrong_pdf(d):
+        d = np.asarray(d, np.float32)
+        p = core.pdf_emitter_direction(ref[None, :], d)
+        return np.where(d[:, 0] > 0, p * 1.1, p * 0.9)
+
+    r = chi2_test(sample, wrong_pdf, n_samples=100_000, grid=SphereGrid(n_theta=20, n_phi=40), seed=7, level=0.01)
+    assert not r.passed
