@@ -195,14 +195,25 @@ bool Scene::visible(const Interaction& from, const DirectSample& ds) const {
     Ray r = from.spawn(ds.d);
     if (std::isinf(ds.dist)) {
         r.tmax = kInf;
-    } else {
-        // Stop short of the emitter by its own floating-point error bound.
-        Vec3 to = ds.p;
-        float eps_to = hit_epsilon(to, max_component(abs(to)));
-        float dist = length(to - r.o);
-        r.tmax = dist - std::max(eps_to, from.eps);
-        if (!(r.tmax > 0.f)) return true;
+        return !occluded(r);
     }
+    // Both ends are pushed off their surfaces (after pbrt-v4's SpawnRayTo):
+    // the light point moves towards the shading point's side by its own
+    // error bound, and the ray stops just short of it. Without the far offset
+    // a shadow ray arriving at a grazing angle crosses the light's own
+    // surface before its end (the point's float error, ~1e-7, over cos ~0.1)
+    // and is falsely occluded: measured -0.03 % direct light in a closed
+    // cube furnace.
+    Vec3 to = ds.p;
+    if (length_sq(ds.n) > 0.f) {
+        float eps_to = hit_epsilon(to, max_component(abs(to)));
+        to = to + ds.n * (dot(ds.n, r.o - to) >= 0.f ? eps_to : -eps_to);
+    }
+    Vec3 d = to - r.o;
+    float dist = length(d);
+    if (!(dist > 0.f)) return true;
+    r.d = d / dist;
+    r.tmax = dist * (1.f - 1e-4f);
     return !occluded(r);
 }
 
