@@ -249,3 +249,11 @@ def test_closed_cube_furnace_is_unbiased_to_1e4(integrator, max_depth):
     # The resolution it has: a 3e-4 relative error would be seen.
     t_biased = (means.mean() - exact * (1 - 3e-4)) / (means.std(ddof=1) / np.sqrt(len(means)))
     assert 2 * stats.t.sf(abs(t_biased), len(means) - 1) < 0.01
+
+
+def test_absurd_resolution_is_a_clear_error(cornell_path):
+    scene = rm.load_file(cornell_path, res=16384)
+    with pytest.raises(ValueError, match="16384x16384 film needs .* GiB"):
+        rm.render(scene, spp=1)
+    with pytest.raises(rm.SceneError, match="width"):
+        rm.load_file(cornell_path, res=100000)

@@ -82,6 +82,13 @@ RenderOutput render(const Scene& scene, const Integrator& integrator, const Rend
     const SensorDesc& sd = scene.sensor_desc;
     int W = sensor.width, H = sensor.height;
     FilterSampler filter(sd.rfilter, sd.filter_radius, sd.filter_stddev);
+    // Two films of 27 doubles per pixel (estimate, squares, 7 effects): say
+    // so up front rather than fail inside an allocation.
+    double film_bytes = 2.0 * double(W) * double(H) * (3 + 3 + 3 * kNumEffects) * sizeof(double);
+    if (film_bytes > 16.0 * (1ull << 30))
+        throw std::invalid_argument("render: a " + std::to_string(W) + "x" + std::to_string(H) + " film needs " +
+                                    std::to_string(int(film_bytes / (1ull << 30))) +
+                                    " GiB of accumulation buffers (limit 16 GiB); lower the resolution");
     Film film(W, H);       // finished passes
     Film pass_film(W, H);  // the pass in flight; merged only when complete
 
