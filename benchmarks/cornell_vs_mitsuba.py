@@ -85,9 +85,9 @@ def git_info() -> dict:
     return {"commit": run("rev-parse", "HEAD"), "dirty": bool(status) if status is not None else None}
 
 
-def long_reference(res: int, max_depth: int, runs: int, spp: int):
+def long_reference(res: int, max_depth: int, runs: int, spp: int, rfilter: str = "gaussian"):
     """Mitsuba llvm_ad_rgb reference, made once and cached under out/."""
-    path = OUT_DIR / f"cornell_box_ref_mitsuba_{res}px_d{max_depth}_{runs}x{spp}spp.exr"
+    path = OUT_DIR / f"cornell_box_ref_mitsuba_{res}px_d{max_depth}_{rfilter}_{runs}x{spp}spp.exr"
     import radiometer as rm
 
     if not path.exists():
@@ -99,16 +99,17 @@ def long_reference(res: int, max_depth: int, runs: int, spp: int):
 
         OUT_DIR.mkdir(exist_ok=True)
         print(f"making the long reference ({runs} x {spp} spp, Mitsuba llvm_ad_rgb) -> {path}", file=sys.stderr)
-        make_mitsuba_reference(SCENE, path, runs=runs, spp=spp, variant="llvm_ad_rgb", res=res, max_depth=max_depth)
+        make_mitsuba_reference(SCENE, path, runs=runs, spp=spp, variant="llvm_ad_rgb", res=res, max_depth=max_depth,
+                               rfilter=rfilter)
     ref = rm.read_exr(path)
     return ref, path
 
 
-def bench_ours(res, spp, max_depth, repeats, ref):
+def bench_ours(res, spp, max_depth, repeats, ref, rfilter="gaussian"):
     import radiometer as rm
 
     t0 = time.perf_counter()
-    scene = rm.load_file(SCENE, res=res, spp=spp, max_depth=max_depth)
+    scene = rm.load_file(SCENE, res=res, spp=spp, max_depth=max_depth, rfilter=rfilter)
     load_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     scene.core()  # builds the Embree scene (cached by the Scene)
@@ -130,12 +131,12 @@ def bench_ours(res, spp, max_depth, repeats, ref):
             "render_s": walls, "render_driver_s": drivers, "relmse": errs}
 
 
-def bench_mitsuba(variant, res, spp, max_depth, repeats, ref):
+def bench_mitsuba(variant, res, spp, max_depth, repeats, ref, rfilter="gaussian"):
     import mitsuba as mi
 
     mi.set_variant(variant)
     t0 = time.perf_counter()
-    scene = mi.load_file(str(SCENE), res=res, spp=spp, max_depth=max_depth)
+    scene = mi.load_file(str(SCENE), res=res, spp=spp, max_depth=max_depth, rfilter=rfilter)
     load_s = time.perf_counter() - t0
     # Warm-up: for llvm this traces and JIT-compiles the kernel; the later
     # renders reuse it from drjit's kernel cache.
@@ -168,7 +169,7 @@ def _run_worker(variant, args, ref_path):
         env = dict(os.environ, HOME=home)
         cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", variant, "--worker-ref", str(ref_path),
                "--res", str(args.res), "--spp", str(args.spp), "--max-depth", str(args.max_depth),
-               "--repeats", str(args.repeats)]
+               "--repeats", str(args.repeats), "--rfilter", args.rfilter]
         p = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, text=True)
     if p.returncode != 0:
         raise RuntimeError(f"Mitsuba {variant} worker failed (exit {p.returncode})")
@@ -185,16 +186,21 @@ def main(argv=None):
     ap.add_argument("--ref-runs", type=int, default=64)
     ap.add_argument("--ref-spp", type=int, default=64, help="spp per reference run")
     ap.add_argument("--no-scalar", action="store_true", help="skip Mitsuba scalar_rgb (slow)")
-    ap.add_argument("-o", "--out", type=Path, default=RESULTS)
+    ap.add_argument("--rfilter", default="gaussian", choices=["gaussian", "box", "tent"],
+                    help="reconstruction filter for every renderer (box: both estimators are the same per "
+                         "pixel; gaussian: Mitsuba splats, ours importance-samples the filter)")
+    ap.add_argument("-o", "--out", type=Path, help="results JSON (default: benchmarks/results/cornell_vs_mitsuba[_FILTER].json)")
     ap.add_argument("--worker", help=argparse.SUPPRESS)  # internal: one Mitsuba variant, JSON row on stdout
     ap.add_argument("--worker-ref", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.out is None:
+        args.out = RESULTS if args.rfilter == "gaussian" else RESULTS.with_name(f"cornell_vs_mitsuba_{args.rfilter}.json")
 
     if args.worker:
         import radiometer as rm
 
         ref = rm.read_exr(args.worker_ref).image.astype(np.float64)
-        row = bench_mitsuba(args.worker, args.res, args.spp, args.max_depth, args.repeats, ref)
+        row = bench_mitsuba(args.worker, args.res, args.spp, args.max_depth, args.repeats, ref, args.rfilter)
         print(json.dumps(row))
         return row
 
@@ -202,10 +208,10 @@ def main(argv=None):
     import radiometer as rm
 
     started = _now()
-    ref, ref_path = long_reference(args.res, args.max_depth, args.ref_runs, args.ref_spp)
+    ref, ref_path = long_reference(args.res, args.max_depth, args.ref_runs, args.ref_spp, args.rfilter)
     r = ref.image.astype(np.float64)
     print("running radiometer path ...", file=sys.stderr, flush=True)
-    rows = [bench_ours(args.res, args.spp, args.max_depth, args.repeats, r)]
+    rows = [bench_ours(args.res, args.spp, args.max_depth, args.repeats, r, args.rfilter)]
     variants = ["llvm_ad_rgb"] + ([] if args.no_scalar else ["scalar_rgb"])
     for v in variants:
         print(f"running Mitsuba {v} (own process, empty kernel cache) ...", file=sys.stderr, flush=True)
@@ -226,7 +232,7 @@ def main(argv=None):
 
     hdr = (f"{'renderer':<16} {'variant':<20} {'load s':>7} {'first s':>8} {'JIT s':>6} {'render s':>9} "
            f"{'x ours':>7} {'Msamp/s':>8} {'relMSE':>9} {'eff. x ours':>11}")
-    print(f"\nCornell box {args.res}x{args.res}, {args.spp} spp, max_depth {args.max_depth}; "
+    print(f"\nCornell box {args.res}x{args.res}, {args.spp} spp, max_depth {args.max_depth}, {args.rfilter} filter; "
           f"median of {args.repeats} renders; relMSE (eps {EPS:g}) against {ref_path.name}")
     print(hdr)
     print("-" * len(hdr))
@@ -239,7 +245,8 @@ def main(argv=None):
     out = {
         "benchmark": "cornell_vs_mitsuba",
         "scene": str(SCENE.relative_to(ROOT)),
-        "params": {"res": args.res, "spp": args.spp, "max_depth": args.max_depth, "repeats": args.repeats},
+        "params": {"res": args.res, "spp": args.spp, "max_depth": args.max_depth, "repeats": args.repeats,
+                   "rfilter": args.rfilter},
         "metric": f"relMSE, eps {EPS:g}: mean over pixels and channels of (a - r)^2 / (r^2 + eps)",
         "reference": {"path": str(ref_path.relative_to(ROOT)) if ref_path.is_relative_to(ROOT) else str(ref_path),
                       "made_with": "mitsuba", **{k: ref.metadata.get(k) for k in
