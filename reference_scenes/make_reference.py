@@ -38,6 +38,23 @@ SCENES = {
         "runs": 32,
         "spp": 2048,
     },
+    # The canonical scenes of issue 3 (card.md in each folder says what they
+    # isolate); budgets measured with llvm_ad_rgb on 2 shared cores.
+    "glass_sphere_caustic": {
+        "params": {"res": 64, "max_depth": 12},
+        "runs": 32,
+        "spp": 4096,
+    },
+    "veach_mis": {
+        "params": {"res": 64, "max_depth": 8},
+        "runs": 32,
+        "spp": 2048,
+    },
+    "ajar_door": {
+        "params": {"res": 64, "max_depth": 10},
+        "runs": 32,
+        "spp": 1536,
+    },
 }
 
 

@@ -307,7 +307,11 @@ class _Params:
         if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-6):
             raise self.error(f"parameter '{name}': projective transforms are not supported "
                              f"(last row {m[3].tolist()})", prop.place)
-        if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        # Singular relative to its own scale (a scene scaled by 1e-4 has a
+        # determinant of ~1e-15 and is fine): the smallest singular value
+        # against the largest.
+        sv = np.linalg.svd(m[:3, :3], compute_uv=False)
+        if not (sv[0] > 0 and sv[-1] > 1e-9 * sv[0]):
             raise self.error(f"parameter '{name}': degenerate (singular) transform", prop.place)
         return m
 

@@ -30,6 +30,7 @@ public:
         float dist = std::sqrt(d2);
         ds.p = ps.p;
         ds.n = ps.n;
+        ds.eps = ps.eps;
         ds.d = v / dist;
         ds.dist = dist;
         float cos_l = -dot(ps.n, ds.d);  // > 0 when the emitting side faces ref
@@ -93,17 +94,17 @@ public:
         float beam = d.beam_width < 0.f ? 0.75f * d.cutoff_angle : d.beam_width;
         cutoff_ = d.cutoff_angle * kPi / 180.f;
         beam_ = std::min(beam * kPi / 180.f, cutoff_);
-        cos_cutoff_ = std::cos(cutoff_);
-        cos_beam_ = std::cos(beam_);
         pos_ = xf_.point(Vec3(0.f));
         delta_ = true;
     }
-    // Mitsuba 3 spot falloff: 1 inside the beam, linear in angle to 0 at the cutoff.
+    // Mitsuba 3 spot falloff: 1 inside the beam, linear in angle to 0 at the
+    // cutoff. Compared as angles from atan2(|xy|, z): the cosine of a 0.01
+    // degree cutoff rounds to 1 in float and would light a cone 8x too wide.
     float falloff(const Vec3& local) const {
-        float c = local.z;
-        if (c < cos_cutoff_) return 0.f;
-        if (c >= cos_beam_ || cutoff_ <= beam_) return 1.f;
-        return (cutoff_ - std::acos(clamp(c, -1.f, 1.f))) / (cutoff_ - beam_);
+        float theta = std::atan2(std::sqrt(local.x * local.x + local.y * local.y), local.z);
+        if (theta > cutoff_) return 0.f;
+        if (theta <= beam_ || cutoff_ <= beam_) return 1.f;
+        return (cutoff_ - theta) / (cutoff_ - beam_);
     }
     DirectSample sample_direct(const Vec3& ref, Vec2, float) const override {
         DirectSample ds;
@@ -124,7 +125,7 @@ private:
     Color intensity_;
     Transform xf_;
     Vec3 pos_;
-    float cutoff_, beam_, cos_cutoff_, cos_beam_;
+    float cutoff_, beam_;
 };
 
 class DirectionalEmitter final : public Emitter {

@@ -20,6 +20,7 @@ struct DirectSample {
     float pdf_w = 0.f;    // solid-angle density at the reference point; 1 for delta emitters
     bool is_delta = false;
     Color radiance{0.f};  // radiance arriving along -d (for point/spot: intensity / dist^2)
+    float eps = 0.f;      // offset that clears p's floating-point error (area emitters)
 };
 
 class Emitter {

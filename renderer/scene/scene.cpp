@@ -206,7 +206,7 @@ bool Scene::visible(const Interaction& from, const DirectSample& ds) const {
     // cube furnace.
     Vec3 to = ds.p;
     if (length_sq(ds.n) > 0.f) {
-        float eps_to = hit_epsilon(to, max_component(abs(to)));
+        float eps_to = ds.eps > 0.f ? ds.eps : hit_epsilon(to, 0.f);
         to = to + ds.n * (dot(ds.n, r.o - to) >= 0.f ? eps_to : -eps_to);
     }
     Vec3 d = to - r.o;

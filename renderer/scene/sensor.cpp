@@ -112,7 +112,7 @@ public:
         Frame fr(ps.n);
         SensorRay sr;
         sr.ray.d = fr.to_world(local);
-        sr.ray.o = ps.p + ps.n * hit_epsilon(ps.p, max_component(vmax(abs(shape_->bbox_min()), abs(shape_->bbox_max()))));
+        sr.ray.o = ps.p + ps.n * ps.eps;
         sr.weight = Color(kPi);
         return sr;
     }

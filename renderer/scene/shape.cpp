@@ -37,14 +37,12 @@ RTCGeometry Mesh::create_geometry(RTCDevice device, unsigned geom_id) {
     // Per-face data the hit and sampling code would otherwise recompute.
     size_t nf = triangle_count();
     face_n_.resize(nf);
-    face_scale_.resize(nf);
     for (size_t f = 0; f < nf; ++f) {
         Vec3 p0 = vertex(indices_[3 * f]), p1 = vertex(indices_[3 * f + 1]), p2 = vertex(indices_[3 * f + 2]);
         Vec3 c = cross(p1 - p0, p2 - p0);
         float l = length(c);
         Vec3 n = (l > 0 && std::isfinite(l)) ? c / l : Vec3(0, 0, 1);
         face_n_[f] = flip_normals ? -n : n;
-        face_scale_[f] = std::max(max_component(abs(p0)), std::max(max_component(abs(p1)), max_component(abs(p2))));
     }
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, pos_.data(), 0, 3 * sizeof(float),
@@ -60,10 +58,25 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     uint32_t i0 = indices_[3 * f], i1 = indices_[3 * f + 1], i2 = indices_[3 * f + 2];
     Vec3 p0 = vertex(i0), p1 = vertex(i1), p2 = vertex(i2);
     float b1 = hit.u, b2 = hit.v, b0 = 1.f - b1 - b2;
-    // Barycentric interpolation is more accurate than o + t d far from the origin.
-    it.p = p0 * b0 + p1 * b1 + p2 * b2;
     Vec3 n = face_n_[f];
     it.n = n;
+    // The hit point from whichever computation has the smaller error bound:
+    // barycentric interpolation errs by ~eps |v_i| (PBR4 eq. 6.21; Embree's
+    // u, v carry a similar error relative to the triangle), the ray by
+    // ~eps (|o| + t |d|) (PBR4 eq. 6.24). A huge floor seen from close by
+    // needs the ray: interpolating 1e4-sized vertices misplaces the point by
+    // 1e-3, which smears the shadow of a 1e-3 object into streaks.
+    constexpr float kGamma7 = 7.f * 0x1p-24f / (1.f - 7.f * 0x1p-24f);
+    Vec3 err_bary = (abs(p0 * b0) + abs(p1 * b1) + abs(p2 * b2)) * kGamma7;
+    Vec3 err_ray = (abs(ray.o) + abs(ray.d * t)) * kGamma7;
+    float tri_mag = std::max(max_component(abs(p0)), std::max(max_component(abs(p1)), max_component(abs(p2))));
+    if (max_component(err_ray) < max_component(err_bary) && tri_mag > 0.f) {
+        it.p = ray.o + ray.d * t;
+        it.eps = offset_epsilon(it.p, n, err_ray);
+    } else {
+        it.p = p0 * b0 + p1 * b1 + p2 * b2;
+        it.eps = offset_epsilon(it.p, n, err_bary);
+    }
     Vec3 ns = n;
     if (!normals_.empty()) {
         auto nv = [&](uint32_t i) { return Vec3(normals_[3 * i], normals_[3 * i + 1], normals_[3 * i + 2]); };
@@ -78,7 +91,6 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     } else {
         it.uv = Vec2(b1, b2);
     }
-    it.eps = hit_epsilon(it.p, std::max(face_scale_[f], max_component(abs(ray.o))));
 }
 
 PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
@@ -89,8 +101,11 @@ PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
     if (f >= triangle_count()) f = triangle_count() - 1;
     Vec3 p0 = vertex(indices_[3 * f]), p1 = vertex(indices_[3 * f + 1]), p2 = vertex(indices_[3 * f + 2]);
     Vec2 b = warp::square_to_uniform_triangle(u);
-    ps.p = p0 * (1.f - b.x - b.y) + p1 * b.x + p2 * b.y;
+    float b0 = 1.f - b.x - b.y;
+    ps.p = p0 * b0 + p1 * b.x + p2 * b.y;
     ps.n = face_n_[f];
+    constexpr float kGamma7 = 7.f * 0x1p-24f / (1.f - 7.f * 0x1p-24f);
+    ps.eps = offset_epsilon(ps.p, ps.n, (abs(p0 * b0) + abs(p1 * b.x) + abs(p2 * b.y)) * kGamma7);
     ps.pdf_a = 1.f / total_area_;
     return ps;
 }
@@ -233,8 +248,9 @@ void Sphere::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Intera
     if (flip_normals) n = -n;
     it.n = n;
     it.sh = Frame(n);
-    float scale = float(std::max(std::max(std::fabs(cx_), std::fabs(cy_)), std::max(std::fabs(cz_), r_)));
-    it.eps = hit_epsilon(it.p, std::max(scale, max_component(abs(ray.o))));
+    // Reprojected in double: the error is the rounding of p to float, plus
+    // the sphere's own size for the Embree-side float bounds.
+    it.eps = hit_epsilon(it.p, float(r_));
 }
 
 PositionSample Sphere::sample_position(Vec2 u, float) const {
@@ -243,6 +259,7 @@ PositionSample Sphere::sample_position(Vec2 u, float) const {
     ps.p = Vec3(float(cx_ + r_ * d.x), float(cy_ + r_ * d.y), float(cz_ + r_ * d.z));
     ps.n = flip_normals ? -d : d;
     ps.pdf_a = 1.f / area();
+    ps.eps = hit_epsilon(ps.p, float(r_));
     return ps;
 }
 
@@ -282,8 +299,7 @@ void Disk::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     float phi = std::atan2(hit.v, hit.u);
     if (phi < 0) phi += 2 * kPi;
     it.uv = Vec2(r, phi * kInv2Pi);
-    float scale = std::max(max_component(abs(hi_)), max_component(abs(lo_)));
-    it.eps = hit_epsilon(it.p, std::max(scale, max_component(abs(ray.o))));
+    it.eps = hit_epsilon(it.p, std::sqrt(area_ / kPi));
 }
 
 PositionSample Disk::sample_position(Vec2 u, float) const {
@@ -292,6 +308,7 @@ PositionSample Disk::sample_position(Vec2 u, float) const {
     ps.p = xf_.point(Vec3(d.x, d.y, 0.f));
     ps.n = flip_normals ? -normal_ : normal_;
     ps.pdf_a = 1.f / area_;
+    ps.eps = hit_epsilon(ps.p, std::sqrt(area_ / kPi));
     return ps;
 }
 

@@ -17,6 +17,7 @@ namespace rm {
 struct PositionSample {
     Vec3 p, n;        // point on the shape and its (oriented) normal
     float pdf_a = 0;  // per unit area
+    float eps = 0;    // ray-origin offset that clears p's floating-point error
 };
 
 class Shape {
@@ -55,7 +56,6 @@ private:
     std::vector<float> normals_, uvs_;
     std::vector<float> area_cdf_;  // cumulative triangle areas, for uniform area sampling
     std::vector<Vec3> face_n_;     // unit face normals, flip_normals applied at create_geometry
-    std::vector<float> face_scale_;  // largest |coordinate| of each triangle (for ray offsets)
     float total_area_ = 0;
     size_t num_vertices_ = 0;
     Vec3 lo_, hi_;
@@ -90,10 +90,19 @@ private:
     Vec3 lo_, hi_;
 };
 
-// Offset that clears floating-point error of a hit at p whose geometry has
-// coordinates of magnitude `scale` (relative float error bound, generously).
-inline float hit_epsilon(const Vec3& p, float scale) {
-    return 1e-6f * std::max(max_component(abs(p)), scale) + 1e-30f;
+// Offset that clears the floating-point error of a hit point p computed to
+// within `err` (a bound on |computed - exact| per coordinate) on a surface with
+// normal n: the error projected on the normal (Pharr et al., PBR4, sec. 6.8.6,
+// eq. 6.22), times 4 for Embree's own intersection rounding, plus a relative
+// floor of 1e-7 |p| so a point never starts exactly on its surface.
+inline float offset_epsilon(const Vec3& p, const Vec3& n, const Vec3& err) {
+    return 4.f * dot(abs(n), err) + 1e-7f * max_component(abs(p)) + 1e-30f;
+}
+// For points whose only error is rounding of their own coordinates
+// (analytic shapes, computed in double): a few ulp of |p|, and never less
+// than `floor_scale` times 1e-7 (so tiny shapes far from scale keep an offset).
+inline float hit_epsilon(const Vec3& p, float floor_scale) {
+    return 1e-6f * max_component(abs(p)) + 1e-7f * floor_scale + 1e-30f;
 }
 
 }  // namespace rm

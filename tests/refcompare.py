@@ -1,0 +1,65 @@
+"""Comparing a render of ours with a Mitsuba 3 reference: 4 x 4 block means
+per channel, z-tested with both sides' variance (DESIGN section 4).
+
+The functions are copied from tests/test_cornell_reference.py, whose
+docstring measures why: per-sample radiances are heavy-tailed, so per pixel
+the z statistic (with the pixel's own estimated variance) is biased and too
+wide; a 4 x 4 block pools 16 pixels and is close enough to normal. Ours
+samples each pixel independently (filter importance sampling), so a block's
+variance is the sum of its pixels'; Mitsuba's splatting correlates
+neighbouring pixels, so for its reference the Cauchy-Schwarz bound
+(mean of the pixel standard deviations)^2 is used (conservative).
+`region_mask` turns the pixel boxes a card.md lists into a block mask.
+"""
+import numpy as np
+
+from radiometer.analysis.stats import z_test
+
+BLOCK = 4
+ALPHA = 0.01
+
+
+def block_mean(img, k=BLOCK):
+    h, w, c = img.shape
+    return np.asarray(img, np.float64).reshape(h // k, k, w // k, k, c).mean(axis=(1, 3))
+
+
+def block_var_independent(var, k=BLOCK):
+    """Variance of a block mean whose pixels are independent (ours: FIS)."""
+    h, w, c = var.shape
+    return np.asarray(var, np.float64).reshape(h // k, k, w // k, k, c).sum(axis=(1, 3)) / k ** 4
+
+
+def block_var_bound(var, k=BLOCK):
+    """Upper bound on the variance of a block mean whose pixels may be
+    correlated (Mitsuba's splatting): Var(mean) <= (mean of the sd)^2."""
+    h, w, c = var.shape
+    sd = np.sqrt(np.asarray(var, np.float64)).reshape(h // k, k, w // k, k, c)
+    return sd.mean(axis=(1, 3)) ** 2
+
+
+def blocked_z_test(a, var_a, b, var_b, *, b_splatted, alpha=ALPHA, k=BLOCK):
+    """z-tests k x k block means, each channel at alpha / 3; returns
+    (passed, message)."""
+    ba, va = block_mean(a, k), block_var_independent(var_a, k)
+    bb = block_mean(b, k)
+    vb = block_var_bound(var_b, k) if b_splatted else block_var_independent(var_b, k)
+    results = [z_test(ba[..., c], va[..., c], bb[..., c], vb[..., c], alpha=alpha / 3) for c in range(3)]
+    msg = "\n".join(f"{'RGB'[c]} ({k}x{k} blocks): {r.summary()}" for c, r in enumerate(results))
+    return all(r.passed for r in results), msg
+
+
+def region_mask(shape, boxes):
+    """Boolean (H, W) mask of the pixel boxes (x0, y0, x1, y1), half-open
+    [x0, x1) x [y0, y1), as card.md lists them at the default resolution."""
+    m = np.zeros(shape[:2], bool)
+    for x0, y0, x1, y1 in boxes:
+        m[y0:y1, x0:x1] = True
+    return m
+
+
+def scale_region(img, var, mask, s):
+    """`img` with the pixels under `mask` scaled by s (a bias confined to the
+    effect region), and its variance scaled by s^2 there."""
+    f = np.where(np.asarray(mask, bool)[..., None], s, 1.0)
+    return img * f, var * f * f

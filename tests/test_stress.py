@@ -1,0 +1,321 @@
+"""Hard cases, first set (reference_scenes/stress/, see its README.md):
+scenes that break careless renderers (grazing angles, extreme scales, lights
+touching surfaces, degenerate meshes, index-matched glass, total internal
+reflection, extreme roughness, delta-only scenes, z-fighting, a camera on a
+surface).
+
+For every scene x estimator: no NaN, no Inf, nothing negative in the image,
+the variance or any effect image; no NaN/Inf sample counted; light where the
+scene must show light (the regions in SCENES). Then the scenes that have an
+answer are held to it: the scaled Cornell boxes equal the unscaled one, the
+huge floor equals a small floor, index-matched glass is invisible, glass
+around the camera shows n^2 Le (or 0 where light is trapped), the narrow spot
+delivers its analytic power, and a furnace of rough spheres never exceeds 1.
+
+Every statistical test runs at significance level ALPHA (two-sided z-tests
+with both sides' variance, `radiometer.analysis.stats.z_test`, which splits
+ALPHA over its three views of the z field).
+
+New estimators are added by name to the lists below.
+"""
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats as st
+from scipy.integrate import quad
+
+import radiometer as rm
+from radiometer.analysis.stats import z_test
+from radiometer.render import INTEGRATOR_PARAMS
+
+# Every estimator: each must survive every scene.
+ESTIMATORS = ["path", "direct"]
+# Unbiased estimators (of whatever they estimate: `direct` estimates paths of
+# at most 2 segments): the scale, huge-floor and narrow-spot tests.
+UNBIASED = ["path", "direct"]
+# Unbiased estimators of full transport (all path lengths): the tests that
+# need light that bounces more than once (glass, invisible glass).
+FULL_TRANSPORT = ["path"]
+
+ALPHA = 0.01
+SPP = 16  # the robustness sweep's budget
+HERE = Path(__file__).resolve().parents[1] / "reference_scenes"
+STRESS = HERE / "stress"
+CORNELL = HERE / "cornell_box" / "scene.xml"
+
+# What must be lit, per scene: (rows, cols, what) regions whose mean (over the
+# region and the channels) must be > 0 for every estimator; "zero": the exact
+# image is 0; "max_at_least": some pixel reaches this value (an emitter seen
+# directly, fully covering a pixel). Images are 32 x 32.
+ALL = (slice(None), slice(None))
+SCENES = {
+    "grazing_angles": {"lit": [(slice(r, r + 1), slice(None), f"floor row {r}") for r in range(32)]},
+    "cornell_scale_1e-4": {"lit": [(*ALL, "the box")]},
+    "cornell_scale_1e4": {"lit": [(*ALL, "the box")]},
+    "huge_floor_tiny_object": {"lit": [(*ALL, "floor"), (slice(12, 20), slice(12, 20), "the cube")]},
+    "point_light_near_surface": {"lit": [(*ALL, "floor and wall around the lights")]},
+    "spot_cutoff_narrow": {"lit": [(slice(12, 20), slice(12, 20), "the lit disk at the centre")]},
+    "spot_cutoff_wide": {"lit": [(slice(16, 32), slice(None), "the floor (bottom half)")]},
+    "degenerate_triangles": {"lit": [(*ALL, "object and emitter")], "max_at_least": 5.0 * 0.999},
+    "index_matched_glass": {"lit": [(*ALL, "floor and wall")]},
+    "glass_sphere_camera_center": {"lit": [(*ALL, "environment through the glass")]},
+    "tir_sphere_camera_offset": {"lit": [(slice(8, 24), slice(0, 2), "left edge"),
+                                         (slice(8, 24), slice(30, 32), "right edge")]},
+    "tir_slab_camera_inside": {"lit": [(*ALL, "environment through the slab")]},
+    "roughness_extremes_furnace": {"lit": [(*ALL, "furnace")]},
+    "roughness_extremes_lit": {"lit": [(*ALL, "floor and objects"), (slice(24, 32), slice(None), "floor")]},
+    "tiny_bright_light": {"lit": [(*ALL, "box"), (slice(26, 32), slice(8, 24), "floor")]},
+    "delta_only": {"lit": [(slice(24, 32), slice(None), "the floor")]},
+    "delta_only_no_smooth": {"zero": True},
+    "coplanar_zfighting": {"lit": [(*ALL, "floor"), (slice(6, 14), slice(4, 10), "the red/green square")]},
+    "camera_on_surface": {"lit": [(slice(0, 16), slice(None), "above the horizon")]},
+}
+
+
+def test_scene_list_matches_folder():
+    """Every stress scene in the folder is tested (the *_ref.xml files are
+    references, not stress scenes) and the README card lists each."""
+    on_disk = {p.stem for p in STRESS.glob("*.xml") if not p.stem.endswith("_ref")}
+    assert on_disk == set(SCENES)
+    card = (STRESS / "README.md").read_text()
+    for name in SCENES:
+        assert f"{name}.xml" in card, name
+
+
+def spec(estimator, max_depth=None, rr_depth=None):
+    """An integrator dict for `estimator`, with max_depth / rr_depth where it
+    takes them (an estimator not in INTEGRATOR_PARAMS yet is assumed to)."""
+    d = {"type": estimator}
+    known = INTEGRATOR_PARAMS.get(estimator, {"max_depth": None, "rr_depth": None})
+    for k, v in (("max_depth", max_depth), ("rr_depth", rr_depth)):
+        if v is not None and k in known:
+            d[k] = v
+    return d
+
+
+_cache = {}
+
+
+def render(path, estimator, spp, seed, max_depth=None, rr_depth=None, **params):
+    key = (str(path), estimator, spp, seed, max_depth, rr_depth, tuple(sorted(params.items())))
+    if key not in _cache:
+        scene = rm.load_file(path, **params)
+        _cache[key] = rm.render(scene, integrator=spec(estimator, max_depth, rr_depth), spp=spp, seed=seed)
+    return _cache[key]
+
+
+def assert_sane(res, where):
+    arrays = {"image": res.image, "variance": res.variance}
+    arrays.update({f"effects['{k}']": v for k, v in res.effects.items()})
+    for name, a in arrays.items():
+        a = np.asarray(a)
+        assert a.shape == res.image.shape, f"{where}: {name} has shape {a.shape}"
+        n_nan, n_inf = int(np.isnan(a).sum()), int(np.isinf(a).sum())
+        assert n_nan == 0 and n_inf == 0, f"{where}: {name} has {n_nan} NaN and {n_inf} Inf values"
+        neg = a < 0
+        assert not neg.any(), (f"{where}: {name} has {int(neg.sum())} negative values, min {a.min():g} "
+                               f"at {tuple(int(i) for i in np.argwhere(neg)[0])}")
+    assert res.stats["nan_samples"] == 0, f"{where}: {res.stats['nan_samples']} NaN samples"
+    assert res.stats["inf_samples"] == 0, f"{where}: {res.stats['inf_samples']} Inf samples"
+
+
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_finite_nonnegative_and_lit(name, estimator):
+    res = render(STRESS / f"{name}.xml", estimator, SPP, 0)
+    where = f"{name} / {estimator}"
+    assert_sane(res, where)
+    exp = SCENES[name]
+    if exp.get("zero"):
+        assert not res.image.any(), f"{where}: must be exactly 0, max {res.image.max():g}"
+    for rows, cols, what in exp.get("lit", []):
+        m = float(res.image[rows, cols].mean())
+        assert m > 0, f"{where}: {what} must be lit, mean {m:g}"
+    if "max_at_least" in exp:
+        assert res.image.max() >= exp["max_at_least"], f"{where}: max {res.image.max():g}"
+
+
+def block_means(image, variance, b=4):
+    """b x b block means and their variances (pixels are independent: box
+    filter, or filter importance sampling)."""
+    h, w, c = image.shape
+    img = np.asarray(image, np.float64).reshape(h // b, b, w // b, b, c).mean(axis=(1, 3))
+    var = np.asarray(variance, np.float64).reshape(h // b, b, w // b, b, c).sum(axis=(1, 3)) / b ** 4
+    return img, var
+
+
+# --- scale: the whole Cornell box scaled by 1e-4 and 1e4 ----------------------
+
+
+@pytest.mark.parametrize("estimator", UNBIASED)
+@pytest.mark.parametrize("scale", ["1e-4", "1e4"])
+def test_scaled_cornell_box_equals_unscaled(scale, estimator):
+    """Radiance is scale invariant: the scaled box (camera and every shape
+    scaled, radiances unchanged) equals the unscaled one up to noise. 4x4
+    block means (64 blocks x 3 channels), independent seeds, z-test at level
+    ALPHA."""
+    ref = render(CORNELL, estimator, 128, 1, res=32)
+    res = render(STRESS / f"cornell_scale_{scale}.xml", estimator, 128, 2)
+    assert_sane(res, f"cornell_scale_{scale} / {estimator}")
+    a, va = block_means(res.image, res.variance)
+    b, vb = block_means(ref.image, ref.variance)
+    t = z_test(a, va, b, vb, alpha=ALPHA)
+    assert t.passed, f"scale {scale}, {estimator}: {t.summary()}"
+
+
+# --- a huge floor under a tiny object -----------------------------------------
+
+
+@pytest.mark.parametrize("estimator", UNBIASED)
+def test_huge_floor_equals_small_floor(estimator):
+    """Direct light and paths of <= 3 segments: the floor beyond 0.05 is
+    unlit and contributes nothing, so a 2e4 floor and a 0.1 floor give the
+    same image (the cube's shadow included). 4x4 block means, z-test at ALPHA."""
+    big = render(STRESS / "huge_floor_tiny_object.xml", estimator, 64, 1, max_depth=3)
+    small = render(STRESS / "huge_floor_tiny_object_ref.xml", estimator, 64, 2, max_depth=3)
+    a, va = block_means(big.image, big.variance)
+    b, vb = block_means(small.image, small.variance)
+    t = z_test(a, va, b, vb, alpha=ALPHA)
+    assert t.passed, (f"{estimator}: huge floor {big.image.mean():.5g} vs small floor "
+                      f"{small.image.mean():.5g}: {t.summary()}")
+
+
+# --- index-matched glass is invisible -------------------------------------------
+
+
+@pytest.mark.parametrize("estimator", FULL_TRANSPORT)
+def test_index_matched_glass_is_invisible(estimator):
+    glass = render(STRESS / "index_matched_glass.xml", estimator, 128, 1)
+    plain = render(STRESS / "index_matched_glass_ref.xml", estimator, 128, 2)
+    a, va = block_means(glass.image, glass.variance)
+    b, vb = block_means(plain.image, plain.variance)
+    t = z_test(a, va, b, vb, alpha=ALPHA)
+    assert t.passed, f"{estimator}: {t.summary()}"
+
+
+# --- glass around the camera: n^2 Le, or 0 where TIR traps the light ---------
+
+
+def _pinhole_dirs(res, fov_x_deg, ss):
+    """Camera-space (x, y) of ss x ss sub-pixel positions per pixel, for a
+    square film with fov on x (z = 1). Signs do not matter to the callers."""
+    t = np.tan(np.radians(fov_x_deg) / 2)
+    u = (np.arange(res * ss) + 0.5) / (res * ss)
+    c = (1 - 2 * u) * t
+    return np.meshgrid(c, c)
+
+
+def _tir_sphere_fraction(res=32, ss=64):
+    """tir_sphere_camera_offset: camera at (0, 0, -0.9) looking along +x, so
+    camera x is world -z; a direction escapes iff b = 0.9 sqrt(1 - dz^2) < 1/1.5."""
+    x, y = _pinhole_dirs(res, 120.0, ss)
+    dz = np.abs(x) / np.sqrt(1 + x * x + y * y)
+    esc = (0.9 * np.sqrt(1 - dz * dz) < 1 / 1.5).astype(np.float64)
+    return esc.reshape(res, ss, res, ss).mean(axis=(1, 3))
+
+
+# scene: (environment radiance, fraction of each pixel that escapes (None:
+# all), rr_depth). Where every direction escapes, Russian roulette is pushed
+# out of reach: every sample is then exactly 2.25 Le (the Fresnel factors
+# cancel against the lobe selection), a zero-variance check of the weights;
+# with roulette, a few killed or boosted samples among thousands of exact
+# ones make estimated variances unreliable. Trapped light needs roulette.
+GLASS = {
+    "glass_sphere_camera_center": ((1.0, 0.5, 0.25), None, 1000),
+    "tir_slab_camera_inside": ((0.5, 1.0, 0.5), None, 1000),
+    "tir_sphere_camera_offset": ((0.25, 0.5, 1.0), _tir_sphere_fraction, None),
+}
+
+
+@pytest.mark.parametrize("estimator", FULL_TRANSPORT)
+@pytest.mark.parametrize("name", sorted(GLASS))
+def test_camera_inside_glass_sees_n2_le(name, estimator):
+    """L = n^2 Le = 2.25 Le in every direction that escapes the glass, 0 in
+    trapped ones; per pixel, times the escaping fraction f of its area. The
+    estimate's variance under H0 is at least the Bernoulli part
+    (2.25 Le)^2 f (1 - f) / spp, which stands in for pixels whose samples all
+    fell on one side. 4x4 block means, z-test at level ALPHA."""
+    spp = 128
+    le, frac, rr_depth = GLASS[name]
+    res = render(STRESS / f"{name}.xml", estimator, spp, 3, rr_depth=rr_depth)
+    f = np.ones(res.image.shape[:2]) if frac is None else frac(res.image.shape[0])
+    full = 2.25 * np.asarray(le)
+    exact = f[..., None] * full
+    bern = (full ** 2) * (f * (1 - f))[..., None] / spp
+    var = np.maximum(res.variance.astype(np.float64), bern)
+    # 4x4 blocks: with roulette a pixel's samples are skewed (most give
+    # exactly 2.25 Le or 0, a few are killed or boosted), which makes
+    # per-pixel z with an estimated variance unreliable.
+    a, va = block_means(res.image, var)
+    b, _ = block_means(exact, np.zeros_like(exact))
+    t = z_test(a, va, b, None, alpha=ALPHA)
+    assert t.passed, f"{name}, {estimator}: mean {res.image.mean():.5g} vs exact {exact.mean():.5g}: {t.summary()}"
+
+
+# --- the narrow spot light ------------------------------------------------------
+
+
+def _spot_solid_angle(cutoff_deg):
+    """Omega = 2 pi int f(theta) sin(theta) dtheta for Mitsuba's falloff: 1
+    inside the beam (3/4 of the cutoff), linear in angle to 0 at the cutoff."""
+    c = np.radians(cutoff_deg)
+    b = 0.75 * c
+    ramp = quad(lambda t: (c - t) / (c - b) * np.sin(t), b, c, epsabs=0, epsrel=1e-12)[0]
+    return 2 * np.pi * (2 * np.sin(b / 2) ** 2 + ramp)  # 1 - cos(b) without cancellation
+
+
+@pytest.mark.parametrize("estimator", UNBIASED)
+@pytest.mark.parametrize("cutoff,half_extent", [(0.01, 5e-4), (10.0, 0.5)], ids=["cutoff_0.01", "control_10"])
+def test_spot_delivers_its_power(cutoff, half_extent, estimator):
+    """Mean of the image = rho/pi * I * Omega / A_view (the floor is the only
+    surface; the whole lit disk is in view). One z-test on the image mean at
+    level ALPHA; cutoff 10 is the control that validates the formula."""
+    res = render(STRESS / "spot_cutoff_narrow.xml", estimator, 512, 0, cutoff=cutoff, half_extent=half_extent)
+    exact = 0.8 / np.pi * 1.0 * _spot_solid_angle(cutoff) / (2 * half_extent) ** 2
+    img = res.image.astype(np.float64)
+    n = img[..., 0].size
+    mean = img.mean(axis=(0, 1))
+    se = np.sqrt(res.variance.astype(np.float64).sum(axis=(0, 1))) / n
+    z = (mean - exact) / se
+    crit = st.norm.isf(ALPHA / 2)
+    assert np.all(np.abs(z) < crit), (f"cutoff {cutoff}, {estimator}: image mean {mean[0]:.6g} vs analytic "
+                                      f"{exact:.6g} ({mean[0] / exact:.3f}x, z = {z[0]:+.1f}, "
+                                      f"|z| must be < {crit:.2f})")
+
+
+# --- rough spheres in a furnace never exceed it ----------------------------------
+
+
+@pytest.mark.parametrize("estimator", ESTIMATORS)
+def test_rough_furnace_never_brighter_than_environment(estimator):
+    """Passive surfaces in a uniform environment of radiance 1: every 4x4
+    block mean <= 1 up to noise (one-sided z-test per block and channel,
+    Bonferroni over them, level ALPHA); and clearly lit (> 0.5)."""
+    res = render(STRESS / "roughness_extremes_furnace.xml", estimator, 64, 4)
+    b, vb = block_means(res.image, res.variance)
+    z = np.where(vb > 0, (b - 1.0) / np.sqrt(np.where(vb > 0, vb, 1.0)), np.where(b > 1.0 + 1e-5, np.inf, 0.0))
+    crit = st.norm.isf(ALPHA / z.size)
+    worst = np.unravel_index(np.argmax(z), z.shape)
+    assert z.max() < crit, (f"{estimator}: block {worst} mean {b[worst]:.5g} exceeds 1 by "
+                            f"z = {z[worst]:.2f} (critical {crit:.2f})")
+    assert res.image.mean() > 0.5
+
+
+# --- an emitter mesh with no area at all ----------------------------------------
+
+
+def test_zero_area_emitter_mesh_is_refused(tmp_path):
+    """An area emitter on a mesh whose triangles all have zero area cannot be
+    sampled (a 1/0 pdf); it is refused with a message naming it, as Mitsuba
+    refuses it, rather than rendered into NaN."""
+    (tmp_path / "zero.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 1 1 4\nf 4 4 4\n")
+    (tmp_path / "s.xml").write_text(
+        '<scene version="3.0.0">\n'
+        '  <shape type="obj"><string name="filename" value="zero.obj"/><emitter type="area"/></shape>\n'
+        '  <shape type="rectangle"/>\n'
+        '  <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="8"/>'
+        '<integer name="height" value="8"/></film></sensor>\n'
+        "</scene>\n")
+    with pytest.raises(rm.SceneError, match="zero area"):
+        rm.render(rm.load_file(tmp_path / "s.xml"), spp=1)
