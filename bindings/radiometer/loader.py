@@ -1,5 +1,14 @@
 """Scene loader: Mitsuba 3 scene dicts and XML files -> `SceneDesc`.
 
+Written here rather than taken from a library: no maintained package reads
+Mitsuba 3's XML/dict formats without Mitsuba itself, which must stay
+optional. PLY files go through the maintained `plyfile` package. OBJ has a
+small reader of our own (_read_obj) because the maintained readers change
+the mesh: meshio drops the texture and normal indices of OBJ faces, trimesh
+merges vertices (and needs PIL for a textured OBJ); neither splits vertices
+per distinct v/vt/vn triple as Mitsuba does, which the tests check against
+Mitsuba's own buffers.
+
 `load_dict(d)` takes the dict that `mitsuba.load_dict` takes, `load_file(path,
 **params)` a Mitsuba 3 XML file; both resolve what Mitsuba leaves implicit
 (defaults, named IORs, `ref`s, transforms, fov_axis) into the dataclasses of
