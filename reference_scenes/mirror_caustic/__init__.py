@@ -1,0 +1,1 @@
+"""Canonical scene with an analytic reference: see card.md."""
