@@ -181,6 +181,30 @@ PYBIND11_MODULE(_core, m) {
                  return out;
              },
              py::arg("ref"), py::arg("u"))
+        .def("sample_sensor_rays",
+             [](const Scene& s, py::object film, py::object u) {
+                 // Rays the sensor generates for film positions (N, 2) (pixels,
+                 // continuous) and extra samples u (N, 5) = (u1, u2.xy, u3.xy).
+                 if (!s.sensor) throw py::value_error("scene has no sensor");
+                 auto f = flat<float>(film, 2, "film");
+                 auto uu = flat<float>(u, 5, "u");
+                 size_t n = f.size() / 2;
+                 if (uu.size() != 5 * n) throw py::value_error("u must be (N, 5) for N film positions");
+                 std::vector<float> o(3 * n), d(3 * n), w(3 * n);
+                 for (size_t i = 0; i < n; ++i) {
+                     SensorRay sr = s.sensor->sample_ray(Vec2(f[2 * i], f[2 * i + 1]), uu[5 * i],
+                                                         Vec2(uu[5 * i + 1], uu[5 * i + 2]),
+                                                         Vec2(uu[5 * i + 3], uu[5 * i + 4]));
+                     for (int k = 0; k < 3; ++k) { o[3 * i + k] = sr.ray.o[k]; d[3 * i + k] = sr.ray.d[k]; w[3 * i + k] = sr.weight[k]; }
+                 }
+                 py::dict r;
+                 py::ssize_t N = py::ssize_t(n);
+                 r["o"] = to_numpy(std::move(o), {N, 3});
+                 r["d"] = to_numpy(std::move(d), {N, 3});
+                 r["weight"] = to_numpy(std::move(w), {N, 3});
+                 return r;
+             },
+             py::arg("film"), py::arg("u"))
         .def("pdf_emitter_direction",
              [](const Scene& s, py::object ref, py::object dirs) {
                  // The light-sampling density that MIS assigns to a ray leaving ref along d.
