@@ -16,11 +16,13 @@ _COMMON = {"max_depth": (int, -1), "rr_depth": (int, 5), "hide_emitters": (bool,
 INTEGRATOR_PARAMS = {
     "path": dict(_COMMON),
     "volpath": dict(_COMMON),
+    # Light tracing; Mitsuba's samples_per_pass (wavefront sizing) is accepted and ignored.
+    "ptracer": dict(_COMMON, samples_per_pass=(int, None)),
     "direct": {"emitter_samples": (int, 1), "bsdf_samples": (int, 1), "hide_emitters": (bool, False),
                "shading_samples": (int, None)},
 }
 # Known to the scene format, arriving in later issues.
-PLANNED_INTEGRATORS = ("ptracer", "bdpt", "photonmapper", "sppm", "vcm", "pssmlt", "vpl", "irrcache", "radiosity")
+PLANNED_INTEGRATORS = ("bdpt", "photonmapper", "sppm", "vcm", "pssmlt", "vpl", "irrcache", "radiosity")
 
 
 class RenderCancelled(KeyboardInterrupt):
@@ -89,7 +91,8 @@ def _integrator_desc(spec, scene_integrator: IntegratorDesc):
         val = resolved.get(k, default)
         if val is not None:
             out[k] = val
-    if itype in ("path", "volpath"):
+    out.pop("samples_per_pass", None)
+    if itype in ("path", "volpath", "ptracer"):
         if out["max_depth"] == 0 or out["max_depth"] < -1:
             raise SceneError(f"{where}['max_depth']: must be -1 (unbounded) or >= 1, got {out['max_depth']}")
         if out["rr_depth"] < 1:

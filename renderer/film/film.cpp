@@ -81,6 +81,19 @@ float FilterSampler::sample(float u, float lo, float hi) const {
     return float(std::clamp(x, double(lo), double(hi)));
 }
 
+double FilterSampler::integral(float lo, float hi) const {
+    const int n = int(cdf_.size()) - 1;
+    double dx = 2.0 * radius_ / n;
+    auto cdf_at = [&](double x) {
+        double f = (x + radius_) / dx;
+        if (f <= 0) return 0.0;
+        if (f >= n) return cdf_[n];
+        int i = int(f);
+        return cdf_[i] + (cdf_[i + 1] - cdf_[i]) * (f - i);
+    };
+    return std::max(0.0, cdf_at(double(hi)) - cdf_at(double(lo)));
+}
+
 Film::Film(int width, int height) : w_(width), h_(height) {
     size_t n = size_t(width) * size_t(height);
     sum_.assign(3 * n, 0.0);

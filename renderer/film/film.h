@@ -35,6 +35,10 @@ public:
     float radius() const { return radius_; }
     float eval(float x) const;
     float sample(float u, float lo, float hi) const;
+    // Integral of the (tabulated) filter over [lo, hi]: the normaliser of a
+    // splat's weight, so that splatting estimators match the sampled ones,
+    // film borders included.
+    double integral(float lo, float hi) const;
 
 private:
     std::string type_;

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/rng.h"
 #include "film/film.h"
@@ -55,9 +56,28 @@ struct PathClass {
     }
 };
 
+// One contribution of a light path to the film (light-tracing estimators):
+// `value` at the continuous film position `film`, filed under `effect`. The
+// driver spreads it over the pixels whose filter footprint covers `film`.
+struct Splat {
+    Vec2 film;
+    int effect = 0;
+    Color value{0.f};
+};
+
 class Integrator {
 public:
     virtual ~Integrator() = default;
+    // Light tracers (ptracer) trace light paths instead of camera rays: the
+    // render driver sends them to render_light_paths (light_render.cpp),
+    // which calls trace_light_path and never sample().
+    virtual bool is_light_tracer() const { return false; }
+    // Traces one light path and appends its splats to `out`. A pixel's
+    // estimate is the filter-weighted sum of the splats of M light paths,
+    // divided by M.
+    virtual void trace_light_path(const Scene&, Sampler&, std::vector<Splat>& out, ThreadStats&) const {}
+    // Throws std::invalid_argument when this estimator cannot render `scene`.
+    virtual void check_scene(const Scene&) const {}
     // Radiance along one camera ray, split by effect class, into `out`.
     virtual void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
                         ThreadStats& stats) const = 0;

@@ -78,6 +78,7 @@ RenderOutput render(const Scene& scene, const Integrator& integrator, const Rend
     if (opts.spp < 0) throw std::invalid_argument("render: spp must be >= 0");
     if (!(opts.seconds >= 0)) throw std::invalid_argument("render: seconds must be >= 0");
     if (opts.spp == 0 && opts.seconds <= 0) throw std::invalid_argument("render: give spp or seconds");
+    if (integrator.is_light_tracer()) return render_light_paths(scene, integrator, opts, poll);
     const Sensor& sensor = *scene.sensor;
     const SensorDesc& sd = scene.sensor_desc;
     int W = sensor.width, H = sensor.height;

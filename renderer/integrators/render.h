@@ -45,4 +45,9 @@ using PollFn = std::function<bool(uint64_t done, uint64_t total)>;
 
 RenderOutput render(const Scene& scene, const Integrator& integrator, const RenderOptions& opts, const PollFn& poll);
 
+// The driver of light-tracing estimators (integrator.is_light_tracer()),
+// called by render(): light paths splatted onto the film (light_render.cpp).
+RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator, const RenderOptions& opts,
+                                const PollFn& poll);
+
 }  // namespace rm

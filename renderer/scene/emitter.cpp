@@ -50,6 +50,28 @@ public:
     Color eval(const Interaction& it, const Vec3& w) const override {
         return dot(it.sh.n, w) > 0.f ? radiance_ : Color(0.f);
     }
+    // Position by area, direction cosine-weighted about the emitting side's
+    // normal: weight = Le cos / (pdf_a cos / pi) = Le pi / pdf_a (PBR4 12.5.1).
+    EmissionSample sample_emission(Vec2 u_pos, float u_extra, Vec2 u_dir, const Vec3&, float) const override {
+        EmissionSample es;
+        PositionSample ps = shape_->sample_position(u_pos, u_extra);
+        if (!(ps.pdf_a > 0.f)) return es;
+        Vec3 local = warp::square_to_cosine_hemisphere(u_dir);
+        if (!(local.z > 0.f)) return es;
+        es.p = ps.p;
+        es.n = ps.n;
+        es.eps = ps.eps;
+        es.d = Frame(ps.n).to_world(local);
+        es.pdf_a = ps.pdf_a;
+        es.pdf_w = warp::square_to_cosine_hemisphere_pdf_w(local);
+        es.weight = radiance_ * (kPi / ps.pdf_a);
+        return es;
+    }
+    Color emitted_towards(const EmissionSample& es, const Vec3& w) const override {
+        float c = dot(es.n, w);
+        if (!(c > 0.f) || !(es.pdf_a > 0.f)) return Color(0.f);
+        return radiance_ * (c / es.pdf_a);
+    }
 
 private:
     const Shape* shape_;
@@ -78,6 +100,17 @@ public:
         ds.radiance = intensity_ / d2;
         return ds;
     }
+    // Delta position, direction uniform on the sphere: weight = I 4 pi.
+    EmissionSample sample_emission(Vec2, float, Vec2 u_dir, const Vec3&, float) const override {
+        EmissionSample es;
+        es.p = pos_;
+        es.d = warp::square_to_uniform_sphere(u_dir);
+        es.pdf_a = 1.f;
+        es.pdf_w = warp::square_to_uniform_sphere_pdf_w();
+        es.weight = intensity_ * (4.f * kPi);
+        return es;
+    }
+    Color emitted_towards(const EmissionSample&, const Vec3&) const override { return intensity_; }
 
 private:
     Color intensity_;
@@ -120,6 +153,26 @@ public:
         ds.radiance = intensity_ * (falloff(local) / d2);
         return ds;
     }
+    // Direction uniform in the cone of the cutoff angle (as Mitsuba 3's spot),
+    // weight = I falloff / pdf_w. 1 - cos(cutoff) is formed as 2 sin^2(c / 2):
+    // the plain difference cancels to 0 for cutoffs below ~0.03 degrees.
+    EmissionSample sample_emission(Vec2, float, Vec2 u, const Vec3&, float) const override {
+        EmissionSample es;
+        float omc_max = 2.f * sqr(std::sin(0.5f * cutoff_));
+        float omc = u.x * omc_max;  // 1 - cos(theta), uniform: uniform in solid angle
+        float sin_t = safe_sqrt(omc * (2.f - omc));
+        float phi = 2.f * kPi * u.y;
+        Vec3 local(sin_t * std::cos(phi), sin_t * std::sin(phi), 1.f - omc);
+        es.p = pos_;
+        es.d = normalize(xf_.vector(local));
+        es.pdf_a = 1.f;
+        es.pdf_w = 1.f / (2.f * kPi * omc_max);
+        es.weight = intensity_ * (falloff(local) * 2.f * kPi * omc_max);
+        return es;
+    }
+    Color emitted_towards(const EmissionSample&, const Vec3& w) const override {
+        return intensity_ * falloff(normalize(xf_.inv_vector(w)));
+    }
 
 private:
     Color intensity_;
@@ -147,6 +200,21 @@ public:
         ds.radiance = irradiance_;
         return ds;
     }
+    // Origin uniform on a disk of the scene's bounding radius perpendicular to
+    // the direction, outside the scene (pbrt-v4 DistantLight::SampleLe):
+    // weight = E pi r^2.
+    EmissionSample sample_emission(Vec2 u_pos, float, Vec2, const Vec3& c, float radius) const override {
+        EmissionSample es;
+        float r = radius * 1.001f + 1e-6f;
+        Vec2 q = warp::square_to_uniform_disk_concentric(u_pos);
+        Frame fr(dir_);
+        es.p = c + (fr.s * q.x + fr.t * q.y) * r - dir_ * r;
+        es.d = dir_;
+        es.pdf_a = 1.f / (kPi * r * r);
+        es.pdf_w = 1.f;
+        es.weight = irradiance_ * (kPi * r * r);
+        return es;
+    }
 
 private:
     Color irradiance_;
@@ -171,6 +239,21 @@ public:
         return warp::square_to_uniform_sphere_pdf_w();
     }
     Color eval_environment(const Vec3&) const override { return radiance_; }
+    // Direction uniform on the sphere, origin uniform on the disk of the
+    // scene's bounding radius perpendicular to it, outside the scene (pbrt-v4
+    // UniformInfiniteLight::SampleLe): weight = L 4 pi * pi r^2.
+    EmissionSample sample_emission(Vec2 u_pos, float, Vec2 u_dir, const Vec3& c, float radius) const override {
+        EmissionSample es;
+        float r = radius * 1.001f + 1e-6f;
+        es.d = warp::square_to_uniform_sphere(u_dir);
+        Vec2 q = warp::square_to_uniform_disk_concentric(u_pos);
+        Frame fr(es.d);
+        es.p = c + (fr.s * q.x + fr.t * q.y) * r - es.d * r;
+        es.pdf_a = 1.f / (kPi * r * r);
+        es.pdf_w = warp::square_to_uniform_sphere_pdf_w();
+        es.weight = radiance_ * (4.f * kPi * kPi * r * r);
+        return es;
+    }
 
 private:
     Color radiance_;

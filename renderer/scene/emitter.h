@@ -23,6 +23,23 @@ struct DirectSample {
     float eps = 0.f;      // offset that clears p's floating-point error (area emitters)
 };
 
+// A ray of light leaving an emitter, for light-path estimators (ptracer, later
+// bdpt and photon mapping). Veach 1997, sec. 8.1.2 / pbrt-v4's Light::SampleLe:
+// the origin is sampled with density pdf_a (per unit area; on the disk that
+// bounds the scene for directional and environment emitters), the direction
+// with pdf_w (per steradian; 1 for a delta direction), and `weight` is the
+// flux the ray carries, Le |cos| / (pdf_a pdf_w) (intensity / pdf_w for point
+// and spot lights, whose position is a delta).
+struct EmissionSample {
+    Vec3 p;               // origin of the ray
+    Vec3 n;               // surface normal at p (area emitters; zero otherwise)
+    Vec3 d;               // unit direction the light travels
+    Color weight{0.f};    // Le |cos| / (pdf_a pdf_w); black = failed sample
+    float pdf_a = 0.f;    // origin density (1 for a delta position)
+    float pdf_w = 0.f;    // direction density (1 for a delta direction)
+    float eps = 0.f;      // ray-origin offset that clears p's floating-point error
+};
+
 class Emitter {
 public:
     virtual ~Emitter() = default;
@@ -36,6 +53,19 @@ public:
     virtual Color eval(const Interaction& it, const Vec3& w) const { return Color(0.f); }
     // Radiance arriving from direction -d for rays that leave the scene (constant).
     virtual Color eval_environment(const Vec3& d) const { return Color(0.f); }
+    // Samples a ray of light leaving the emitter (see EmissionSample): u_pos and
+    // u_extra pick the origin, u_dir the direction. scene_center/scene_radius
+    // bound the scene (directional and constant emitters start their rays on
+    // a disk of that radius outside it, as pbrt-v4 does).
+    virtual EmissionSample sample_emission(Vec2 u_pos, float u_extra, Vec2 u_dir, const Vec3& scene_center,
+                                           float scene_radius) const = 0;
+    // The s = 1 connection of light tracing (Veach 1997, sec. 10.2): what
+    // leaves es's origin towards the unit direction w, per unit of origin
+    // density: Le(p, w) |cos| / pdf_a for area lights, I(w) for point and
+    // spot lights; zero for directional and environment emitters, which a
+    // point cannot connect to (the environment is seen along directions:
+    // eval_environment).
+    virtual Color emitted_towards(const EmissionSample& es, const Vec3& w) const { return Color(0.f); }
     bool is_delta() const { return delta_; }
     bool is_environment() const { return environment_; }
 

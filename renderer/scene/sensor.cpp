@@ -52,8 +52,58 @@ public:
         sr.ray.tmax = far_ * inv_z;
         return sr;
     }
+    bool has_importance() const override { return true; }
+    ImportanceSample sample_direction(const Vec3& ref) const override {
+        ImportanceSample is;
+        Vec3 v = origin_ - ref;
+        float dist = length(v);
+        if (!(dist > 0.f)) return is;
+        // The ray from the pinhole through ref, in camera space; its film
+        // position inverts film_to_plane.
+        Vec3 local = normalize(xf_.inv_vector(-v));
+        if (!film_of(local, is.film)) return is;
+        // sample_ray's clip range: t in [near, far] / cos theta.
+        if (dist * local.z < near_ || dist * local.z > far_) return is;
+        is.valid = true;
+        is.p = origin_;
+        is.d = v / dist;
+        is.dist = dist;
+        is.weight = importance_w(local.z) / (dist * dist);
+        return is;
+    }
+    ImportanceSample eval_direction(const Vec3& w, Ray* ray) const override {
+        ImportanceSample is;
+        Vec3 local = normalize(xf_.inv_vector(w));
+        if (!film_of(local, is.film)) return is;
+        is.valid = true;
+        is.p = origin_;
+        is.d = -w;
+        is.dist = kInf;
+        is.weight = importance_w(local.z);
+        if (ray) {
+            ray->o = origin_;
+            ray->d = w;
+            ray->tmin = near_ / local.z;
+            ray->tmax = far_ / local.z;
+        }
+        return is;
+    }
 
 private:
+    // Film position of the camera-space unit direction `local`; false outside the film.
+    bool film_of(const Vec3& local, Vec2& film) const {
+        if (!(local.z > 0.f)) return false;
+        float qx = local.x / (local.z * tan_x_), qy = local.y / (local.z * tan_x_);
+        film = Vec2(0.5f * float(width) * (1.f - qx), 0.5f * float(height) * (1.f - qy * aspect_));
+        return film.x >= 0.f && film.x <= float(width) && film.y >= 0.f && film.y <= float(height);
+    }
+    // Importance per steradian in pixel units: a film area dA on the plane
+    // z = 1 subtends dw = dA cos^3 theta, and one pixel there has area
+    // A_pix = (2 tan_x)(2 tan_x / aspect) / (W H) (pbrt-v4 PerspectiveCamera::We).
+    float importance_w(float cos_t) const {
+        float a_pix = 4.f * tan_x_ * tan_x_ / aspect_ / (float(width) * float(height));
+        return 1.f / (a_pix * cos_t * cos_t * cos_t);
+    }
     float tan_x_;
     Vec3 origin_;
 };
@@ -62,6 +112,29 @@ class OrthographicCamera final : public ProjectiveCamera {
 public:
     explicit OrthographicCamera(const SensorDesc& d) : ProjectiveCamera(d) {
         dir_ = normalize(xf_.vector(Vec3(0, 0, 1)));
+        z_scale_ = length(xf_.vector(Vec3(0, 0, 1)));
+        // Area of one pixel across the beam (perpendicular to dir_), world units.
+        float a_plane = std::fabs(dot(cross(xf_.vector(Vec3(1, 0, 0)), xf_.vector(Vec3(0, 1, 0))), dir_));
+        a_pix_ = a_plane * 4.f / aspect_ / (float(width) * float(height));
+    }
+    bool has_importance() const override { return true; }
+    // The ray through ref is the one parallel to dir_: its film point is ref
+    // projected along dir_; the importance per unit area across the beam is
+    // 1 / a_pix_ (a delta in direction, so only points connect).
+    ImportanceSample sample_direction(const Vec3& ref) const override {
+        ImportanceSample is;
+        Vec3 l = xf_.inv_point(ref);
+        Vec2 f(0.5f * float(width) * (1.f - l.x), 0.5f * float(height) * (1.f - l.y * aspect_));
+        if (!(f.x >= 0.f && f.x <= float(width) && f.y >= 0.f && f.y <= float(height))) return is;
+        float t = l.z * z_scale_;
+        if (!(t >= near_ && t <= far_) || !(a_pix_ > 0.f)) return is;
+        is.valid = true;
+        is.film = f;
+        is.p = xf_.point(Vec3(l.x, l.y, 0.f));
+        is.d = -dir_;
+        is.dist = t;
+        is.weight = 1.f / a_pix_;
+        return is;
     }
     SensorRay sample_ray(Vec2 f, float, Vec2, Vec2) const override {
         Vec2 q = film_to_plane(f);
@@ -75,6 +148,7 @@ public:
 
 private:
     Vec3 dir_;
+    float z_scale_, a_pix_;
 };
 
 class RadianceMeter final : public Sensor {

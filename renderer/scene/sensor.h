@@ -18,6 +18,25 @@ struct SensorRay {
     Color weight{1.f};
 };
 
+// The sensor end of a light path (the t = 1 strategy of Veach 1997, sec.
+// 10.2; pbrt-v4's Camera::SampleWi). `weight` is the importance arriving at
+// the reference point per unit of its area and per unit of film area
+// measured in pixels, without the reference point's cosine: a light subpath
+// of flux-weight beta ending at x with BSDF f splats
+// beta f |cos_x| weight at `film`, and the mean over M light paths of those
+// splats (filtered) is the pixel estimate of a camera-side estimator (see
+// ptracer.cpp). Pinhole: W = 1 / (A_pix cos^3 theta dist^2), A_pix the area
+// of one pixel on the plane at distance 1 (pbrt-v4 PerspectiveCamera::We
+// times the conversion of dw to film area).
+struct ImportanceSample {
+    bool valid = false;
+    Vec2 film;          // continuous film position, [0, width] x [0, height]
+    Vec3 p;             // the sensor point reached (pinhole, or the orthographic film-plane point)
+    Vec3 d;             // unit direction from the reference point towards p
+    float dist = 0.f;   // distance from the reference point to p
+    float weight = 0.f; // importance as described above; per steradian for eval_direction
+};
+
 class Sensor {
 public:
     virtual ~Sensor() = default;
@@ -25,6 +44,15 @@ public:
     // film: continuous film position in [0, width] x [0, height]; u1, u2, u3 for
     // sensors that integrate over area or direction.
     virtual SensorRay sample_ray(Vec2 film, float u1, Vec2 u2, Vec2 u3) const = 0;
+    // Light tracing support: sensors whose importance a point can connect to.
+    virtual bool has_importance() const { return false; }
+    // Connects the point `ref` to the sensor; invalid when it is outside the
+    // field of view or the clip range.
+    virtual ImportanceSample sample_direction(const Vec3& ref) const { return {}; }
+    // Importance per steradian along the camera ray leaving in direction w
+    // (emitters at infinity seen directly); `ray` gets that camera ray with
+    // its clip range. Invalid for sensors whose directions are a delta.
+    virtual ImportanceSample eval_direction(const Vec3& w, Ray* ray) const { return {}; }
 };
 
 // shape: the shape an irradiancemeter is attached to (else ignored).

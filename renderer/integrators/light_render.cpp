@@ -1,0 +1,322 @@
+// The render driver of light-tracing estimators (ptracer): light paths
+// instead of camera tiles, their splats filtered onto the film.
+//
+// Which light paths: a render of `spp` traces M = spp * W * H of them, light
+// path g = s * W * H + j (s < spp, j < W * H) drawing on Sampler(seed, j, s),
+// so every path's random numbers are fixed by the seed alone.
+//
+// Determinism whatever the thread count: the paths of a pass are cut into
+// work items of kItemPaths consecutive paths (not by thread); threads trace
+// items in any order, each into the item's own list of splats, and the lists
+// are added to the film in item order (the film's rows are shared out among
+// threads, each adding every splat that touches its rows, in item order), so
+// every pixel sums the same numbers in the same order.
+//
+// Filtering: a splat at film position (x, y) adds to every pixel (px, py)
+// whose filter footprint covers it, with weight f(x - cx) f(y - cy) / (N_x
+// N_y), (cx, cy) the pixel centre and N the filter's integral over the
+// footprint's part inside the film: the expectation is then exactly the
+// estimate of the camera-side estimators, whose filter importance sampling
+// draws film positions with density f / N (film.h), borders included.
+//
+// Variance: batch means (e.g. Glynn & Whitt 1991; Law & Kelton, "Simulation
+// Modeling and Analysis", sec. 9.5). Path g belongs to batch g mod kBatches;
+// with I_b the estimate from batch b's n_b paths alone and I the estimate from
+// all M, var = sum_b n_b (I_b - I)^2 / ((B - 1) M) is an unbiased estimate of
+// Var(I) (the one-way ANOVA identity E[sum_b n_b (I_b - I)^2] = (B - 1)
+// sigma^2 for independent paths of variance sigma^2, whatever the n_b). It
+// has B - 1 = 31 degrees of freedom.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <limits>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+
+#include "integrators/render.h"
+
+namespace rm {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+constexpr int kBatches = 32;
+constexpr uint64_t kItemPaths = 1024;   // light paths per work item
+constexpr uint64_t kChunkItems = 256;   // items traced before their splats join the film (bounds memory)
+
+struct ItemSplat {
+    Splat s;
+    int batch;
+};
+
+class SplatFilm {
+public:
+    SplatFilm(int w, int h, const FilterSampler& f) : w_(w), h_(h), filter_(f) {
+        size_t n = size_t(w) * size_t(h);
+        effects_.assign(n * kNumEffects * 3, 0.0);
+        batches_.assign(n * kBatches * 3, 0.0);
+        norm_x_.resize(w);
+        norm_y_.resize(h);
+        for (int x = 0; x < w; ++x) norm_x_[x] = filter_.integral(-float(x) - 0.5f, float(w - x) - 0.5f);
+        for (int y = 0; y < h; ++y) norm_y_[y] = filter_.integral(-float(y) - 0.5f, float(h - y) - 0.5f);
+    }
+
+    // Adds the items' splats, in item order, to the rows [y0, y1).
+    void merge(const std::vector<std::vector<ItemSplat>>& items, size_t n_items, int y0, int y1) {
+        const float r = filter_.radius();
+        for (size_t i = 0; i < n_items; ++i)
+            for (const ItemSplat& is : items[i]) {
+                float x = is.s.film.x, y = is.s.film.y;
+                int py0 = std::max(y0, int(std::ceil(y - 0.5f - r))), py1 = std::min(y1 - 1, int(std::floor(y - 0.5f + r)));
+                if (py0 > py1) continue;
+                int px0 = std::max(0, int(std::ceil(x - 0.5f - r))), px1 = std::min(w_ - 1, int(std::floor(x - 0.5f + r)));
+                for (int py = py0; py <= py1; ++py) {
+                    double wy = filter_.eval(y - float(py) - 0.5f) / norm_y_[py];
+                    if (!(wy > 0)) continue;
+                    for (int px = px0; px <= px1; ++px) {
+                        double wx = filter_.eval(x - float(px) - 0.5f) / norm_x_[px];
+                        if (!(wx > 0)) continue;
+                        double wgt = wx * wy;
+                        size_t p = size_t(py) * size_t(w_) + size_t(px);
+                        double* e = &effects_[(p * kNumEffects + is.s.effect) * 3];
+                        double* b = &batches_[(p * kBatches + is.batch) * 3];
+                        for (int c = 0; c < 3; ++c) {
+                            double v = wgt * double(is.s.value[c]);
+                            e[c] += v;
+                            b[c] += v;
+                        }
+                    }
+                }
+            }
+    }
+
+    // Estimates from the first `paths` light paths (see the top of the file).
+    void develop(uint64_t paths, std::vector<float>& image, std::vector<float>& variance,
+                 std::vector<std::vector<float>>* effects) const {
+        size_t n = size_t(w_) * size_t(h_);
+        image.assign(3 * n, 0.f);
+        variance.assign(3 * n, std::numeric_limits<float>::quiet_NaN());
+        if (effects) effects->assign(kNumEffects, std::vector<float>(3 * n, 0.f));
+        if (paths == 0) return;
+        double inv_m = 1.0 / double(paths);
+        double n_b[kBatches];
+        int b_eff = 0;
+        for (int b = 0; b < kBatches; ++b) {
+            n_b[b] = double(paths / kBatches + (uint64_t(b) < paths % kBatches ? 1 : 0));
+            if (n_b[b] > 0) ++b_eff;
+        }
+        for (size_t p = 0; p < n; ++p)
+            for (int c = 0; c < 3; ++c) {
+                double total = 0;
+                for (int k = 0; k < kNumEffects; ++k) {
+                    double ek = effects_[(p * kNumEffects + k) * 3 + c] * inv_m;
+                    total += ek;
+                    if (effects) (*effects)[k][3 * p + c] = float(ek);
+                }
+                image[3 * p + c] = float(total);
+                if (b_eff < 2) continue;  // too few batches: NaN, never a fake 0
+                double sum = 0;
+                for (int b = 0; b < kBatches; ++b) sum += batches_[(p * kBatches + b) * 3 + c];
+                double mean = sum * inv_m, ss = 0;
+                for (int b = 0; b < kBatches; ++b)
+                    if (n_b[b] > 0) {
+                        double d = batches_[(p * kBatches + b) * 3 + c] / n_b[b] - mean;
+                        ss += n_b[b] * d * d;
+                    }
+                variance[3 * p + c] = float(ss / ((b_eff - 1) * double(paths)));
+            }
+    }
+
+private:
+    int w_, h_;
+    const FilterSampler& filter_;
+    std::vector<double> effects_;  // [pixel][effect][channel] sums
+    std::vector<double> batches_;  // [pixel][batch][channel] sums
+    std::vector<double> norm_x_, norm_y_;
+};
+
+// Runs fn(i, thread) for i in [0, n) on `threads` threads while the calling
+// thread polls; returns false when the poll asked to cancel (the items then
+// may be unfinished). Worker exceptions are rethrown here.
+template <class Fn>
+bool run_parallel(int threads, size_t n, Fn fn, const std::function<bool()>& poll_once, std::atomic<bool>& cancel) {
+    std::atomic<size_t> next{0};
+    std::atomic<int> running{threads};
+    std::mutex mu;
+    std::condition_variable cv;
+    std::exception_ptr error;
+    std::mutex error_mu;
+    auto worker = [&](int t) {
+        try {
+            for (;;) {
+                size_t i = next.fetch_add(1);
+                if (i >= n || cancel.load()) break;
+                fn(i, t);
+            }
+        } catch (...) {
+            std::lock_guard<std::mutex> lk(error_mu);
+            if (!error) error = std::current_exception();
+            cancel = true;
+        }
+        if (running.fetch_sub(1) == 1) {
+            std::lock_guard<std::mutex> lk(mu);
+            cv.notify_all();
+        }
+    };
+    std::vector<std::thread> pool;
+    for (int t = 0; t < threads; ++t) pool.emplace_back(worker, t);
+    {
+        std::unique_lock<std::mutex> lk(mu);
+        while (running.load() > 0) {
+            cv.wait_for(lk, std::chrono::milliseconds(50));
+            if (running.load() == 0) break;
+            lk.unlock();
+            bool go_on = true;
+            try {
+                go_on = poll_once();
+            } catch (...) {
+                std::lock_guard<std::mutex> elk(error_mu);
+                if (!error) error = std::current_exception();
+                go_on = false;
+            }
+            if (!go_on) cancel = true;
+            lk.lock();
+        }
+    }
+    for (auto& th : pool) th.join();
+    if (error) std::rethrow_exception(error);
+    return !cancel.load();
+}
+
+}  // namespace
+
+RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator, const RenderOptions& opts,
+                                const PollFn& poll) {
+    integrator.check_scene(scene);
+    const Sensor& sensor = *scene.sensor;
+    const SensorDesc& sd = scene.sensor_desc;
+    int W = sensor.width, H = sensor.height;
+    FilterSampler filter(sd.rfilter, sd.filter_radius, sd.filter_stddev);
+    double film_bytes = double(W) * double(H) * 3.0 * (kNumEffects + kBatches) * sizeof(double);
+    if (film_bytes > 16.0 * (1ull << 30))
+        throw std::invalid_argument("render: a " + std::to_string(W) + "x" + std::to_string(H) +
+                                    " film needs " + std::to_string(int(film_bytes / (1ull << 30))) +
+                                    " GiB of light-tracing buffers (limit 16 GiB); lower the resolution");
+    SplatFilm film(W, H, filter);
+
+    int threads = opts.threads > 0 ? opts.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+    RenderOutput out;
+    out.width = W;
+    out.height = H;
+    out.threads = threads;
+    std::atomic<bool> cancel{false};
+    auto t0 = Clock::now();
+    std::vector<int> cps = opts.checkpoints;
+    std::sort(cps.begin(), cps.end());
+    cps.erase(std::unique(cps.begin(), cps.end()), cps.end());
+
+    const uint64_t pixels = uint64_t(W) * uint64_t(H);
+    const uint64_t total = opts.seconds > 0 ? 0 : pixels * uint64_t(opts.spp);
+    uint64_t paths_done = 0;  // light paths [0, paths_done) are in the film
+    std::atomic<uint64_t> in_flight{0};
+    int spp_done = 0;
+    double sec_per_spp = 0;
+    ThreadStats stats;
+    std::vector<std::vector<ItemSplat>> items(kChunkItems);
+    std::vector<ThreadStats> tstats(threads);
+    auto poll_once = [&]() { return !poll || poll(paths_done + in_flight.load(), total); };
+
+    while (!out.cancelled) {
+        // The pass plan of render.cpp: fixed by spp and checkpoints under an
+        // spp budget, ~1/8 of the time left under a seconds budget.
+        int cap = opts.spp > 0 ? opts.spp : (1 << 30);
+        if (spp_done >= cap) break;
+        int s1 = cap;
+        for (int c : cps)
+            if (c > spp_done) { s1 = std::min(s1, c); break; }
+        if (opts.seconds > 0) {
+            double left = opts.seconds - since(t0);
+            if (left <= 0) break;
+            if (spp_done == 0) {
+                s1 = std::min(s1, 1);
+            } else {
+                if (sec_per_spp > left) break;
+                int n = int(std::min(1e6, std::max(1.0, std::floor(left / 8.0 / std::max(sec_per_spp, 1e-9)))));
+                s1 = std::min(s1, spp_done + n);
+            }
+        } else {
+            s1 = std::min(s1, spp_done == 0 ? 1 : spp_done + std::min(spp_done, 64));
+        }
+        auto pass_t0 = Clock::now();
+        const uint64_t g_end = uint64_t(s1) * pixels;
+        // Chunks of up to kChunkItems work items: trace, then add to the film.
+        while (paths_done < g_end) {
+            uint64_t chunk_paths = std::min(g_end - paths_done, kChunkItems * kItemPaths);
+            size_t n_items = size_t((chunk_paths + kItemPaths - 1) / kItemPaths);
+            const uint64_t g0 = paths_done;
+            in_flight = 0;
+            auto trace_item = [&](size_t i, int t) {
+                std::vector<ItemSplat>& dst = items[i];
+                dst.clear();
+                std::vector<Splat> splats;
+                uint64_t a = g0 + i * kItemPaths, b = std::min(g0 + chunk_paths, a + kItemPaths);
+                for (uint64_t g = a; g < b; ++g) {
+                    if (cancel.load(std::memory_order_relaxed)) return;
+                    Sampler sampler(opts.seed, g % pixels, g / pixels);
+                    splats.clear();
+                    integrator.trace_light_path(scene, sampler, splats, tstats[t]);
+                    for (const Splat& s : splats) {
+                        // A NaN or Inf contribution is counted and dropped, never written.
+                        if (!is_finite(s.value)) {
+                            bool nan = std::isnan(s.value.x) || std::isnan(s.value.y) || std::isnan(s.value.z);
+                            if (nan) ++tstats[t].nan_samples; else ++tstats[t].inf_samples;
+                            continue;
+                        }
+                        dst.push_back({s, int(g % kBatches)});
+                    }
+                }
+                in_flight.fetch_add(b - a, std::memory_order_relaxed);
+            };
+            if (!run_parallel(threads, n_items, trace_item, poll_once, cancel)) {
+                out.cancelled = true;  // the unfinished chunk is dropped; finished chunks stand
+                break;
+            }
+            int stripes = std::min(H, threads * 4);
+            auto merge_stripe = [&](size_t i, int) {
+                int y0 = int(int64_t(H) * int64_t(i) / stripes), y1 = int(int64_t(H) * int64_t(i + 1) / stripes);
+                film.merge(items, n_items, y0, y1);
+            };
+            std::atomic<bool> no_cancel{false};
+            run_parallel(threads, size_t(stripes), merge_stripe, [] { return true; }, no_cancel);
+            paths_done += chunk_paths;
+            in_flight = 0;
+        }
+        if (out.cancelled) break;
+        double pass_sec = since(pass_t0);
+        sec_per_spp = pass_sec / (s1 - spp_done);
+        spp_done = s1;
+        if (poll && !poll(paths_done, total)) out.cancelled = true;
+        if (std::binary_search(cps.begin(), cps.end(), spp_done)) {
+            Checkpoint cp;
+            cp.spp = spp_done;
+            cp.seconds = since(t0);
+            film.develop(paths_done, cp.image, cp.variance, nullptr);
+            out.checkpoints.push_back(std::move(cp));
+        }
+    }
+    for (auto& s : tstats) stats.merge(s);
+    // A cancel inside a pass keeps its finished chunks: the estimate uses
+    // every light path traced, and spp reports whole samples per pixel.
+    out.spp = int(paths_done / pixels);
+    out.seconds = since(t0);
+    out.stats = stats;
+    film.develop(paths_done, out.image, out.variance, &out.effects);
+    return out;
+}
+
+}  // namespace rm
