@@ -30,7 +30,21 @@ from radiometer.analysis.stats import z_test
 from radiometer.render import INTEGRATOR_PARAMS
 
 # Every estimator: each must survive every scene.
-ESTIMATORS = ["path", "direct"]
+ESTIMATORS = ["path", "direct", "ptracer"]
+# Regions an estimator cannot light by construction, with the reason; its
+# image there is still checked for NaN, Inf and negative values.
+CANNOT_LIGHT = {
+    # Light tracing connects light paths to the camera only at non-specular
+    # vertices: a camera that sees the light only through specular surfaces
+    # (the L S* E class) gets nothing, as in Mitsuba 3's ptracer.
+    ("ptracer", "glass_sphere_camera_center"): "camera sees the environment only through glass",
+    ("ptracer", "tir_sphere_camera_offset"): "camera sees the environment only through glass",
+    ("ptracer", "tir_slab_camera_inside"): "camera sees the environment only through glass",
+    ("ptracer", "index_matched_glass"): "the wall is seen through the (invisible) glass only",
+    # A directional light reaching a 0.09-wide band at 0.25 degrees in a scene
+    # of radius ~50: ~1e-6 of the light paths, none at this budget.
+    ("ptracer", "grazing_angles"): "the far grazing band needs ~1e6 light paths per pixel",
+}
 # Unbiased estimators (of whatever they estimate: `direct` estimates paths of
 # at most 2 segments): the scale, huge-floor and narrow-spot tests.
 UNBIASED = ["path", "direct"]
@@ -127,6 +141,8 @@ def test_finite_nonnegative_and_lit(name, estimator):
     where = f"{name} / {estimator}"
     assert_sane(res, where)
     exp = SCENES[name]
+    if (estimator, name) in CANNOT_LIGHT:
+        return  # sanity asserted above; see CANNOT_LIGHT for why nothing must be lit
     if exp.get("zero"):
         assert not res.image.any(), f"{where}: must be exactly 0, max {res.image.max():g}"
     for rows, cols, what in exp.get("lit", []):
