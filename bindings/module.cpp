@@ -114,7 +114,9 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("rr_depth", &IntegratorDesc::rr_depth)
         .def_readwrite("hide_emitters", &IntegratorDesc::hide_emitters)
         .def_readwrite("emitter_samples", &IntegratorDesc::emitter_samples)
-        .def_readwrite("bsdf_samples", &IntegratorDesc::bsdf_samples);
+        .def_readwrite("bsdf_samples", &IntegratorDesc::bsdf_samples)
+        .def_readwrite("mis", &IntegratorDesc::mis)
+        .def_readwrite("beta", &IntegratorDesc::beta);
 
     py::class_<Scene>(m, "Scene")
         .def(py::init<>())
@@ -338,6 +340,22 @@ PYBIND11_MODULE(_core, m) {
         return py::tuple(l);
     }();
 
+    m.def(
+        "bdpt_mis_check",
+        [](const Scene& scene, const IntegratorDesc& idesc, uint64_t seed, int n) {
+            if (!scene.committed()) throw py::value_error("bdpt_mis_check: scene is not committed");
+            std::vector<float> fast, brute;
+            std::vector<int> strategy;
+            {
+                py::gil_scoped_release nogil;
+                bdpt_mis_check(scene, idesc, seed, n, fast, brute, strategy);
+            }
+            return py::make_tuple(py::array_t<float>(fast.size(), fast.data()),
+                                  py::array_t<float>(brute.size(), brute.data()),
+                                  py::array_t<int>(strategy.size(), strategy.data()));
+        },
+        py::arg("scene"), py::arg("integrator"), py::arg("seed"), py::arg("n"),
+        "test hook: bdpt's MIS weights (linear-time) and brute-force ones for the strategies of n sample pairs");
     m.def(
         "render",
         [](const Scene& scene, const IntegratorDesc& idesc, std::vector<bool> effects, int spp, double seconds,

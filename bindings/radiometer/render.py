@@ -18,11 +18,13 @@ INTEGRATOR_PARAMS = {
     "volpath": dict(_COMMON),
     # Light tracing; Mitsuba's samples_per_pass (wavefront sizing) is accepted and ignored.
     "ptracer": dict(_COMMON, samples_per_pass=(int, None)),
+    # Bidirectional path tracing; mis in {"power", "balance", "uniform"}, beta the power heuristic's exponent.
+    "bdpt": dict(_COMMON, mis=(str, "power"), beta=(float, 2.0)),
     "direct": {"emitter_samples": (int, 1), "bsdf_samples": (int, 1), "hide_emitters": (bool, False),
                "shading_samples": (int, None)},
 }
 # Known to the scene format, arriving in later issues.
-PLANNED_INTEGRATORS = ("bdpt", "photonmapper", "sppm", "vcm", "pssmlt", "vpl", "irrcache", "radiosity")
+PLANNED_INTEGRATORS = ("photonmapper", "sppm", "vcm", "pssmlt", "vpl", "irrcache", "radiosity")
 
 
 class RenderCancelled(KeyboardInterrupt):
@@ -81,6 +83,13 @@ def _integrator_desc(spec, scene_integrator: IntegratorDesc):
             if not isinstance(v, (bool, np.bool_)):
                 raise SceneError(f"{where}['{k}']: expected a boolean, got {v!r}")
             v = bool(v)
+        elif typ is str:
+            if not isinstance(v, str):
+                raise SceneError(f"{where}['{k}']: expected a string, got {v!r}")
+        elif typ is float:
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
+                raise SceneError(f"{where}['{k}']: expected a finite number, got {v!r}")
+            v = float(v)
         else:
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
                 raise SceneError(f"{where}['{k}']: expected an integer, got {v!r}")
@@ -92,11 +101,16 @@ def _integrator_desc(spec, scene_integrator: IntegratorDesc):
         if val is not None:
             out[k] = val
     out.pop("samples_per_pass", None)
-    if itype in ("path", "volpath", "ptracer"):
+    if itype in ("path", "volpath", "ptracer", "bdpt"):
         if out["max_depth"] == 0 or out["max_depth"] < -1:
             raise SceneError(f"{where}['max_depth']: must be -1 (unbounded) or >= 1, got {out['max_depth']}")
         if out["rr_depth"] < 1:
             raise SceneError(f"{where}['rr_depth']: must be >= 1, got {out['rr_depth']}")
+    if itype == "bdpt":
+        if out["mis"] not in ("power", "balance", "uniform"):
+            raise SceneError(f"{where}['mis']: must be 'power', 'balance' or 'uniform', got {out['mis']!r}")
+        if not out["beta"] > 0:
+            raise SceneError(f"{where}['beta']: must be > 0, got {out['beta']}")
     if itype == "direct":
         if "shading_samples" in out:  # Mitsuba: sets both counts
             out["emitter_samples"] = out["bsdf_samples"] = out.pop("shading_samples")
@@ -110,7 +124,7 @@ def _core_integrator(spec: dict):
 
     c = _core.IntegratorDesc()
     c.type = spec["type"]
-    for k in ("max_depth", "rr_depth", "hide_emitters", "emitter_samples", "bsdf_samples"):
+    for k in ("max_depth", "rr_depth", "hide_emitters", "emitter_samples", "bsdf_samples", "mis", "beta"):
         if k in spec:
             setattr(c, k, spec[k])
     return c

@@ -81,6 +81,7 @@ private:
 
 std::unique_ptr<Integrator> make_path_integrator(const IntegratorDesc& d);
 std::unique_ptr<Integrator> make_ptracer_integrator(const IntegratorDesc& d);
+std::unique_ptr<Integrator> make_bdpt_integrator(const IntegratorDesc& d);
 
 std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& d, const EffectMask& mask) {
     std::unique_ptr<Integrator> r;
@@ -91,6 +92,8 @@ std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& d, const Effec
         r = make_path_integrator(d);
     } else if (d.type == "ptracer") {
         r = make_ptracer_integrator(d);
+    } else if (d.type == "bdpt") {
+        r = make_bdpt_integrator(d);
     } else if (d.type == "direct") {
         if (d.emitter_samples < 0 || d.bsdf_samples < 0 || d.emitter_samples + d.bsdf_samples == 0)
             throw std::invalid_argument("integrator 'direct': emitter_samples and bsdf_samples must be >= 0, not both 0");

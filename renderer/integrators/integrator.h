@@ -59,10 +59,16 @@ struct PathClass {
 // One contribution of a light path to the film (light-tracing estimators):
 // `value` at the continuous film position `film`, filed under `effect`. The
 // driver spreads it over the pixels whose filter footprint covers `film`.
+// A splat with pixel >= 0 is a camera sample of that pixel (bdpt's camera
+// subpaths, drawn by filter importance sampling as render.cpp does): it is
+// added to that pixel alone, unfiltered, and its value is already scaled by
+// W * H so that the driver's division by M = spp * W * H leaves the mean over
+// the pixel's spp camera samples.
 struct Splat {
     Vec2 film;
     int effect = 0;
     Color value{0.f};
+    int pixel = -1;
 };
 
 class Integrator {
@@ -75,7 +81,9 @@ public:
     // Traces one light path and appends its splats to `out`. A pixel's
     // estimate is the filter-weighted sum of the splats of M light paths,
     // divided by M.
-    virtual void trace_light_path(const Scene&, Sampler&, std::vector<Splat>& out, ThreadStats&) const {}
+    // `pixel` is the pixel whose Sampler(seed, pixel, sample) drives the path
+    // (bdpt also traces one camera path through that pixel).
+    virtual void trace_light_path(const Scene&, Sampler&, int pixel, std::vector<Splat>& out, ThreadStats&) const {}
     // Throws std::invalid_argument when this estimator cannot render `scene`.
     virtual void check_scene(const Scene&) const {}
     // Radiance along one camera ray, split by effect class, into `out`.
@@ -86,6 +94,12 @@ public:
 
 // Throws std::invalid_argument for an unknown type or a bad parameter.
 std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& desc, const EffectMask& mask);
+
+// Test hook of bdpt.cpp: for the strategies (s, t) of n random sample
+// pairs, the MIS weight as bdpt computes it and as a brute-force product of
+// every strategy's path density gives it; strategy = 1000 s + t.
+void bdpt_mis_check(const Scene& scene, const IntegratorDesc& d, uint64_t seed, int n, std::vector<float>& fast,
+                    std::vector<float>& brute, std::vector<int>& strategy);
 
 // Power heuristic with beta = 2 (Veach 1997, eq. 9.13), for one sample per strategy.
 inline float mis_power(float pdf_a, float pdf_b) {

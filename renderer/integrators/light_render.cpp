@@ -20,7 +20,11 @@
 // draws film positions with density f / N (film.h), borders included.
 //
 // Variance: batch means (e.g. Glynn & Whitt 1991; Law & Kelton, "Simulation
-// Modeling and Analysis", sec. 9.5). Path g belongs to batch g mod kBatches;
+// Modeling and Analysis", sec. 9.5). Path g = s W H + j belongs to batch
+// (j + s) mod kBatches (batch_of), so that the camera samples of one pixel,
+// which bdpt traces along with light path g = s W H + j, spread over all
+// batches (with g mod kBatches and W H a multiple of 32 they all fell into
+// one batch and the batch means overestimated their variance ~100-fold);
 // with I_b the estimate from batch b's n_b paths alone and I the estimate from
 // all M, var = sum_b n_b (I_b - I)^2 / ((B - 1) M) is an unbiased estimate of
 // Var(I) (the one-way ANOVA identity E[sum_b n_b (I_b - I)^2] = (B - 1)
@@ -46,6 +50,26 @@ using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 constexpr int kBatches = 32;
+
+inline int batch_of(uint64_t g, uint64_t pixels) { return int((g % pixels + g / pixels) % kBatches); }
+
+// Number of j in [0, n) with j mod kBatches == k.
+inline uint64_t count_residue(uint64_t n, int k) { return n / kBatches + (uint64_t(k) < n % kBatches ? 1 : 0); }
+
+// n_b: the number of the first `paths` light paths in each batch (batch_of).
+void batch_sizes(uint64_t paths, uint64_t pixels, double* n_b) {
+    uint64_t full = paths / pixels, rem = paths % pixels;
+    for (int b = 0; b < kBatches; ++b) {
+        double n = 0;
+        for (int r = 0; r < kBatches; ++r) {  // sample indices s < full with s mod B == r
+            uint64_t c_r = count_residue(full, r);
+            if (c_r) n += double(c_r) * double(count_residue(pixels, ((b - r) % kBatches + kBatches) % kBatches));
+        }
+        // the partial sample index `full`: pixels j < rem
+        n += double(count_residue(rem, int(((int64_t(b) - int64_t(full % kBatches)) % kBatches + kBatches) % kBatches)));
+        n_b[b] = n;
+    }
+}
 constexpr uint64_t kItemPaths = 1024;   // light paths per work item
 constexpr uint64_t kChunkItems = 256;   // items traced before their splats join the film (bounds memory)
 
@@ -71,6 +95,18 @@ public:
         const float r = filter_.radius();
         for (size_t i = 0; i < n_items; ++i)
             for (const ItemSplat& is : items[i]) {
+                if (is.s.pixel >= 0) {  // a camera sample: its own pixel only (integrator.h)
+                    int py = is.s.pixel / w_;
+                    if (py < y0 || py >= y1) continue;
+                    size_t p = size_t(is.s.pixel);
+                    double* e = &effects_[(p * kNumEffects + is.s.effect) * 3];
+                    double* b = &batches_[(p * kBatches + is.batch) * 3];
+                    for (int c = 0; c < 3; ++c) {
+                        e[c] += double(is.s.value[c]);
+                        b[c] += double(is.s.value[c]);
+                    }
+                    continue;
+                }
                 float x = is.s.film.x, y = is.s.film.y;
                 int py0 = std::max(y0, int(std::ceil(y - 0.5f - r))), py1 = std::min(y1 - 1, int(std::floor(y - 0.5f + r)));
                 if (py0 > py1) continue;
@@ -106,8 +142,8 @@ public:
         double inv_m = 1.0 / double(paths);
         double n_b[kBatches];
         int b_eff = 0;
+        batch_sizes(paths, uint64_t(w_) * uint64_t(h_), n_b);
         for (int b = 0; b < kBatches; ++b) {
-            n_b[b] = double(paths / kBatches + (uint64_t(b) < paths % kBatches ? 1 : 0));
             if (n_b[b] > 0) ++b_eff;
         }
         for (size_t p = 0; p < n; ++p)
@@ -269,7 +305,7 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
                     if (cancel.load(std::memory_order_relaxed)) return;
                     Sampler sampler(opts.seed, g % pixels, g / pixels);
                     splats.clear();
-                    integrator.trace_light_path(scene, sampler, splats, tstats[t]);
+                    integrator.trace_light_path(scene, sampler, int(g % pixels), splats, tstats[t]);
                     for (const Splat& s : splats) {
                         // A NaN or Inf contribution is counted and dropped, never written.
                         if (!is_finite(s.value)) {
@@ -277,7 +313,7 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
                             if (nan) ++tstats[t].nan_samples; else ++tstats[t].inf_samples;
                             continue;
                         }
-                        dst.push_back({s, int(g % kBatches)});
+                        dst.push_back({s, batch_of(g, pixels)});
                     }
                 }
                 in_flight.fetch_add(b - a, std::memory_order_relaxed);

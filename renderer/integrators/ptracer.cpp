@@ -69,7 +69,7 @@ public:
                                         "hide_emitters or use a perspective camera or integrator 'path'");
     }
 
-    void trace_light_path(const Scene& scene, Sampler& sampler, std::vector<Splat>& out,
+    void trace_light_path(const Scene& scene, Sampler& sampler, int, std::vector<Splat>& out,
                           ThreadStats& stats) const override {
         const Sensor& sensor = *scene.sensor;
         size_t n = scene.emitters.size();

@@ -60,6 +60,9 @@ struct IntegratorDesc {
     bool hide_emitters = false;
     // direct: sample counts per strategy (Mitsuba's direct integrator)
     int emitter_samples = 1, bsdf_samples = 1;
+    // bdpt: MIS heuristic ("power", "balance", "uniform") and the power heuristic's exponent
+    std::string mis = "power";
+    float beta = 2.f;
 };
 
 }  // namespace rm

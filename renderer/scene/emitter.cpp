@@ -72,6 +72,10 @@ public:
         if (!(c > 0.f) || !(es.pdf_a > 0.f)) return Color(0.f);
         return radiance_ * (c / es.pdf_a);
     }
+    float pdf_emission_w(const Vec3& n, const Vec3& w) const override {
+        float c = dot(n, w);
+        return c > 0.f ? c * kInvPi : 0.f;
+    }
 
 private:
     const Shape* shape_;
@@ -111,6 +115,7 @@ public:
         return es;
     }
     Color emitted_towards(const EmissionSample&, const Vec3&) const override { return intensity_; }
+    float pdf_emission_w(const Vec3&, const Vec3&) const override { return warp::square_to_uniform_sphere_pdf_w(); }
 
 private:
     Color intensity_;
@@ -172,6 +177,11 @@ public:
     }
     Color emitted_towards(const EmissionSample&, const Vec3& w) const override {
         return intensity_ * falloff(normalize(xf_.inv_vector(w)));
+    }
+    float pdf_emission_w(const Vec3&, const Vec3& w) const override {
+        Vec3 local = normalize(xf_.inv_vector(w));
+        float theta = std::atan2(std::sqrt(local.x * local.x + local.y * local.y), local.z);
+        return theta <= cutoff_ ? 1.f / (2.f * kPi * 2.f * sqr(std::sin(0.5f * cutoff_))) : 0.f;
     }
 
 private:

@@ -66,6 +66,11 @@ public:
     // point cannot connect to (the environment is seen along directions:
     // eval_environment).
     virtual Color emitted_towards(const EmissionSample& es, const Vec3& w) const { return Color(0.f); }
+    // Solid-angle density with which sample_emission picks the direction w
+    // leaving a point of normal n (area lights; n unused otherwise): the
+    // reverse densities of bidirectional MIS (Veach 1997, sec. 10.2).
+    // 0 for directional and environment emitters.
+    virtual float pdf_emission_w(const Vec3& n, const Vec3& w) const { return 0.f; }
     bool is_delta() const { return delta_; }
     bool is_environment() const { return environment_; }
 

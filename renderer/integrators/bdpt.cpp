@@ -1,0 +1,635 @@
+// `bdpt`: bidirectional path tracing (Veach 1997, ch. 10; Lafortune and
+// Willems 1993). Each sample traces a camera subpath z0 z1 .. and a light
+// subpath y0 y1 .. with one vertex record and one random walk (pbrt-v4's
+// Vertex and RandomWalk, bdpt.cpp; SmallVCM's shared subpath of
+// vertexcm.hxx), and combines every strategy (s, t) of s light and t camera
+// vertices:
+//   s = 0   the camera subpath reaches an emitter by itself
+//   t = 1   a light vertex connected to the camera: a splat (as `ptracer`)
+//   s = 1   next event estimation: a fresh emitter sample for z_{t-1}
+//   s, t >= 2  a deterministic connection of y_{s-1} and z_{t-1}
+// weighted by multiple importance sampling over all strategies that could
+// have produced the same path (Veach 1997, sec. 10.2 and eq. 9.13).
+// Parameters, as Mitsuba 3's (0.6's) `bdpt`:
+//   max_depth      longest path in segments (s + t - 1); -1 = unbounded
+//   rr_depth       subpath depth (segments) from which Russian roulette may stop a subpath
+//   hide_emitters  directly visible emitters appear black
+//   mis            "power" (default), "balance" or "uniform" weights
+//   beta           the power heuristic's exponent (default 2)
+//
+// Driver: bdpt splats (t = 1), so it runs through the light-path driver
+// (light_render.cpp): light path g = s W H + j also traces one camera path
+// through pixel j, its film position drawn by filter importance sampling as
+// render.cpp does, and its (t >= 2) contributions go to pixel j alone
+// (Splat::pixel), scaled by W H so that the driver's division by spp W H
+// leaves the mean over the pixel's spp camera samples.
+//
+// Densities of the MIS weights, per sample (one camera and one light path):
+// the camera's density of z1 per unit area is W(z1) |cos z1| / (W H), W the
+// importance of sample_direction (per unit film area in pixels), because
+// camera paths cover the film uniformly with W H of them per spp; that is
+// pbrt-v4's PerspectiveCamera::PDF_We (1 / (A cos^3) per steradian over the
+// whole film) converted to area, and for the orthographic camera the uniform
+// density over the film plane, projected. Exact for the box filter; for
+// other filters any consistent choice keeps the weights a partition of
+// unity, hence the estimator unbiased (Veach 1997, sec. 9.2.1).
+//
+// Not supported (refused by check_scene): emitters at infinity (constant,
+// directional), and sensors without importance (radiance/irradiance meters).
+#include <climits>
+#include <stdexcept>
+
+#include "film/film.h"
+#include "integrators/common.h"
+
+namespace rm {
+
+namespace {
+
+enum class VType : uint8_t { Camera, Light, Surface };
+
+// One vertex of either subpath (pbrt-v4's Vertex; media slots live in the
+// Interaction). pdf_fwd is the area density with which the vertex was
+// sampled by its own subpath, pdf_rev the area density with which the other
+// direction would sample it (Veach 1997, sec. 10.2.1: p_i^->, p_i^<-).
+struct PathVertex {
+    VType type = VType::Surface;
+    Interaction it;        // p, n (zero for a delta-position light), wi towards the previous vertex
+    Color beta{0.f};       // throughput of the subpath up to this vertex (Veach's alpha_i)
+    float pdf_fwd = 0.f, pdf_rev = 0.f;
+    bool delta = false;    // the walk sampled a delta lobe here
+    const Bsdf* bsdf = nullptr;
+    const Emitter* emitter = nullptr;  // the light of a Light vertex, or the area emitter a surface carries
+    bool connectible() const {
+        return type != VType::Surface || bsdf->has_smooth();
+    }
+    bool null_surface() const { return type == VType::Surface && bsdf->flags() == kNull; }
+};
+
+// Adjoint BSDF with shading normals (Veach 1997, eq. 5.16), as in ptracer.cpp.
+float shading_correction(const Interaction& it, const Vec3& wi, const Vec3& wo) {
+    float num = absdot(wi, it.sh.n) * absdot(wo, it.n);
+    float den = absdot(wi, it.n) * absdot(wo, it.sh.n);
+    return den > 0.f ? num / den : 0.f;
+}
+
+// Solid angle at `from` to area at `to` (Veach 1997, eq. 8.10): p_a = p_w |cos| / d^2.
+float to_area(float pdf_w, const Vec3& from, const PathVertex& to) {
+    Vec3 v = to.it.p - from;
+    float d2 = length_sq(v);
+    if (!(d2 > 0.f)) return 0.f;
+    float c = length_sq(to.it.n) > 0.f ? absdot(to.it.n, v) / std::sqrt(d2) : 1.f;
+    return pdf_w * c / d2;
+}
+
+inline float remap0(float f) { return f != 0.f ? f : 1.f; }
+
+void scene_bounds(const Scene& scene, Vec3& center, float& radius) {
+    if (is_finite(scene.bbox_lo) && is_finite(scene.bbox_hi)) {
+        center = (scene.bbox_lo + scene.bbox_hi) * 0.5f;
+        radius = 0.5f * length(scene.bbox_hi - scene.bbox_lo);
+    } else {
+        center = Vec3(0.f);
+        radius = 1.f;
+    }
+}
+
+enum class Mis { Power, Balance, Uniform };
+
+}  // namespace
+
+class BdptIntegrator final : public Integrator {
+public:
+    explicit BdptIntegrator(const IntegratorDesc& d)
+        : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), beta_(d.beta) {
+        if (d.mis == "power") mis_ = Mis::Power;
+        else if (d.mis == "balance") mis_ = Mis::Balance;
+        else if (d.mis == "uniform") mis_ = Mis::Uniform;
+        else throw std::invalid_argument("integrator 'bdpt': mis must be 'power', 'balance' or 'uniform', not '" + d.mis + "'");
+        if (!(beta_ > 0.f) || !std::isfinite(beta_))
+            throw std::invalid_argument("integrator 'bdpt': beta must be a positive finite number");
+    }
+
+    bool is_light_tracer() const override { return true; }
+    void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
+        throw std::logic_error("integrator 'bdpt' runs through the light-path driver, not camera rays");
+    }
+
+    void check_scene(const Scene& scene) const override {
+        if (!scene.sensor->has_importance())
+            throw std::invalid_argument("integrator 'bdpt': sensor '" + scene.sensor_desc.type +
+                                        "' cannot be reached by light subpaths (bdpt connects to cameras with a "
+                                        "film); use integrator 'path' or a perspective or orthographic camera");
+        Vec3 c;
+        float r;
+        scene_bounds(scene, c, r);
+        for (const auto& e : scene.emitters)
+            if (e->is_environment() || (e->is_delta() && std::isinf(e->sample_direct(c, Vec2(0.5f, 0.5f), 0.5f).dist)))
+                throw std::invalid_argument("integrator 'bdpt': emitter '" + e->id +
+                                            "' is at infinity (constant or directional), which bdpt does not "
+                                            "support yet; use integrator 'path'");
+        const SensorDesc& sd = scene.sensor_desc;
+        filter_ = std::make_unique<FilterSampler>(sd.rfilter, sd.filter_radius, sd.filter_stddev);
+    }
+
+    // Steps 1 and 2 of trace_light_path: the two subpaths, into cam_ref()
+    // and light_ref(); `es` keeps the emission sample.
+    void generate_subpaths(const Scene& scene, Sampler& sampler, int pixel, EmissionSample& es,
+                           ThreadStats& stats) const {
+        const Sensor& sensor = *scene.sensor;
+        const int W = sensor.width, H = sensor.height;
+        std::vector<PathVertex>& cam = cam_ref();
+        std::vector<PathVertex>& light = light_ref();
+        cam.clear();
+        light.clear();
+        ++stats.paths;
+
+        // 1. The camera subpath through `pixel`, its film position drawn by
+        //    filter importance sampling (as render.cpp).
+        int px = pixel % W, py = pixel / W;
+        float fx = filter_->sample(sampler.next_1d(), -float(px) - 0.5f, float(W - px) - 0.5f);
+        float fy = filter_->sample(sampler.next_1d(), -float(py) - 0.5f, float(H - py) - 0.5f);
+        Vec2 film_pos(float(px) + 0.5f + fx, float(py) + 0.5f + fy);
+        float u1 = sampler.next_1d();
+        Vec2 u2 = sampler.next_2d(), u3 = sampler.next_2d();
+        SensorRay sr = sensor.sample_ray(film_pos, u1, u2, u3);
+        {
+            PathVertex z0;
+            z0.type = VType::Camera;
+            z0.it.p = sr.ray.o;
+            z0.beta = sr.weight;
+            z0.pdf_fwd = 1.f;
+            cam.push_back(z0);
+        }
+        int max_cam = max_depth_ < 0 ? INT_MAX : max_depth_ + 1;  // z0 .. z_max_depth
+        random_walk(scene, sampler, sr.ray, sr.weight, TransportMode::Radiance, max_cam, cam, stats);
+
+        // 2. The light subpath: an emitter picked uniformly (as NEE), a ray of light leaving it.
+        size_t n_em = scene.emitters.size();
+        float u_pick = sampler.next_1d();
+        Vec2 u_pos = sampler.next_2d();
+        float u_extra = sampler.next_1d();
+        Vec2 u_dir = sampler.next_2d();
+        if (n_em > 0) {
+            const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n_em)), n_em - 1)];
+            Vec3 center;
+            float radius;
+            scene_bounds(scene, center, radius);
+            es = e.sample_emission(u_pos, u_extra, u_dir, center, radius);
+            if (es.pdf_a > 0.f && es.pdf_w > 0.f) {
+                float pick = emitter_pick_prob(scene);
+                PathVertex y0;
+                y0.type = VType::Light;
+                y0.emitter = &e;
+                y0.it.p = es.p;
+                y0.it.n = es.n;
+                y0.it.eps = es.eps;
+                y0.pdf_fwd = pick * es.pdf_a;
+                light.push_back(y0);
+                Ray ray;
+                ray.o = es.p + es.n * es.eps;
+                ray.d = es.d;
+                int max_light = max_depth_ < 0 ? INT_MAX : max_depth_;  // y0 .. y_{max_depth - 1}
+                random_walk(scene, sampler, ray, es.weight / pick, TransportMode::Importance, max_light,
+                            light, stats);
+            }
+        }
+    }
+
+    void trace_light_path(const Scene& scene, Sampler& sampler, int pixel, std::vector<Splat>& out,
+                          ThreadStats& stats) const override {
+        const float film_scale = float(scene.sensor->width) * float(scene.sensor->height);
+        EmissionSample es;
+        generate_subpaths(scene, sampler, pixel, es, stats);
+        std::vector<PathVertex>& cam = cam_ref();
+        std::vector<PathVertex>& light = light_ref();
+        size_t n_em = scene.emitters.size();
+
+        // 3. Every strategy (s, t) with s + t - 1 segments, 1 <= s + t - 1 <= max_depth.
+        //    (1, 1), the emitter's origin seen by the camera, is left to (0, 2),
+        //    as in pbrt-v4 (its weight is then 1).
+        // s = 1 draws its own emitter sample, so it exists even without a light subpath.
+        const int nc = int(cam.size()), nl = std::max(int(light.size()), n_em > 0 ? 1 : 0);
+        for (int t = 1; t <= nc; ++t)
+            for (int s = 0; s <= nl; ++s) {
+                if (s > int(light.size()) && s != 1) continue;
+                int depth = s + t - 1;
+                if (depth < 1 || (s == 1 && t == 1)) continue;
+                if (max_depth_ >= 0 && depth > max_depth_) continue;
+                bool hidden = hide_ && depth == 1;
+                Splat sp;
+                float w = 0.f;
+                Color L = connect(scene, sampler, es, s, t, sp.film, sp.effect, w, hidden, stats);
+                if (is_black(L) || !(w > 0.f)) continue;
+                sp.value = L * w;
+                if (t > 1) {
+                    sp.pixel = pixel;
+                    sp.value *= film_scale;
+                }
+                out.push_back(sp);
+            }
+    }
+
+    // Test hook (bindings: _core.bdpt_mis_check): for the strategies of n
+    // random sample pairs, the weight of mis_weight (linear-time ratios) and
+    // the weight from the strategies' full path densities, each a product
+    // over all vertices, computed from scratch (Veach 1997, eqs. 10.5-10.6
+    // and 9.13). Visibility is ignored: weights do not depend on it.
+    void mis_check(const Scene& scene, uint64_t seed, int n, std::vector<float>& fast, std::vector<float>& brute,
+                   std::vector<int>& strategy) const {
+        check_scene(scene);
+        ThreadStats stats;
+        const int P = scene.sensor->width * scene.sensor->height;
+        for (int g = 0; g < n; ++g) {
+            Sampler sampler(seed, uint64_t(g % P), uint64_t(g / P));
+            EmissionSample es;
+            generate_subpaths(scene, sampler, g % P, es, stats);
+            std::vector<PathVertex>& cam = cam_ref();
+            std::vector<PathVertex>& light = light_ref();
+            for (int t = 2; t <= int(cam.size()); ++t)
+                for (int s = 0; s <= int(light.size()); ++s) {
+                    // s = 1 uses the light subpath's y0 here (the renderer draws a
+                    // fresh one, whose densities come from the same functions).
+                    if (s + t - 1 < 2) continue;
+                    if (max_depth_ >= 0 && s + t - 1 > max_depth_) continue;
+                    if (s == 0 && !(cam[t - 1].emitter && cam[t - 1].type == VType::Surface)) continue;
+                    if (s > 0 && (!cam[t - 1].connectible() || !light[s - 1].connectible())) continue;
+                    // s = 1 behind a one-sided area light carries nothing (and has no light-sampling density)
+                    if (s == 1 && !light[0].emitter->is_delta() &&
+                        !(dot(light[0].it.n, cam[t - 1].it.p - light[0].it.p) > 0.f))
+                        continue;
+                    fast.push_back(mis_weight(scene, s, t));
+                    brute.push_back(brute_weight(scene, s, t));
+                    strategy.push_back(s * 1000 + t);
+                }
+        }
+    }
+
+private:
+    // The full path x_0 (camera) .. x_k (light) of strategy (s, t), every
+    // strategy's density as a product of per-vertex densities, each vertex's
+    // density in the camera direction (pc) and in the light direction (pl);
+    // a delta vertex contributes 1 to the vertex after it (the delta
+    // functions are common to all strategies that can make the path).
+    float brute_weight(const Scene& scene, int s, int t) const {
+        std::vector<PathVertex>& cam = cam_ref();
+        std::vector<PathVertex>& light = light_ref();
+        std::vector<PathVertex> x;
+        for (int i = 0; i < t; ++i) x.push_back(cam[i]);
+        for (int i = s - 1; i >= 0; --i) x.push_back(light[i]);
+        const int k = int(x.size()) - 1;
+        if (s > 0) { x[t - 1].delta = false; x[t].delta = false; }
+        x[k].delta = false;
+        if (s == 0) {  // the emitter the camera path ended on acts as the light vertex
+            x[k].type = VType::Light;
+        }
+        const Emitter* em = x[k].emitter;
+        std::vector<double> pc(k + 1, 1.0), pl(k + 1, 1.0);
+        for (int i = 1; i <= k; ++i) {
+            if (x[i - 1].delta) continue;
+            double p = i == 1 ? camera_pdf_a(scene, x[1]) : pdf_to(scene, x[i - 1], &x[i - 2], x[i]);
+            pc[i] = p != 0.0 ? p : 1.0;
+        }
+        for (int i = k; i >= 1; --i) {
+            double p;
+            if (i == k) {
+                p = em->is_delta() ? emitter_pick_prob(scene) : light_origin_pdf(scene, x[k], x[k - 1]);
+            } else {
+                if (x[i + 1].delta) continue;
+                p = i == k - 1 ? to_area(em->pdf_emission_w(x[k].it.n, normalize(x[i].it.p - x[k].it.p)), x[k].it.p, x[i])
+                               : pdf_to(scene, x[i + 1], &x[i + 2], x[i]);
+            }
+            pl[i] = p != 0.0 ? p : 1.0;
+        }
+        // Strategy with tt camera vertices x_0 .. x_{tt-1} and the rest from the light.
+        auto density = [&](int tt) {
+            double p = 1.0;
+            for (int i = 1; i < tt; ++i) p *= pc[i];
+            for (int i = tt; i <= k; ++i) p *= pl[i];
+            return p;
+        };
+        auto valid = [&](int tt) {
+            if (tt == k + 1) return !em->is_delta();  // s = 0: the camera path hits the emitter
+            return !x[tt - 1].delta && !x[tt].delta;
+        };
+        double sum = 0.0, mine = 0.0;
+        for (int tt = 1; tt <= k + 1; ++tt) {
+            if (!valid(tt)) continue;
+            double h = mis_ == Mis::Uniform ? 1.0 : std::pow(density(tt), mis_ == Mis::Balance ? 1.0 : double(beta_));
+            sum += h;
+            if (tt == t) mine = h;
+        }
+        return sum > 0.0 ? float(mine / sum) : 0.f;
+    }
+
+    // pbrt-v4's RandomWalk: extends `path` (its start vertex, the camera or
+    // the light, already in it) from `ray`, carrying throughput `beta`. Each
+    // new vertex gets pdf_fwd and its predecessor's predecessor pdf_rev
+    // (Veach 1997, sec. 10.2.1), both through pdf_to from the vertex
+    // positions, exactly as the connections compute them: the weights are a
+    // partition of unity only if every strategy sees the same numbers (the
+    // sampled direction leaves an offset origin, and for vertices 1e-2 apart
+    // in a corner that moved densities by 1 %, measured by bdpt_mis_check).
+    void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode,
+                     int max_vertices, std::vector<PathVertex>& path, ThreadStats& stats) const {
+        BsdfContext ctx{mode};
+        Color thr(1.f);         // throughput since the start (Russian roulette)
+        float eta_scale = 1.f;  // undoes radiance scaling by eta^2 (Russian roulette)
+        for (int depth = 1;; ++depth) {  // depth: segments from the start to the new vertex
+            if (int(path.size()) >= max_vertices) break;
+            Interaction it;
+            ++stats.rays;
+            if (!scene.intersect(ray, it)) break;
+            const Shape& shape = *scene.shapes[it.shape];
+            PathVertex v;
+            v.it = it;
+            v.beta = beta;
+            v.bsdf = scene.bsdfs[shape.bsdf].get();
+            v.emitter = shape.emitter >= 0 ? scene.emitters[shape.emitter].get() : nullptr;
+            const size_t n = path.size();  // index of v
+            const PathVertex& prev = path[n - 1];
+            if (n == 1) {
+                v.pdf_fwd = prev.type == VType::Camera ? camera_pdf_a(scene, v) : pdf_to(scene, prev, nullptr, v);
+            } else if (prev.delta) {
+                v.pdf_fwd = 0.f;  // a delta: remap0 in the weights (pbrt-v4)
+                path[n - 2].pdf_rev = 0.f;
+            } else {
+                v.pdf_fwd = pdf_to(scene, prev, &path[n - 2], v);
+                path[n - 2].pdf_rev = pdf_to(scene, prev, &v, path[n - 2]);
+            }
+            path.push_back(v);
+            if (int(path.size()) >= max_vertices) break;
+
+            // Sample the next direction.
+            PathVertex& cur = path.back();
+            Vec3 wi = it.to_local(it.wi);
+            BsdfSample bs = cur.bsdf->sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+            if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
+            Vec3 wo = it.to_world(bs.wo);
+            Color f = bs.weight;
+            if (mode == TransportMode::Importance) f *= shading_correction(it, it.wi, wo);
+            else eta_scale *= sqr(bs.eta);
+            beta *= f;
+            thr *= f;
+            cur.delta = bs.is_delta;
+            ray = it.spawn(wo);
+
+            // Russian roulette (Mitsuba: q = min(max(throughput) eta^2, 0.95)).
+            float rr_u = sampler.next_1d();
+            if (depth >= rr_depth_) {
+                float q = std::min(max_component(thr) * eta_scale, 0.95f);
+                if (!(rr_u < q)) break;
+                beta /= q;
+                thr /= q;
+            }
+        }
+    }
+
+    // The camera's area density of sampling the first vertex v (see the top).
+    float camera_pdf_a(const Scene& scene, const PathVertex& v) const {
+        ImportanceSample is = scene.sensor->sample_direction(v.it.p);
+        if (!is.valid) return 0.f;
+        float c = length_sq(v.it.n) > 0.f ? absdot(v.it.n, is.d) : 1.f;
+        return is.weight * c / (float(scene.sensor->width) * float(scene.sensor->height));
+    }
+
+    // Area density with which vertex v samples `next`, given it was reached
+    // from `prev` (pbrt-v4's Vertex::PDF).
+    float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, const PathVertex& next) const {
+        if (v.type == VType::Camera) return camera_pdf_a(scene, next);
+        Vec3 d = next.it.p - v.it.p;
+        float len = length(d);
+        if (!(len > 0.f)) return 0.f;
+        d = d / len;
+        if (v.type == VType::Light) return to_area(v.emitter->pdf_emission_w(v.it.n, d), v.it.p, next);
+        if (!prev) return 0.f;
+        BsdfContext ctx;
+        Vec3 wi = normalize(prev->it.p - v.it.p);
+        return to_area(v.bsdf->pdf_w(ctx, v.it.to_local(wi), v.it.to_local(d)), v.it.p, next);
+    }
+
+    // Area density with which light sampling picks v, a point on an area emitter (pbrt-v4 PdfLightOrigin).
+    float light_origin_pdf(const Scene& scene, const PathVertex& v, const PathVertex& ref) const {
+        float pd = v.emitter->pdf_direct(ref.it.p, v.it.p, v.it.n);
+        Vec3 d = v.it.p - ref.it.p;
+        float d2 = length_sq(d);
+        if (!(pd > 0.f) || !(d2 > 0.f)) return 0.f;
+        float cos_l = absdot(v.it.n, d) / std::sqrt(d2);
+        return emitter_pick_prob(scene) * pd * cos_l / d2;
+    }
+
+    float heuristic(float r) const {
+        switch (mis_) {
+            case Mis::Balance: return r;
+            case Mis::Uniform: return 1.f;
+            default: return beta_ == 2.f ? r * r : std::pow(r, beta_);
+        }
+    }
+
+    // MIS weight of strategy (s, t) in time linear in s + t: with r_i the
+    // ratio of the density of the strategy that would connect at vertex i to
+    // the density of (s, t), w = 1 / (1 + sum_i h(r_i)) (Veach 1997, eq. 10.9
+    // and sec. 10.2.1, where p_{i+1} / p_i = p^<-_i / p^->_i: each ratio is the
+    // previous one times one vertex's reverse over forward density; pbrt-v4
+    // BDPT MISWeight). h(r) = r^beta is the power heuristic (eq. 9.13), r the
+    // balance heuristic, 1 the uniform weights. A strategy exists only if
+    // both vertices it connects are non-delta (and, for s' = 0, the light is
+    // not a delta position). The densities at the connection are set here
+    // for the duration of the call.
+    float mis_weight(const Scene& scene, int s, int t) const {
+        if (s + t == 2) return 1.f;
+        std::vector<PathVertex>& cam = cam_ref();
+        std::vector<PathVertex>& light = light_ref();
+        PathVertex* qs = s > 0 ? &light[s - 1] : nullptr;
+        PathVertex* pt = &cam[t - 1];
+        PathVertex* qs_m = s > 1 ? &light[s - 2] : nullptr;
+        PathVertex* pt_m = t > 1 ? &cam[t - 2] : nullptr;
+        struct Saved { float pt_rev = 0, ptm_rev = 0, qs_rev = 0, qsm_rev = 0; bool pt_delta = false, qs_delta = false; } sv;
+        sv.pt_rev = pt->pdf_rev;
+        sv.pt_delta = pt->delta;
+        if (pt_m) sv.ptm_rev = pt_m->pdf_rev;
+        if (qs) { sv.qs_rev = qs->pdf_rev; sv.qs_delta = qs->delta; }
+        if (qs_m) sv.qsm_rev = qs_m->pdf_rev;
+
+        pt->pdf_rev = s > 0 ? pdf_to(scene, *qs, qs_m, *pt) : light_origin_pdf(scene, *pt, *pt_m);
+        if (pt_m)
+            pt_m->pdf_rev = s > 0 ? pdf_to(scene, *pt, qs, *pt_m)
+                                  : to_area(pt->emitter->pdf_emission_w(pt->it.n, normalize(pt_m->it.p - pt->it.p)),
+                                            pt->it.p, *pt_m);
+        if (qs) qs->pdf_rev = pdf_to(scene, *pt, pt_m, *qs);
+        if (qs_m) qs_m->pdf_rev = pdf_to(scene, *qs, pt, *qs_m);
+        pt->delta = false;  // the ends of a connection (or the emitter an s = 0 path ends on)
+        if (qs) qs->delta = false;
+
+        float sum = 0.f, ri = 1.f;
+        for (int i = t - 1; i > 0; --i) {  // strategies with fewer camera vertices
+            ri *= remap0(cam[i].pdf_rev) / remap0(cam[i].pdf_fwd);
+            if (!cam[i].delta && !cam[i - 1].delta) sum += heuristic(ri);
+        }
+        ri = 1.f;
+        for (int i = s - 1; i >= 0; --i) {  // strategies with fewer light vertices
+            ri *= remap0(light[i].pdf_rev) / remap0(light[i].pdf_fwd);
+            bool delta_before = i > 0 ? light[i - 1].delta : light[0].emitter->is_delta();
+            if (!light[i].delta && !delta_before) sum += heuristic(ri);
+        }
+
+        pt->pdf_rev = sv.pt_rev;
+        pt->delta = sv.pt_delta;
+        if (pt_m) pt_m->pdf_rev = sv.ptm_rev;
+        if (qs) { qs->pdf_rev = sv.qs_rev; qs->delta = sv.qs_delta; }
+        if (qs_m) qs_m->pdf_rev = sv.qsm_rev;
+        return 1.f / (1.f + sum);
+    }
+
+    // The contribution of strategy (s, t) before its MIS weight `w`, its
+    // effect class and, for t = 1, its film position. Veach 1997, eq. 10.8:
+    // C = alpha^L_s c_{s,t} alpha^E_t.
+    Color connect(const Scene& scene, Sampler& sampler, const EmissionSample& es, int s, int t, Vec2& film,
+                  int& effect, float& w, bool hidden, ThreadStats& stats) const {
+        std::vector<PathVertex>& cam = cam_ref();
+        std::vector<PathVertex>& light = light_ref();
+        BsdfContext ctx_r, ctx_i{TransportMode::Importance};
+        Color L(0.f);
+        w = 0.f;
+        // Random numbers for s = 1 are drawn whatever happens, so the stream
+        // of the later strategies does not depend on the mask.
+        float u_pick = 0.f, u_extra = 0.f;
+        Vec2 u_l;
+        if (s == 1) {
+            u_pick = sampler.next_1d();
+            u_l = sampler.next_2d();
+            u_extra = sampler.next_1d();
+        }
+        effect = classify(s, t);
+        if (hidden || !mask[effect]) return L;
+
+        if (s == 0) {
+            // The camera subpath found an emitter.
+            const PathVertex& z = cam[t - 1];
+            if (z.type != VType::Surface || !z.emitter) return L;
+            L = z.beta * z.emitter->eval(z.it, z.it.wi);
+            if (is_black(L)) return L;
+        } else if (t == 1) {
+            // A light vertex connected to the camera (light tracing's splat).
+            PathVertex& y = light[s - 1];
+            if (!y.connectible()) return L;
+            ImportanceSample is = scene.sensor->sample_direction(y.it.p);
+            if (!is.valid) return L;
+            Color f = y.bsdf->eval(ctx_i, y.it.to_local(y.it.wi), y.it.to_local(is.d)) *
+                      shading_correction(y.it, y.it.wi, is.d);
+            if (is_black(f)) return L;
+            DirectSample ds;
+            ds.p = is.p;
+            ds.d = is.d;
+            ds.dist = is.dist;
+            ++stats.shadow_rays;
+            if (!scene.visible(y.it, ds)) return L;
+            L = y.beta * f * is.weight;
+            film = is.film;
+            PathVertex z0;
+            z0.type = VType::Camera;
+            z0.it.p = is.p;
+            z0.pdf_fwd = 1.f;
+            PathVertex saved = cam[0];
+            cam[0] = z0;
+            w = mis_weight(scene, s, t);
+            cam[0] = saved;
+            return L;
+        } else if (s == 1) {
+            // Next event estimation with a fresh emitter sample.
+            PathVertex& z = cam[t - 1];
+            if (!z.connectible() || z.type != VType::Surface) return L;
+            size_t n = scene.emitters.size();
+            if (n == 0) return L;
+            const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n)), n - 1)];
+            DirectSample ds = e.sample_direct(z.it.p, u_l, u_extra);
+            if (!(ds.pdf_w > 0.f) || is_black(ds.radiance)) return L;
+            Color f = z.bsdf->eval(ctx_r, z.it.to_local(z.it.wi), z.it.to_local(ds.d));
+            if (is_black(f)) return L;
+            ++stats.shadow_rays;
+            if (!scene.visible(z.it, ds)) return L;
+            float pick = emitter_pick_prob(scene);
+            L = z.beta * f * ds.radiance / (ds.pdf_w * pick);
+            PathVertex y0;
+            y0.type = VType::Light;
+            y0.emitter = &e;
+            y0.it.p = ds.p;
+            y0.it.n = e.is_delta() ? Vec3(0.f) : ds.n;
+            float pdf_a = 1.f;
+            if (!e.is_delta()) pdf_a = ds.pdf_w * std::fabs(dot(ds.n, ds.d)) / (ds.dist * ds.dist);
+            y0.pdf_fwd = pick * pdf_a;
+            bool had = !light.empty();
+            PathVertex saved;
+            if (had) saved = light[0];
+            else light.push_back(y0);
+            light[0] = y0;
+            w = mis_weight(scene, s, t);
+            if (had) light[0] = saved;
+            else light.pop_back();
+            return L;
+        } else {
+            // Connect y_{s-1} and z_{t-1}: f_L f_E / d^2, the cosines inside the evals.
+            PathVertex& y = light[s - 1];
+            PathVertex& z = cam[t - 1];
+            if (!y.connectible() || !z.connectible()) return L;
+            Vec3 d = y.it.p - z.it.p;
+            float d2 = length_sq(d);
+            if (!(d2 > 0.f)) return L;
+            float dist = std::sqrt(d2);
+            d = d / dist;
+            Color fz = z.bsdf->eval(ctx_r, z.it.to_local(z.it.wi), z.it.to_local(d));
+            if (is_black(fz)) return L;
+            Color fy = y.bsdf->eval(ctx_i, y.it.to_local(y.it.wi), y.it.to_local(-d)) *
+                       shading_correction(y.it, y.it.wi, -d);
+            if (is_black(fy)) return L;
+            DirectSample ds;
+            ds.p = y.it.p;
+            ds.n = y.it.n;
+            ds.eps = y.it.eps;
+            ds.d = d;
+            ds.dist = dist;
+            ++stats.shadow_rays;
+            if (!scene.visible(z.it, ds)) return L;
+            L = z.beta * fz * fy * y.beta / d2;
+        }
+        w = mis_weight(scene, s, t);
+        return L;
+    }
+
+    // Effect class of the full vertex string E z1 .. z_{t-1} y_{s-1} .. y1 L
+    // (DESIGN sec. 3): connection ends scatter through smooth lobes (D),
+    // walk vertices by the lobe they sampled; null boundaries are no vertices.
+    int classify(int s, int t) const {
+        const std::vector<PathVertex>& cam = cam_ref();
+        const std::vector<PathVertex>& light = light_ref();
+        PathClass pc;
+        int last_cam = s == 0 ? t - 2 : t - 1;  // for s = 0, z_{t-1} is the emitter
+        for (int i = 1; i <= last_cam; ++i)
+            if (!cam[i].null_surface()) pc.push(i == t - 1 ? false : cam[i].delta);
+        for (int i = s - 1; i >= 1; --i)
+            if (!light[i].null_surface()) pc.push(i == s - 1 ? false : light[i].delta);
+        return pc.classify();
+    }
+
+    static std::vector<PathVertex>& cam_ref() { return tl_paths().first; }
+    static std::vector<PathVertex>& light_ref() { return tl_paths().second; }
+    static std::pair<std::vector<PathVertex>, std::vector<PathVertex>>& tl_paths() {
+        thread_local std::pair<std::vector<PathVertex>, std::vector<PathVertex>> p;
+        return p;
+    }
+
+    int max_depth_, rr_depth_;
+    bool hide_;
+    float beta_;
+    Mis mis_ = Mis::Power;
+    mutable std::unique_ptr<FilterSampler> filter_;  // built by check_scene, before any path
+};
+
+std::unique_ptr<Integrator> make_bdpt_integrator(const IntegratorDesc& d) { return std::make_unique<BdptIntegrator>(d); }
+
+void bdpt_mis_check(const Scene& scene, const IntegratorDesc& d, uint64_t seed, int n, std::vector<float>& fast,
+                    std::vector<float>& brute, std::vector<int>& strategy) {
+    BdptIntegrator(d).mis_check(scene, seed, n, fast, brute, strategy);
+}
+
+}  // namespace rm

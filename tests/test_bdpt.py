@@ -1,0 +1,299 @@
+"""`bdpt` (bidirectional path tracing, Veach 1997 ch. 10) against `path`, against
+analytic images, and for its MIS weights.
+
+Comparisons are two-sided z-tests (radiometer.analysis.stats.z_test) at
+ALPHA = 0.01 on 4 x 4 block means, as in tests/test_ptracer.py (see there for
+why blocks). bdpt runs through the light-path driver: its camera samples land
+in their own pixel (filter importance sampling) and its t = 1 splats are
+filtered; with the box filter used here pixels correlate only through splats
+on pixel borders. Its variance is a batch-means estimate (light_render.cpp).
+
+MIS: each strategy's weight is a partition of unity only if the weights are
+right, so three heuristics (power, balance, uniform) rendering the same
+expectation as `path` checks the weights' sum (a wrong sum biases them
+differently), and the closed-sphere furnace checks it against the exact
+answer at several depths.
+"""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import radiometer as rm
+from radiometer.analysis.stats import z_test
+from radiometer.reference_scenes.mirror_caustic import analytic as mirror
+
+from conftest import furnace_dict, furnace_exact
+
+ALPHA = 0.01
+BLOCK = 4
+ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
+CORNELL = ROOT / "cornell_box" / "scene.xml"
+
+
+def block_mean(img, k=BLOCK):
+    h, w, c = img.shape
+    return np.asarray(img, np.float64).reshape(h // k, k, w // k, k, c).mean(axis=(1, 3))
+
+
+def block_var(var, k=BLOCK):
+    h, w, c = var.shape
+    return np.asarray(var, np.float64).reshape(h // k, k, w // k, k, c).sum(axis=(1, 3)) / k ** 4
+
+
+def blocked_z(a, var_a, b, var_b=None, alpha=ALPHA):
+    vb = None if var_b is None else block_var(var_b)
+    r = z_test(block_mean(a), block_var(var_a), block_mean(b), vb, alpha=alpha)
+    return r.passed, r.summary() + "\n" + "\n".join(getattr(r, "channel_lines", []))
+
+
+def assert_clean(res, where=""):
+    for name, a in [("image", res.image), ("variance", res.variance)] + list(res.effects.items()):
+        a = np.asarray(a)
+        assert np.all(np.isfinite(a)), f"{where}: {name} has NaN/Inf"
+        assert not np.any(a < 0), f"{where}: {name} has negative values"
+    assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, where
+
+
+def lookat(origin, target, up=(0, 1, 0)):
+    o, t, u = (np.asarray(v, float) for v in (origin, target, up))
+    d = (t - o) / np.linalg.norm(t - o)
+    left = np.cross(u, d)
+    left /= np.linalg.norm(left)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, np.cross(d, left), d, o
+    return m
+
+
+def _rgb(v):
+    return {"type": "rgb", "value": list(v) if np.ndim(v) else [v] * 3}
+
+
+def small_scene(light, res=32, extra=None):
+    """Floor, back wall and a diffuse cube under `light`; `extra` adds shapes."""
+    def rect(m, rho):
+        return {"type": "rectangle", "to_world": m, "bsdf": {"type": "diffuse", "reflectance": _rgb(rho)}}
+    wall = np.array([[2.0, 0, 0, 0], [0, 0, 1.0, 2.0], [0, -2.0, 0, 2.0], [0, 0, 0, 1.0]])
+    d = {"type": "scene",
+         "floor": rect(np.diag([2.0, 2.0, 1.0, 1.0]), [0.7, 0.6, 0.5]),
+         "wall": rect(wall, [0.5, 0.5, 0.5]),
+         "cube": {"type": "cube", "to_world": np.array([[0.3, 0, 0, -0.3], [0, 0.3, 0, 0.2], [0, 0, 0.3, 0.3],
+                                                         [0, 0, 0, 1.0]]),
+                  "bsdf": {"type": "diffuse", "reflectance": _rgb([0.3, 0.5, 0.7])}},
+         "light": light,
+         "sensor": {"type": "perspective", "fov": 50.0, "to_world": lookat([0.0, -3.2, 2.4], [0, 0, 0.3], (0, 0, 1)),
+                    "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}}}
+    d.update(extra or {})
+    return rm.load_dict(d)
+
+
+def compare_with_path(scene, spp_path, spp_bd, seed=1, where="", effects=None, **integ):
+    common = {k: v for k, v in integ.items() if k in ("max_depth", "rr_depth", "hide_emitters")}
+    a = rm.render(scene, integrator={"type": "path", **common}, spp=spp_path, seed=seed, effects=effects)
+    b = rm.render(scene, integrator={"type": "bdpt", **integ}, spp=spp_bd, seed=seed + 1000, effects=effects)
+    assert_clean(b, where)
+    assert b.image.mean() > 0, f"{where}: bdpt image is black"
+    passed, msg = blocked_z(b.image, b.variance, a.image, a.variance)
+    assert passed, f"{where}: bdpt / path = {b.image.sum() / a.image.sum():.5f}\n{msg}"
+    return a, b
+
+
+# ------------------------------------------------------------------ agreement with path
+
+@pytest.fixture(scope="module")
+def cornell_pair():
+    scene = rm.load_file(CORNELL, res=32, rfilter="box")
+    return scene, compare_with_path(scene, 2048, 2048, where="cornell box, max_depth 8", max_depth=8)
+
+
+def test_cornell_bdpt_matches_path(cornell_pair):
+    """Cornell box (32 x 32, box filter, max_depth 8): bdpt == path at ALPHA, per effect class to 2 %."""
+    scene, (a, b) = cornell_pair
+    for k in ("emission", "direct", "indirect"):
+        ea, eb = a.effects[k].mean(), b.effects[k].mean()
+        assert eb == pytest.approx(ea, rel=0.02), f"effect {k}: bdpt {eb:.5f} vs path {ea:.5f}"
+    for k in ("caustic", "specular", "volume", "subsurface"):
+        assert not np.any(b.effects[k]), f"effect {k} must be empty in the Cornell box"
+
+
+def test_cornell_power_rejects_one_percent(cornell_pair):
+    scene, (a, b) = cornell_pair
+    assert not blocked_z(b.image * 1.01, b.variance, a.image, a.variance)[0], "a 1 % bias went undetected"
+    assert not blocked_z(b.image * 0.99, b.variance, a.image, a.variance)[0], "a -1 % bias went undetected"
+
+
+def test_effects_sum_to_image(cornell_pair):
+    scene, (a, b) = cornell_pair
+    np.testing.assert_allclose(sum(b.effects.values()), b.image, rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.parametrize("mis", [{"mis": "power"}, {"mis": "balance"}, {"mis": "uniform"},
+                                 {"mis": "power", "beta": 3.0}, {"mis": "power", "beta": 0.5}],
+                         ids=lambda m: "-".join(str(v) for v in m.values()))
+def test_cornell_max_depth_3_every_heuristic_matches_path(mis):
+    """max_depth 3: every weighting (a partition of unity only if the ratio
+    recursion is right) gives path's expectation."""
+    scene = rm.load_file(CORNELL, res=32, rfilter="box")
+    compare_with_path(scene, 512, 256, seed=11, where=f"cornell box, max_depth 3, {mis}", max_depth=3, **mis)
+
+
+@pytest.mark.parametrize("max_depth", [1, 2, 3, 5, -1])
+def test_furnace_exact(max_depth):
+    """Closed diffuse emitting sphere seen from inside: L = le sum_{k<max_depth} rho^k exactly."""
+    le, rho = 0.5, 0.5
+    scene = rm.load_dict(furnace_dict(le, rho, res=8, max_depth=max_depth))
+    b = rm.render(scene, integrator={"type": "bdpt", "max_depth": max_depth}, spp=128, seed=3)
+    assert_clean(b, "furnace")
+    exact = furnace_exact(le, rho, max_depth)
+    m = b.image.astype(np.float64).mean()
+    sd = np.sqrt(b.variance.astype(np.float64).sum()) / b.variance.size
+    assert abs(m - exact) <= 4 * sd + 1e-6, f"max_depth {max_depth}: {m:.6f} vs exact {exact:.6f} (sd {sd:.2e})"
+
+
+AREA = {"type": "rectangle", "flip_normals": True,
+        "to_world": np.array([[0.3, 0, 0, 0.6], [0, 0.3, 0, -0.5], [0, 0, -1.0, 1.5], [0, 0, 0, 1.0]]),
+        "emitter": {"type": "area", "radiance": _rgb(8.0)}}
+MIRROR_BALL = {"ball": {"type": "sphere", "center": [0.5, -0.2, 0.45], "radius": 0.4, "bsdf": {"type": "conductor"}}}
+GLOSSY = {"glass": {"type": "sphere", "center": [0.4, -0.3, 0.45], "radius": 0.4,
+                    "bsdf": {"type": "roughdielectric", "alpha": 0.2}},
+          "plastic": {"type": "sphere", "center": [-0.8, -0.6, 0.3], "radius": 0.3, "bsdf": {"type": "plastic"}}}
+# Caustics (L S+ D E) are left out of the comparisons with `path`: its
+# estimate of them is heavy-tailed (BSDF sampling must hit the light after
+# the specular bounces), so its reported variance understates its error;
+# with delta lights it cannot produce them at all. bdpt's caustics are
+# checked against the analytic mirror caustic and the furnace instead.
+NO_CAUSTIC = ["emission", "direct", "indirect", "specular"]
+
+
+def test_area_light_mirror_ball_matches_path():
+    """A mirror ball in view: the specular class (L .. S E) comes from
+    camera-side strategies only (s = 0, s = 1 and connections behind the mirror)."""
+    a, b = compare_with_path(small_scene(AREA, extra=MIRROR_BALL), 512, 512, where="area light + mirror ball",
+                             effects=NO_CAUSTIC)
+    assert b.effects["specular"].mean() == pytest.approx(a.effects["specular"].mean(), rel=0.03)
+
+
+def test_area_light_rough_glass_plastic_match_path():
+    compare_with_path(small_scene(AREA, extra=GLOSSY), 512, 512, where="area light + rough glass + plastic",
+                      effects=NO_CAUSTIC)
+
+
+def test_point_light_mirror_ball_matches_path():
+    """Delta position (no s = 0 strategy); bdpt also finds the caustics that `path` cannot."""
+    light = {"type": "point", "position": [0.6, -0.5, 1.5], "intensity": _rgb([3.0, 2.5, 2.0])}
+    scene = small_scene(light, extra=MIRROR_BALL)
+    compare_with_path(scene, 512, 512, where="point light + mirror ball", effects=NO_CAUSTIC)
+    b = rm.render(scene, integrator="bdpt", spp=16, seed=5)
+    assert b.effects["caustic"].mean() > 0
+
+
+def test_spot_light_plastic_matches_path():
+    to_world = lookat([0.5, -0.8, 1.8], [-0.2, 0.2, 0.0])
+    light = {"type": "spot", "to_world": to_world, "cutoff_angle": 35.0, "beam_width": 20.0,
+             "intensity": _rgb([6.0, 5.0, 4.0])}
+    # Rough glass is left out here: a point light focused through it is a
+    # glossy caustic, heavy-tailed for path, ptracer and bdpt alike (at
+    # max_depth 4 over 8 seeds: 0.00326 +- 0.00022, 0.00382 +- 0.00016,
+    # 0.00364 +- 0.00008 in the indirect class, consistent but not z-testable).
+    compare_with_path(small_scene(light, extra={"plastic": GLOSSY["plastic"]}), 512, 512,
+                      where="spot light + plastic", effects=NO_CAUSTIC)
+
+
+def test_mirror_caustic_matches_analytic():
+    """Orthographic camera (delta direction), mirror caustic L S D E and direct light, exact by the image method."""
+    res = 32
+    b = rm.render(rm.load_file(mirror.XML, res=res), integrator={"type": "bdpt", "max_depth": 3}, spp=256, seed=3)
+    assert_clean(b, "mirror caustic")
+    ref = mirror.effects(res=res)
+    for k in ("direct", "caustic"):
+        assert b.effects[k].sum() == pytest.approx(ref[k].sum(), rel=0.03), k
+    total = ref["direct"] + ref["caustic"]
+    passed, msg = blocked_z(b.image, b.variance, total)
+    assert passed, f"mirror caustic: bdpt / exact = {b.image.sum() / total.sum():.5f}\n{msg}"
+    assert not blocked_z(b.image, b.variance, total * 1.01)[0], "mirror caustic: a 1 % bias went undetected"
+    for k in ("emission", "indirect", "specular"):
+        assert not np.any(b.effects[k]), k
+
+
+def test_hide_emitters():
+    scene = rm.load_file(CORNELL, res=16, rfilter="box")
+    b = rm.render(scene, integrator={"type": "bdpt", "hide_emitters": True}, spp=32, seed=2)
+    assert not np.any(b.effects["emission"])
+    assert b.effects["direct"].mean() > 0
+
+
+# ------------------------------------------------------------------ MIS weights, brute force
+
+def _mis_check(scene, n=3000, **integ):
+    from radiometer import _core
+    from radiometer.render import _core_integrator, _integrator_desc
+    spec = _integrator_desc({"type": "bdpt", **integ}, scene.desc.integrator)
+    return _core.bdpt_mis_check(scene.core(), _core_integrator(spec), 7, n)
+
+
+@pytest.mark.parametrize("mis", [{}, {"mis": "balance"}, {"mis": "uniform"}, {"beta": 3.0}],
+                         ids=lambda m: "-".join(str(v) for v in m.values()) or "power")
+@pytest.mark.parametrize("which", ["cornell", "mirror_ball_point", "glossy_area", "mirror_caustic_ortho"])
+def test_mis_weights_match_brute_force(which, mis):
+    """For every strategy (s, t) of random subpath pairs, bdpt's linear-time
+    weight (ratio recursion) equals the weight from every strategy's full path
+    density computed from scratch as a product over the vertices. The brute
+    force weights of one path sum to 1 by construction, so this checks that
+    bdpt's weights of one path sum to 1, delta vertices (mirror, plastic's
+    coat, an orthographic camera, point lights) included."""
+    if which == "cornell":
+        scene = rm.load_file(CORNELL, res=8, rfilter="box")
+    elif which == "mirror_ball_point":
+        scene = small_scene({"type": "point", "position": [0.6, -0.5, 1.5], "intensity": _rgb(3.0)}, res=8,
+                            extra=MIRROR_BALL)
+    elif which == "glossy_area":
+        scene = small_scene(AREA, res=8, extra=GLOSSY)
+    else:
+        scene = rm.load_file(mirror.XML, res=8)
+    fast, brute, strategy = _mis_check(scene, **mis)
+    assert len(fast) > 1000 and len(np.unique(strategy)) > 10
+    assert np.all(np.isfinite(fast)) and np.all((fast >= 0) & (fast <= 1 + 1e-6))
+    np.testing.assert_allclose(fast, brute, rtol=2e-4, atol=1e-6, err_msg=which)
+
+
+# ------------------------------------------------------------------ determinism, errors, stress
+
+def test_same_seed_same_bytes_whatever_threads():
+    scene = rm.load_file(CORNELL, res=16)
+    r = [rm.render(scene, integrator="bdpt", spp=8, seed=9, threads=t) for t in (1, 2, 3)]
+    for x in r[1:]:
+        assert x.image.tobytes() == r[0].image.tobytes()
+        assert x.variance.tobytes() == r[0].variance.tobytes()
+        for k in x.effects:
+            assert x.effects[k].tobytes() == r[0].effects[k].tobytes()
+    other = rm.render(scene, integrator="bdpt", spp=8, seed=10, threads=2)
+    assert other.image.tobytes() != r[0].image.tobytes()
+
+
+def test_bad_parameters():
+    scene = rm.load_file(CORNELL, res=8)
+    with pytest.raises(rm.SceneError, match="mis"):
+        rm.render(scene, integrator={"type": "bdpt", "mis": "max"}, spp=1)
+    with pytest.raises(rm.SceneError, match="beta"):
+        rm.render(scene, integrator={"type": "bdpt", "beta": 0.0}, spp=1)
+    with pytest.raises(rm.SceneError, match="max_depth"):
+        rm.render(scene, integrator={"type": "bdpt", "max_depth": 0}, spp=1)
+    with pytest.raises(rm.SceneError, match="unknown parameter"):
+        rm.render(scene, integrator={"type": "bdpt", "emitter_samples": 2}, spp=1)
+
+
+STRESS = ROOT / "stress"
+
+
+@pytest.mark.parametrize("path", sorted(p for p in STRESS.glob("*.xml") if not p.stem.endswith("_ref")),
+                         ids=lambda p: p.stem)
+def test_stress_scenes_finite_nonnegative(path):
+    """No NaN, Inf or negative value anywhere; scenes with emitters at
+    infinity (not supported yet) are refused with a message naming them."""
+    scene = rm.load_file(path)
+    try:
+        res = rm.render(scene, integrator="bdpt", spp=16, seed=0)
+    except ValueError as e:
+        assert "at infinity" in str(e), str(e)
+        return
+    assert_clean(res, path.stem)

@@ -1,0 +1,261 @@
+"""The canonical scenes of issue 3 against their committed Mitsuba 3
+references (reference_scenes/<name>/reference.exr, 64 x 64, mean of 32
+independent llvm_ad_rgb runs and the variance of that mean; budgets in
+reference_scenes/make_reference.py, what each scene isolates in its card.md).
+
+Surface scenes (glass_sphere_caustic, veach_mis, ajar_door): our `path` at
+a CI budget (about 2-4 s each on 2 shared cores) against the reference, with the
+blocked z-test of tests/refcompare.py (4 x 4 block means, each channel at
+alpha / 3, alpha = 0.01 in all; see test_cornell_reference.py for why blocks),
+and a power check: the reference scaled by 1.01 (ajar_door: its effect region
+scaled by 1.05, see below) must be rejected.
+
+One addition to the Cornell box's test, measured on these scenes: the
+variance of each of our blocks is the larger of our render's own estimate
+and the per-sample variance the reference measured, scaled to our sample
+count (`reference_variance_floor`). These scenes are built around rare
+paths (a caustic of a small light seen through or reflected by a glass
+sphere, light through a door gap), which a render at CI budget mostly
+misses, and when it misses them its own variance estimate misses them too:
+the estimate is low exactly where its variance is underestimated. With our
+own variance only, 20 of 20 glass_sphere_caustic renders at 1024 spp
+(independent seeds) failed against Mitsuba (mean z -60.9, 125 of 256
+blocks rejected per channel), and 4 of 4 failed the same way against our
+own 16384 spp render (mean z about -11), while the mean of 8 renders agreed
+with it: the failure is the estimate of the variance, not a disagreement.
+With the floor (never smaller than our own estimate, so a block can only be
+judged more leniently where the reference saw more spread than our render
+did), 20 of 20 passed and 20 of 20 with a 1 % bias were rejected; numbers
+for each scene, including the floor's measured false-alarm rates, in the
+scene's card.md.
+
+Media and subsurface scenes (homogeneous_slab, fog_room, vandehulst_slab,
+translucent_slab, translucent_object, volumetric_caustic): our loader
+rejects <medium> until issue 6, so their comparisons are skipped (never
+removed); their references are checked for form here, and the two with an
+independent answer (Beer-Lambert; the slab's diffuse transmittance) are
+checked against it.
+"""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import radiometer as rm
+from radiometer.analysis.stats import z_test
+
+from refcompare import blocked_z_test, reference_variance_floor, region_mask, scale_region
+
+ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
+RES = 64
+ALPHA = 0.01
+
+# Per surface scene: our CI budget, the scene's max_depth (as its reference
+# was made), and the power check. Regions are card.md's pixel boxes
+# (x0, y0, x1, y1), half-open, at 64 x 64.
+AJAR_DOORWAY = (28, 15, 40, 41)  # the view through the doorway into the lit room
+AJAR_BEAM = (47, 7, 64, 42)  # the beam through the gap on the near room's right wall
+SURFACE = {
+    "glass_sphere_caustic": {"spp": 1024, "max_depth": 12, "power": None},
+    "veach_mis": {"spp": 512, "max_depth": 8, "power": None},
+    # At 512 spp a 1 % overall bias is about 1.4 sigma of the mean z here
+    # (measured: 0 of 10 renders rejected), so the check scales the region
+    # the scene is about, the near room lit only through the gap (every
+    # pixel outside the doorway and the beam), by 5 %.
+    "ajar_door": {"spp": 512, "max_depth": 10, "power": ("near room, indirect only", 1.05)},
+}
+MEDIA = ["homogeneous_slab", "fog_room", "vandehulst_slab", "translucent_slab", "translucent_object",
+         "volumetric_caustic"]
+MEDIA_SKIP = "media not supported by our estimators yet (issue 6)"
+
+
+def _reference(name, shape=(RES, RES, 3), min_spp=16384):
+    path = ROOT / name / "reference.exr"
+    assert path.exists(), (f"{path} is missing: regenerate it with "
+                           f"python -m radiometer.reference_scenes.make_reference {name}")
+    ref = rm.read_exr(path)
+    assert ref.variance is not None, f"{path} has no variance layer"
+    assert ref.image.shape == shape, ref.image.shape
+    assert np.all(np.isfinite(ref.image)) and np.all(ref.variance >= 0), path
+    assert int(ref.metadata.get("runs", 0)) >= 16, ref.metadata
+    assert int(ref.metadata.get("total_spp", 0)) >= min_spp, ref.metadata
+    return ref
+
+
+def _effect_mask(name):
+    if name == "ajar_door":
+        return ~region_mask((RES, RES), [AJAR_DOORWAY, AJAR_BEAM])
+    raise KeyError(name)
+
+
+_ours = {}
+
+
+def _render_ours(name):
+    """Our `path` on the scene, once per session (the comparison and the
+    power check use the same render)."""
+    if name not in _ours:
+        cfg = SURFACE[name]
+        scene = rm.load_file(ROOT / name / "scene.xml", res=RES)
+        _ours[name] = rm.render(scene, integrator={"type": "path", "max_depth": cfg["max_depth"]},
+                                spp=cfg["spp"], seed=1)
+    return _ours[name]
+
+
+def _compare(res, ref_image, ref_variance, total_spp):
+    floor = reference_variance_floor(ref_variance, total_spp, res.spp)
+    return blocked_z_test(res.image, res.variance, ref_image, ref_variance, b_splatted=False, alpha=ALPHA,
+                          var_a_floor=floor)
+
+
+@pytest.mark.parametrize("name", sorted(SURFACE))
+def test_path_matches_mitsuba_reference(name):
+    ref = _reference(name)
+    res = _render_ours(name)
+    assert res.spp == SURFACE[name]["spp"]
+    assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, res.stats
+    passed, msg = _compare(res, ref.image, ref.variance, int(ref.metadata["total_spp"]))
+    assert passed, f"{name}: ours ({res.spp} spp) differs from Mitsuba's reference:\n{msg}"
+
+
+@pytest.mark.parametrize("name", sorted(SURFACE))
+def test_power_scaled_reference_is_rejected(name):
+    """The reference with a bias the test must see (1 % overall, or 5 % on
+    the scene's effect region) must fail: the test can fail."""
+    ref = _reference(name)
+    res = _render_ours(name)
+    power = SURFACE[name]["power"]
+    if power is None:
+        what, image, var = "1 % overall", ref.image * 1.01, ref.variance * 1.01 ** 2
+    else:
+        region, s = power
+        image, var = scale_region(ref.image, ref.variance, _effect_mask(name), s)
+        what = f"{(s - 1) * 100:.0f} % on the {region} region"
+    passed, msg = _compare(res, image, var, int(ref.metadata["total_spp"]))
+    assert not passed, f"{name}: a bias of {what} went undetected:\n{msg}"
+
+
+# -- media and subsurface scenes ---------------------------------------------
+
+
+@pytest.mark.parametrize("name", MEDIA)
+def test_media_reference_is_well_formed(name):
+    shape = (1, 1, 3) if name == "vandehulst_slab" else (RES, RES, 3)
+    ref = _reference(name, shape=shape, min_spp=8192)
+    assert float(ref.image.max()) > 0, f"{name}: the reference is black"
+
+
+@pytest.mark.skip(reason=MEDIA_SKIP)
+@pytest.mark.parametrize("name", MEDIA)
+def test_volpath_matches_mitsuba_reference(name):
+    """Once media load (issue 6): our volpath against the reference, as the
+    surface scenes above (power check: 1 % overall)."""
+    shape = (1, 1, 3) if name == "vandehulst_slab" else (RES, RES, 3)
+    ref = _reference(name, shape=shape, min_spp=8192)
+    total = int(ref.metadata["total_spp"])
+    params = {} if name == "vandehulst_slab" else {"res": RES}
+    scene = rm.load_file(ROOT / name / "scene.xml", **params)
+    res = rm.render(scene, integrator="volpath", spp=4096 if name == "vandehulst_slab" else 512, seed=1)
+    if name == "vandehulst_slab":  # one pixel: no blocks
+        floor = reference_variance_floor(ref.variance, total, res.spp)
+        r = z_test(res.image, np.maximum(res.variance, floor), ref.image, ref.variance, alpha=ALPHA)
+        assert r.passed, r.summary()
+        return
+    passed, msg = _compare(res, ref.image, ref.variance, total)
+    assert passed, f"{name}: ours differs from Mitsuba's reference:\n{msg}"
+    passed, msg = _compare(res, ref.image * 1.01, ref.variance * 1.01 ** 2, total)
+    assert not passed, f"{name}: a 1 % bias went undetected:\n{msg}"
+
+
+# Fully covered pixels of each slab (card.md), and its optical thickness.
+SLABS = {"slab_0.25": ((2, 10, 14, 54), 0.25), "slab_0.5": ((18, 10, 30, 54), 0.5),
+         "slab_1": ((34, 10, 46, 54), 1.0), "slab_2": ((50, 10, 62, 54), 2.0)}
+
+
+@pytest.mark.parametrize("slab", sorted(SLABS))
+def test_homogeneous_slab_reference_is_beer_lambert(slab):
+    """The Mitsuba reference itself against the exact answer exp(-tau)
+    (an absorber seen along its normal: no scattering, no boundary effect),
+    pixel by pixel over the slab's fully covered pixels (analytic: var_b = 0)."""
+    ref = _reference("homogeneous_slab", min_spp=8192)
+    box, tau = SLABS[slab]
+    m = region_mask((RES, RES), [box])
+    exact = np.full(ref.image.shape, math.exp(-tau))
+    r = z_test(ref.image, ref.variance, exact, None, alpha=ALPHA, mask=m[..., None])
+    assert r.passed, f"{slab}: Mitsuba's reference is not exp(-{tau}) = {math.exp(-tau):.5f}:\n{r.summary()}"
+    # And the test would see a 1 % error at this budget.
+    r = z_test(ref.image, ref.variance, exact * 1.01, None, alpha=ALPHA, mask=m[..., None])
+    assert not r.passed, f"{slab}: a 1 % error went undetected:\n{r.summary()}"
+
+
+# The slab's diffuse transmittance (tau 1, albedo 0.9, isotropic, normal
+# incidence, index-matched), from the independent analog Monte Carlo in
+# reference_scenes/vandehulst_slab/independent.py (4e7 photons; card.md).
+VDH_TD, VDH_TD_SE = 0.22375, 0.00005
+
+
+def test_vandehulst_reference_matches_independent_transport():
+    ref = _reference("vandehulst_slab", shape=(1, 1, 3), min_spp=8192)
+    v = ref.image[0, 0].astype(np.float64)
+    se = np.sqrt(ref.variance[0, 0].astype(np.float64) + VDH_TD_SE ** 2)
+    z = (v - VDH_TD) / se
+    from scipy.stats import norm
+
+    p = 2 * norm.sf(np.abs(z))
+    assert np.all(p >= ALPHA / 3), (f"Mitsuba's diffuse transmittance {v} differs from the independent "
+                                    f"{VDH_TD} +- {VDH_TD_SE}: z {z}")
+
+
+# -- the veach_mis finding: Mitsuba's small analytic sphere lights ------------
+
+SMALL_SPHERE_XML = """<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+    <sensor type="orthographic">
+        <transform name="to_world"><lookat origin="5, 5, 0" target="5, 0, 0" up="0, 0, -1"/></transform>
+        <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/>
+            <rfilter type="box"/></film>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="10"/><rotate x="1" angle="-90"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
+    </shape>
+    <shape type="sphere">
+        <point name="center" x="0" y="1" z="0"/>
+        <float name="radius" value="0.01"/>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0, 0, 0"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="10000, 10000, 10000"/></emitter>
+    </shape>
+</scene>
+"""
+
+
+def _small_sphere_exact(res=32, ss=16, r=0.01, le=1e4, h=1.0, rho=0.5):
+    """Pixel means (box filter) of the floor's radiance under a sphere of
+    radius r and radiance le at height h, fully above the horizon: E =
+    pi le sin^2(alpha) cos(theta) with sin(alpha) = r / d, so L = rho le
+    r^2 h / d^3 (exact). Pixels cover world x in [4, 6], z in [-1, 1];
+    16 x 16 midpoint samples per pixel (error < 1e-7 relative)."""
+    n = res * ss
+    c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    x, z = 5.0 + c[None, :], c[:, None]
+    d2 = x * x + z * z + h * h
+    lo = rho * le * r * r * h / d2 ** 1.5
+    return np.repeat(lo.reshape(res, ss, res, ss).mean(axis=(1, 3))[..., None], 3, axis=-1)
+
+
+def test_small_sphere_light_matches_analytic(tmp_path):
+    """Ours against the exact irradiance of a small sphere light (radius 0.01
+    seen from ~5 units, sin^2 alpha ~ 4e-6), the geometry of veach_mis's
+    smallest light. Mitsuba 3.9.1 (llvm_ad_rgb, 8 x 4096 spp) renders this
+    0.74 % too bright (z +2740; 0.13 % at half the distance, 0.04 % for
+    radius 0.04): its cone sampling of the sphere loses 1 - cos(theta_max)
+    to float32 rounding. The test must reject that error at our budget."""
+    path = tmp_path / "small_sphere.xml"
+    path.write_text(SMALL_SPHERE_XML)
+    res = rm.render(rm.load_file(path), spp=1024, seed=1)
+    exact = _small_sphere_exact()
+    r = z_test(res.image, res.variance, exact, None, alpha=ALPHA)
+    assert r.passed, f"ours differs from the exact small-sphere irradiance:\n{r.summary()}"
+    r = z_test(res.image, res.variance, exact * 1.0074, None, alpha=ALPHA)
+    assert not r.passed, f"Mitsuba's +0.74 % went undetected:\n{r.summary()}"
