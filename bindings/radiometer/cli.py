@@ -156,7 +156,7 @@ def main(argv=None) -> int:
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("render", help="render a scene to EXR (image, variance and effect layers)")
     r.add_argument("scene", help="Mitsuba 3 XML file, or a canonical scene name such as cornell-box")
-    r.add_argument("-i", "--integrator", help="estimator name (path, direct) or a JSON dict like the XML's")
+    r.add_argument("-i", "--integrator", help="estimator name (direct, path, ptracer, bdpt) or a JSON dict like the XML's")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--spp", type=int, help="samples per pixel (default: the scene's sampler)")
     g.add_argument("--seconds", type=float, help="wall-clock budget in seconds")
