@@ -40,9 +40,7 @@ Scene::~Scene() {
 
 int Scene::add_bsdf(const BsdfDesc& desc) {
     bsdfs.push_back(make_bsdf(desc));
-    uint32_t f = bsdfs.back()->flags();
     return int(bsdfs.size()) - 1;
-    (void)f;
 }
 
 int Scene::add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals) {
