@@ -1,7 +1,7 @@
 """Comparing a render of ours with a Mitsuba 3 reference: 4 x 4 block means
 per channel, z-tested with both sides' variance (DESIGN section 4).
 
-The functions are copied from tests/test_cornell_reference.py, whose
+The Cornell box test (tests/test_cornell_reference.py) uses them; its
 docstring measures why: per-sample radiances are heavy-tailed, so per pixel
 the z statistic (with the pixel's own estimated variance) is biased and too
 wide; a 4 x 4 block pools 16 pixels and is close enough to normal. Ours

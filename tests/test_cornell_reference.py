@@ -34,11 +34,10 @@ How the images are compared, and why (measured on this scene, 64 x 64):
 """
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 import radiometer as rm
-from radiometer.analysis.stats import z_test
+from refcompare import blocked_z_test  # block means per channel; why: this module's docstring
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "reference_scenes" / "cornell_box" / "scene.xml"
@@ -46,38 +45,7 @@ REFERENCE = ROOT / "reference_scenes" / "cornell_box" / "reference.exr"
 
 RES = 64
 SPP = 512  # about 3 s on 2 cores
-BLOCK = 4
 ALPHA = 0.01
-
-
-def block_mean(img, k=BLOCK):
-    h, w, c = img.shape
-    return np.asarray(img, np.float64).reshape(h // k, k, w // k, k, c).mean(axis=(1, 3))
-
-
-def block_var_independent(var, k=BLOCK):
-    """Variance of a block mean whose pixels are independent (ours: FIS)."""
-    h, w, c = var.shape
-    return np.asarray(var, np.float64).reshape(h // k, k, w // k, k, c).sum(axis=(1, 3)) / k ** 4
-
-
-def block_var_bound(var, k=BLOCK):
-    """Upper bound on the variance of a block mean whose pixels may be
-    correlated (Mitsuba's splatting): Var(mean) <= (mean of the sd)^2."""
-    h, w, c = var.shape
-    sd = np.sqrt(np.asarray(var, np.float64)).reshape(h // k, k, w // k, k, c)
-    return sd.mean(axis=(1, 3)) ** 2
-
-
-def blocked_z_test(a, var_a, b, var_b, *, b_splatted, alpha=ALPHA):
-    """z-tests 4 x 4 block means, each channel at alpha / 3; returns
-    (passed, message)."""
-    ba, va = block_mean(a), block_var_independent(var_a)
-    bb = block_mean(b)
-    vb = block_var_bound(var_b) if b_splatted else block_var_independent(var_b)
-    results = [z_test(ba[..., c], va[..., c], bb[..., c], vb[..., c], alpha=alpha / 3) for c in range(3)]
-    msg = "\n".join(f"{'RGB'[c]} ({BLOCK}x{BLOCK} blocks): {r.summary()}" for c, r in enumerate(results))
-    return all(r.passed for r in results), msg
 
 
 @pytest.fixture(scope="module")
