@@ -7,6 +7,7 @@
 
 #include "film/film.h"
 #include "integrators/render.h"
+#include "scene/phase.h"
 #include "scene/scene.h"
 
 namespace py = pybind11;
@@ -317,6 +318,42 @@ PYBIND11_MODULE(_core, m) {
                  return r;
              },
              py::arg("wi"), py::arg("u1"), py::arg("u2"), py::arg("adjoint") = false);
+
+    py::class_<PhaseFunction>(m, "Phase")
+        .def(py::init([](const std::string& type, float g) { return make_phase(type, g); }), py::arg("type"),
+             py::arg("g") = 0.f)
+        .def("eval",
+             [](const PhaseFunction& ph, py::object wi, py::object wo) {
+                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
+                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
+                 size_t n = a.size() / 3;
+                 std::vector<float> out(n);
+                 for (size_t i = 0; i < n; ++i)
+                     out[i] = ph.eval(Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
+                 return to_numpy(std::move(out), {py::ssize_t(n)});
+             },
+             py::arg("wi"), py::arg("wo"), "phase function value (== its sampling pdf), per steradian")
+        .def("sample",
+             [](const PhaseFunction& ph, py::object wi, py::object u) {
+                 auto a = flat<float>(wi, 3, "wi");
+                 auto uu = flat<float>(u, 2, "u");
+                 size_t n = a.size() / 3;
+                 if (uu.size() != 2 * n) throw py::value_error("u must be (N, 2) for N directions wi");
+                 std::vector<float> wo(3 * n), w(n), pdf(n);
+                 for (size_t i = 0; i < n; ++i) {
+                     PhaseSample ps = ph.sample(Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), Vec2(uu[2 * i], uu[2 * i + 1]));
+                     for (int k = 0; k < 3; ++k) wo[3 * i + k] = ps.wo[k];
+                     w[i] = ps.weight;
+                     pdf[i] = ps.pdf_w;
+                 }
+                 py::dict r;
+                 py::ssize_t N = py::ssize_t(n);
+                 r["wo"] = to_numpy(std::move(wo), {N, 3});
+                 r["weight"] = to_numpy(std::move(w), {N});
+                 r["pdf"] = to_numpy(std::move(pdf), {N});
+                 return r;
+             },
+             py::arg("wi"), py::arg("u"));
 
     m.def(
         "filter_sample",
