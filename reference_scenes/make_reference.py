@@ -74,6 +74,11 @@ SCENES = {
         "runs": 32,
         "spp": 524288,
     },
+    "vandehulst_slab_reflectance": {
+        "params": {"max_depth": 256},  # a 1 x 1 irradiancemeter film
+        "runs": 32,
+        "spp": 524288,
+    },
     "translucent_slab": {
         "params": {"res": 64, "max_depth": 1024},
         "runs": 32,
