@@ -290,3 +290,24 @@ def test_volpath_matches_vandehulst_reflectance():
     from scipy.stats import norm
 
     assert 2 * norm.sf(abs(v - VDH_R) / se) >= ALPHA, f"volpath R {v} +- {se} vs published {VDH_R}"
+
+
+# -- the other unbiased estimators on the surface scenes ----------------------
+# `bdpt` estimates every path class, so it must match every surface reference
+# (same budget and comparison as `path`). `ptracer` is not held to these
+# scenes at this budget: it cannot see the glass sphere's specular paths at
+# all, and on veach_mis (plates down to alpha 0.005) and ajar_door its
+# near-specular and narrow-passage connections are so heavy-tailed at 512 spp
+# that the comparison rejected (measured: block mean z -4.1 and -3.4); whether
+# that is only variance needs a longer study (issue 4).
+
+
+@pytest.mark.parametrize("estimator,name", [("bdpt", n) for n in sorted(SURFACE)])
+def test_other_estimators_match_mitsuba_reference(estimator, name):
+    ref = _reference(name)
+    cfg = SURFACE[name]
+    scene = rm.load_file(ROOT / name / "scene.xml", res=RES)
+    res = rm.render(scene, integrator={"type": estimator, "max_depth": cfg["max_depth"]}, spp=cfg["spp"], seed=2)
+    assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, res.stats
+    passed, msg = _compare(res, ref.image, ref.variance, int(ref.metadata["total_spp"]))
+    assert passed, f"{name}: {estimator} ({res.spp} spp) differs from Mitsuba's reference:\n{msg}"
