@@ -59,16 +59,19 @@ float FilterSampler::eval(float x) const {
     return std::max(0.f, std::exp(a * x * x) - std::exp(a * radius_ * radius_));
 }
 
+// The tabulated CDF at x, linear within a bin (the density is piecewise constant).
+double FilterSampler::cdf_at(double x) const {
+    const int n = int(cdf_.size()) - 1;
+    double f = (x + radius_) / (2.0 * radius_ / n);
+    if (f <= 0) return 0.0;
+    if (f >= n) return cdf_[n];
+    int i = int(f);
+    return cdf_[i] + (cdf_[i + 1] - cdf_[i]) * (f - i);
+}
+
 float FilterSampler::sample(float u, float lo, float hi) const {
     const int n = int(cdf_.size()) - 1;
     double dx = 2.0 * radius_ / n;
-    auto cdf_at = [&](double x) {
-        double f = (x + radius_) / dx;
-        if (f <= 0) return 0.0;
-        if (f >= n) return cdf_[n];
-        int i = int(f);
-        return cdf_[i] + (cdf_[i + 1] - cdf_[i]) * (f - i);
-    };
     // Interior pixels (the common case) use the whole filter.
     double c0 = lo <= -radius_ ? 0.0 : cdf_at(double(lo));
     double c1 = hi >= radius_ ? cdf_.back() : cdf_at(double(hi));
@@ -82,15 +85,6 @@ float FilterSampler::sample(float u, float lo, float hi) const {
 }
 
 double FilterSampler::integral(float lo, float hi) const {
-    const int n = int(cdf_.size()) - 1;
-    double dx = 2.0 * radius_ / n;
-    auto cdf_at = [&](double x) {
-        double f = (x + radius_) / dx;
-        if (f <= 0) return 0.0;
-        if (f >= n) return cdf_[n];
-        int i = int(f);
-        return cdf_[i] + (cdf_[i + 1] - cdf_[i]) * (f - i);
-    };
     return std::max(0.0, cdf_at(double(hi)) - cdf_at(double(lo)));
 }
 

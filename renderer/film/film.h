@@ -46,6 +46,7 @@ private:
     std::vector<double> cdf_;  // tabulated on [-radius, radius]
     std::vector<int> guide_;   // guide_[j]: first bin whose cdf reaches j / guide size (O(1) inversion)
     int find_bin(double target) const;
+    double cdf_at(double x) const;
 };
 
 class Film {

@@ -268,26 +268,9 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
     auto poll_once = [&]() { return !poll || poll(paths_done + in_flight.load(), total); };
 
     while (!out.cancelled) {
-        // The pass plan of render.cpp: fixed by spp and checkpoints under an
-        // spp budget, ~1/8 of the time left under a seconds budget.
-        int cap = opts.spp > 0 ? opts.spp : (1 << 30);
-        if (spp_done >= cap) break;
-        int s1 = cap;
-        for (int c : cps)
-            if (c > spp_done) { s1 = std::min(s1, c); break; }
-        if (opts.seconds > 0) {
-            double left = opts.seconds - since(t0);
-            if (left <= 0) break;
-            if (spp_done == 0) {
-                s1 = std::min(s1, 1);
-            } else {
-                if (sec_per_spp > left) break;
-                int n = int(std::min(1e6, std::max(1.0, std::floor(left / 8.0 / std::max(sec_per_spp, 1e-9)))));
-                s1 = std::min(s1, spp_done + n);
-            }
-        } else {
-            s1 = std::min(s1, spp_done == 0 ? 1 : spp_done + std::min(spp_done, 64));
-        }
+        // The pass plan of render.cpp (same bytes for a seed under an spp budget).
+        int s1 = next_pass_end(opts, cps, spp_done, since(t0), sec_per_spp);
+        if (s1 < 0) break;
         auto pass_t0 = Clock::now();
         const uint64_t g_end = uint64_t(s1) * pixels;
         // Chunks of up to kChunkItems work items: trace, then add to the film.

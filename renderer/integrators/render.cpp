@@ -73,6 +73,30 @@ void render_tile(PassJob& job, int tile, ThreadStats& stats) {
 
 }  // namespace
 
+int next_pass_end(const RenderOptions& opts, const std::vector<int>& checkpoints, int spp_done, double elapsed,
+                  double sec_per_spp) {
+    // Under an spp budget the passes are fixed by the budget and checkpoints
+    // alone, so the summation order and hence the bytes do not depend on
+    // timing; a cancel keeps every finished pass. Under a time budget, passes
+    // take ~1/8 of what is left.
+    int cap = opts.spp > 0 ? opts.spp : (1 << 30);
+    if (spp_done >= cap) return -1;
+    int s1 = cap;
+    for (int c : checkpoints)
+        if (c > spp_done) { s1 = std::min(s1, c); break; }
+    if (opts.seconds > 0) {
+        double left = opts.seconds - elapsed;
+        if (left <= 0) return -1;
+        if (spp_done == 0) return std::min(s1, 1);
+        if (sec_per_spp > left) return -1;  // one more sample per pixel would overrun the budget
+        int n = int(std::min(1e6, std::max(1.0, std::floor(left / 8.0 / std::max(sec_per_spp, 1e-9)))));
+        return std::min(s1, spp_done + n);
+    }
+    // 1, 2, 4, ... 64, then 64 more at a time: early passes are quick, so a
+    // cancel soon keeps something, and the plan ignores timing.
+    return std::min(s1, spp_done == 0 ? 1 : spp_done + std::min(spp_done, 64));
+}
+
 RenderOutput render(const Scene& scene, const Integrator& integrator, const RenderOptions& opts, const PollFn& poll) {
     if (!scene.committed()) throw std::logic_error("render: scene is not committed");
     if (opts.spp < 0) throw std::invalid_argument("render: spp must be >= 0");
@@ -113,30 +137,8 @@ RenderOutput render(const Scene& scene, const Integrator& integrator, const Rend
     ThreadStats stats;
 
     while (true) {
-        // Decide this pass. Under an spp budget the passes are fixed by the
-        // budget and checkpoints alone (below), so the summation order
-        // and hence the bytes do not depend on timing; a cancel keeps every
-        // finished pass. Under a time budget, passes take ~1/8 of what is left.
-        int cap = opts.spp > 0 ? opts.spp : (1 << 30);
-        if (spp_done >= cap) break;
-        int s1 = cap;
-        for (int c : cps)
-            if (c > spp_done) { s1 = std::min(s1, c); break; }
-        if (opts.seconds > 0) {
-            double left = opts.seconds - since(t0);
-            if (left <= 0) break;
-            if (spp_done == 0) {
-                s1 = std::min(s1, 1);
-            } else {
-                if (sec_per_spp > left) break;  // one more sample per pixel would overrun the budget
-                int n = int(std::min(1e6, std::max(1.0, std::floor(left / 8.0 / std::max(sec_per_spp, 1e-9)))));
-                s1 = std::min(s1, spp_done + n);
-            }
-        } else {
-            // 1, 2, 4, ... 64, then 64 more at a time: early passes are quick,
-            // so a cancel soon keeps something, and the plan ignores timing.
-            s1 = std::min(s1, spp_done == 0 ? 1 : spp_done + std::min(spp_done, 64));
-        }
+        int s1 = next_pass_end(opts, cps, spp_done, since(t0), sec_per_spp);
+        if (s1 < 0) break;
         PassJob job;
         job.scene = &scene;
         job.integrator = &integrator;

@@ -45,6 +45,12 @@ using PollFn = std::function<bool(uint64_t done, uint64_t total)>;
 
 RenderOutput render(const Scene& scene, const Integrator& integrator, const RenderOptions& opts, const PollFn& poll);
 
+// End (exclusive sample index) of the next pass of samples per pixel after
+// spp_done, or -1 when the budget is spent; shared by every render driver so
+// their pass plans (and hence their bytes for a seed) follow one rule.
+int next_pass_end(const RenderOptions& opts, const std::vector<int>& checkpoints, int spp_done, double elapsed,
+                  double sec_per_spp);
+
 // The driver of light-tracing estimators (integrator.is_light_tracer()),
 // called by render(): light paths splatted onto the film (light_render.cpp).
 RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator, const RenderOptions& opts,
