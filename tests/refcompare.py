@@ -84,3 +84,39 @@ def reference_variance_floor(ref_variance, ref_total_spp, spp):
     our estimate only where ours is smaller. Valid for box-filtered images
     (a sample lands in one pixel, pixels independent on both sides)."""
     return np.asarray(ref_variance, np.float64) * float(ref_total_spp) / float(spp)
+
+
+# --- shared by the estimator tests (test_ptracer.py, test_bdpt.py) -----------
+
+
+def blocked_z(a, var_a, b, var_b=None, alpha=ALPHA, a_correlated=False):
+    """a_correlated: a's pixels share splats (a filter wider than a pixel
+    spreads each splat over its footprint), so its block variance is bounded
+    by Cauchy-Schwarz instead of summed."""
+    vb = None if var_b is None else block_var_independent(var_b)
+    va = block_var_bound(var_a) if a_correlated else block_var_independent(var_a)
+    r = z_test(block_mean(a), va, block_mean(b), vb, alpha=alpha)
+    return r.passed, r.summary() + "\n" + "\n".join(getattr(r, "channel_lines", []))
+
+
+def assert_clean(res, where=""):
+    for name, a in [("image", res.image), ("variance", res.variance)] + list(res.effects.items()):
+        a = np.asarray(a)
+        assert np.all(np.isfinite(a)), f"{where}: {name} has NaN/Inf"
+        assert not np.any(a < 0), f"{where}: {name} has negative values"
+    assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, where
+
+
+def lookat(origin, target, up=(0, 1, 0)):
+    """Mitsuba's lookat: local +z forward, +x left, +y up."""
+    o, t, u = (np.asarray(v, float) for v in (origin, target, up))
+    d = (t - o) / np.linalg.norm(t - o)
+    left = np.cross(u, d)
+    left /= np.linalg.norm(left)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, np.cross(d, left), d, o
+    return m
+
+
+def _rgb(v):
+    return {"type": "rgb", "value": list(v) if np.ndim(v) else [v] * 3}

@@ -20,53 +20,14 @@ import numpy as np
 import pytest
 
 import radiometer as rm
-from radiometer.analysis.stats import z_test
 from radiometer.reference_scenes.mirror_caustic import analytic as mirror
+from refcompare import _rgb, assert_clean, block_mean, blocked_z, lookat
 
 from conftest import furnace_dict, furnace_exact
 
 ALPHA = 0.01
-BLOCK = 4
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
 CORNELL = ROOT / "cornell_box" / "scene.xml"
-
-
-def block_mean(img, k=BLOCK):
-    h, w, c = img.shape
-    return np.asarray(img, np.float64).reshape(h // k, k, w // k, k, c).mean(axis=(1, 3))
-
-
-def block_var(var, k=BLOCK):
-    h, w, c = var.shape
-    return np.asarray(var, np.float64).reshape(h // k, k, w // k, k, c).sum(axis=(1, 3)) / k ** 4
-
-
-def blocked_z(a, var_a, b, var_b=None, alpha=ALPHA):
-    vb = None if var_b is None else block_var(var_b)
-    r = z_test(block_mean(a), block_var(var_a), block_mean(b), vb, alpha=alpha)
-    return r.passed, r.summary() + "\n" + "\n".join(getattr(r, "channel_lines", []))
-
-
-def assert_clean(res, where=""):
-    for name, a in [("image", res.image), ("variance", res.variance)] + list(res.effects.items()):
-        a = np.asarray(a)
-        assert np.all(np.isfinite(a)), f"{where}: {name} has NaN/Inf"
-        assert not np.any(a < 0), f"{where}: {name} has negative values"
-    assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, where
-
-
-def lookat(origin, target, up=(0, 1, 0)):
-    o, t, u = (np.asarray(v, float) for v in (origin, target, up))
-    d = (t - o) / np.linalg.norm(t - o)
-    left = np.cross(u, d)
-    left /= np.linalg.norm(left)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, np.cross(d, left), d, o
-    return m
-
-
-def _rgb(v):
-    return {"type": "rgb", "value": list(v) if np.ndim(v) else [v] * 3}
 
 
 def small_scene(light, res=32, extra=None):
