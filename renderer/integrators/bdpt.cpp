@@ -66,12 +66,6 @@ struct PathVertex {
     bool null_surface() const { return type == VType::Surface && bsdf->flags() == kNull; }
 };
 
-// Adjoint BSDF with shading normals (Veach 1997, eq. 5.16), as in ptracer.cpp.
-float shading_correction(const Interaction& it, const Vec3& wi, const Vec3& wo) {
-    float num = absdot(wi, it.sh.n) * absdot(wo, it.n);
-    float den = absdot(wi, it.n) * absdot(wo, it.sh.n);
-    return den > 0.f ? num / den : 0.f;
-}
 
 // Solid angle at `from` to area at `to` (Veach 1997, eq. 8.10): p_a = p_w |cos| / d^2.
 float to_area(float pdf_w, const Vec3& from, const PathVertex& to) {
@@ -84,15 +78,6 @@ float to_area(float pdf_w, const Vec3& from, const PathVertex& to) {
 
 inline float remap0(float f) { return f != 0.f ? f : 1.f; }
 
-void scene_bounds(const Scene& scene, Vec3& center, float& radius) {
-    if (is_finite(scene.bbox_lo) && is_finite(scene.bbox_hi)) {
-        center = (scene.bbox_lo + scene.bbox_hi) * 0.5f;
-        radius = 0.5f * length(scene.bbox_hi - scene.bbox_lo);
-    } else {
-        center = Vec3(0.f);
-        radius = 1.f;
-    }
-}
 
 enum class Mis { Power, Balance, Uniform };
 
@@ -122,7 +107,7 @@ public:
                                         "film); use integrator 'path' or a perspective or orthographic camera");
         Vec3 c;
         float r;
-        scene_bounds(scene, c, r);
+        scene.bounding_sphere(c, r);
         for (const auto& e : scene.emitters)
             if (e->is_environment() || (e->is_delta() && std::isinf(e->sample_direct(c, Vec2(0.5f, 0.5f), 0.5f).dist)))
                 throw std::invalid_argument("integrator 'bdpt': emitter '" + e->id +
@@ -174,7 +159,7 @@ public:
             const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n_em)), n_em - 1)];
             Vec3 center;
             float radius;
-            scene_bounds(scene, center, radius);
+            scene.bounding_sphere(center, radius);
             es = e.sample_emission(u_pos, u_extra, u_dir, center, radius);
             if (es.pdf_a > 0.f && es.pdf_w > 0.f) {
                 float pick = emitter_pick_prob(scene);

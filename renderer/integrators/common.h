@@ -20,4 +20,14 @@ Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsd
 float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
                        float bsdf_pdf_w, float light_frac = 1.f, float bsdf_frac = 1.f);
 
+// Adjoint BSDF with shading normals (Veach 1997, eq. 5.16; pbrt-v3's
+// CorrectShadingNormal): in importance transport a vertex that scatters
+// from wi (towards the light) to wo weights f |wo.ns| (what eval/sample
+// give) by |wi.ns| |wo.ng| / (|wi.ng| |wo.ns|). Used by ptracer and bdpt.
+inline float shading_correction(const Interaction& it, const Vec3& wi, const Vec3& wo) {
+    float num = absdot(wi, it.sh.n) * absdot(wo, it.n);
+    float den = absdot(wi, it.n) * absdot(wo, it.sh.n);
+    return den > 0.f ? num / den : 0.f;
+}
+
 }  // namespace rm

@@ -24,25 +24,7 @@ namespace rm {
 
 namespace {
 
-// Adjoint BSDF with shading normals (Veach 1997, eq. 5.16; pbrt-v3's
-// CorrectShadingNormal): in importance transport a vertex that scatters
-// from wi (towards the light) to wo weights f |wo.ns| (what eval/sample
-// give) by |wi.ns| |wo.ng| / (|wi.ng| |wo.ns|).
-float shading_correction(const Interaction& it, const Vec3& wi, const Vec3& wo) {
-    float num = absdot(wi, it.sh.n) * absdot(wo, it.n);
-    float den = absdot(wi, it.n) * absdot(wo, it.sh.n);
-    return den > 0.f ? num / den : 0.f;
-}
 
-void scene_bounds(const Scene& scene, Vec3& center, float& radius) {
-    if (is_finite(scene.bbox_lo) && is_finite(scene.bbox_hi)) {
-        center = (scene.bbox_lo + scene.bbox_hi) * 0.5f;
-        radius = 0.5f * length(scene.bbox_hi - scene.bbox_lo);
-    } else {
-        center = Vec3(0.f);
-        radius = 1.f;
-    }
-}
 
 }  // namespace
 
@@ -84,7 +66,7 @@ public:
         float inv_pick = 1.f / emitter_pick_prob(scene);
         Vec3 center;
         float radius;
-        scene_bounds(scene, center, radius);
+        scene.bounding_sphere(center, radius);
         EmissionSample es = e.sample_emission(u_pos, u_extra, u_dir, center, radius);
         if (!(es.pdf_a > 0.f) || !(es.pdf_w > 0.f)) return;
 

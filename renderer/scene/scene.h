@@ -61,6 +61,17 @@ public:
     SceneFeatures features;
     Vec3 bbox_lo{kInf}, bbox_hi{-kInf};
     bool committed() const { return committed_; }
+    // Sphere around the scene's bounding box (unit sphere at the origin for
+    // an empty scene): where infinite emitters start their light paths.
+    void bounding_sphere(Vec3& center, float& radius) const {
+        if (is_finite(bbox_lo) && is_finite(bbox_hi)) {
+            center = (bbox_lo + bbox_hi) * 0.5f;
+            radius = 0.5f * length(bbox_hi - bbox_lo);
+        } else {
+            center = Vec3(0.f);
+            radius = 1.f;
+        }
+    }
 
 private:
     int add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals);
