@@ -30,24 +30,13 @@ import numpy as np
 import pytest
 
 import radiometer as rm
+from radiometer.analysis.blocks import BLOCK, block_mean, blocked_z_test
 from radiometer.analysis.stats import z_test
 from radiometer.reference_scenes.area_lights import analytic as area
 from radiometer.reference_scenes.furnace import analytic as furnace
 from radiometer.reference_scenes.mirror_caustic import analytic as mirror
 
 ALPHA = 0.01
-BLOCK = 4
-
-
-def block_mean(img, k=BLOCK):
-    h, w, c = img.shape
-    return np.asarray(img, np.float64).reshape(h // k, k, w // k, k, c).mean(axis=(1, 3))
-
-
-def block_var(var, k=BLOCK):
-    """Variance of a block mean of independent pixels (ours: FIS)."""
-    h, w, c = var.shape
-    return np.asarray(var, np.float64).reshape(h // k, k, w // k, k, c).sum(axis=(1, 3)) / k ** 4
 
 
 def per_channel_z(a, var_a, ref, *, alpha=ALPHA, mask=None, label=""):
@@ -60,9 +49,8 @@ def per_channel_z(a, var_a, ref, *, alpha=ALPHA, mask=None, label=""):
 
 
 def blocked_z(img, var, ref, *, alpha=ALPHA, block_mask=None, label=""):
-    """per_channel_z on 4 x 4 block means (ref exact: var_b = 0)."""
-    return per_channel_z(block_mean(img), block_var(var), block_mean(ref), alpha=alpha, mask=block_mask,
-                         label=f"{label}({BLOCK}x{BLOCK} blocks) ")
+    """4 x 4 block means against the exact `ref` (var_b = 0)."""
+    return blocked_z_test(img, var, ref, None, alpha=alpha, block_mask=block_mask, label=label)
 
 
 def assert_clean(res):

@@ -294,20 +294,49 @@ def test_volpath_matches_vandehulst_reflectance():
 
 # -- the other unbiased estimators on the surface scenes ----------------------
 # `bdpt` estimates every path class, so it must match every surface reference
-# (same budget and comparison as `path`). `ptracer` is not held to these
-# scenes at this budget: it cannot see the glass sphere's specular paths at
-# all, and on veach_mis (plates down to alpha 0.005) and ajar_door its
-# near-specular and narrow-passage connections are so heavy-tailed at 512 spp
-# that the comparison rejected (measured: block mean z -4.1 and -3.4); whether
-# that is only variance needs a longer study (issue 4).
+# (same budget and comparison as `path`).
+#
+# `ptracer` (light tracing) is held to each scene except the pixels where it
+# cannot work, left out of the test (every 4 x 4 block touching them):
+# - glass_sphere_caustic: the sphere itself (card.md box (16, 14, 41, 39)).
+#   The camera sees it through a delta BSDF (L ... S E); a light path can
+#   never connect to a pinhole through a delta vertex, so ptracer renders
+#   those paths as 0 (it has no `specular` effect).
+# - veach_mis: the plates of alpha 0.005 and 0.02 (boxes (0, 28, 64, 34) and
+#   (0, 34, 64, 39)). There the camera sees a near-mirror reflecting the
+#   indirectly lit floor and wall: a light path contributes only when its
+#   last bounce arrives inside a lobe of width ~alpha, so the estimate is
+#   carried by rare huge samples. Measured (512 spp, 64 x 64, 40 seeds,
+#   the alpha-0.005 plate's pixels (27..33, 29..32)): median 0.30 of the
+#   reference, 6 of 40 renders above it, up to 3.6x; every seed failed the
+#   comparison there, and 8192 spp failed worse (one block p 3e-58), the
+#   signature of a heavy tail rather than a bias. The same scene with that
+#   plate's alpha set to 0.05 (nothing else changed) gives ptracer's
+#   indirect light on the plate at 1.013 +- 0.017 of `path`'s (24 seeds x
+#   512 spp against 8192 spp), median equal to mean; and the plates' direct
+#   highlights (light -> plate -> camera, the same connection code) agree
+#   at alpha 0.005. Outside the two plates, 8 of 8 seeds passed at 512 spp.
+# ajar_door is tested whole (12 seeds x 512 spp: the image mean at 0.9979 +-
+# 0.0030 of the reference, 4 of 4 seeds passed at 1024 spp).
+PTRACER_EXCLUDE = {
+    "glass_sphere_caustic": [(16, 14, 41, 39)],
+    "veach_mis": [(0, 28, 64, 34), (0, 34, 64, 39)],
+    "ajar_door": [],
+}
+PTRACER_SPP = 1024
 
 
-@pytest.mark.parametrize("estimator,name", [("bdpt", n) for n in sorted(SURFACE)])
+@pytest.mark.parametrize("estimator,name", [("bdpt", n) for n in sorted(SURFACE)] +
+                         [("ptracer", n) for n in sorted(SURFACE)])
 def test_other_estimators_match_mitsuba_reference(estimator, name):
     ref = _reference(name)
     cfg = SURFACE[name]
     scene = rm.load_file(ROOT / name / "scene.xml", res=RES)
-    res = rm.render(scene, integrator={"type": estimator, "max_depth": cfg["max_depth"]}, spp=cfg["spp"], seed=2)
+    spp = PTRACER_SPP if estimator == "ptracer" else cfg["spp"]
+    res = rm.render(scene, integrator={"type": estimator, "max_depth": cfg["max_depth"]}, spp=spp, seed=2)
     assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, res.stats
-    passed, msg = _compare(res, ref.image, ref.variance, int(ref.metadata["total_spp"]))
+    exclude = PTRACER_EXCLUDE[name] if estimator == "ptracer" else ()
+    floor = reference_variance_floor(ref.variance, int(ref.metadata["total_spp"]), res.spp)
+    passed, msg = blocked_z_test(res.image, res.variance, ref.image, ref.variance, b_splatted=False, alpha=ALPHA,
+                                 var_a_floor=floor, exclude=exclude)
     assert passed, f"{name}: {estimator} ({res.spp} spp) differs from Mitsuba's reference:\n{msg}"
