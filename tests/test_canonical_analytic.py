@@ -140,6 +140,10 @@ AREA_INTEGRATORS = {
     "direct": ({"type": "direct"}, 256),
     "direct-emitter-only": ({"type": "direct", "emitter_samples": 1, "bsdf_samples": 0}, 256),
     "direct-bsdf-only": ({"type": "direct", "emitter_samples": 0, "bsdf_samples": 1}, 2048),
+    # The bidirectional estimators (issue 4): light tracing splats every
+    # light path onto the film; bdpt weighs all its strategies.
+    "ptracer": ({"type": "ptracer", "max_depth": 2}, 256),
+    "bdpt": ({"type": "bdpt", "max_depth": 2}, 128),
 }
 
 
