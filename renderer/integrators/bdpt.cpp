@@ -40,44 +40,11 @@
 #include <stdexcept>
 
 #include "film/film.h"
-#include "integrators/common.h"
+#include "integrators/subpath.h"
 
 namespace rm {
 
 namespace {
-
-enum class VType : uint8_t { Camera, Light, Surface };
-
-// One vertex of either subpath (pbrt-v4's Vertex; media slots live in the
-// Interaction). pdf_fwd is the area density with which the vertex was
-// sampled by its own subpath, pdf_rev the area density with which the other
-// direction would sample it (Veach 1997, sec. 10.2.1: p_i^->, p_i^<-).
-struct PathVertex {
-    VType type = VType::Surface;
-    Interaction it;        // p, n (zero for a delta-position light), wi towards the previous vertex
-    Color beta{0.f};       // throughput of the subpath up to this vertex (Veach's alpha_i)
-    float pdf_fwd = 0.f, pdf_rev = 0.f;
-    bool delta = false;    // the walk sampled a delta lobe here
-    const Bsdf* bsdf = nullptr;
-    const Emitter* emitter = nullptr;  // the light of a Light vertex, or the area emitter a surface carries
-    bool connectible() const {
-        return type != VType::Surface || bsdf->has_smooth();
-    }
-    bool null_surface() const { return type == VType::Surface && bsdf->flags() == kNull; }
-};
-
-
-// Solid angle at `from` to area at `to` (Veach 1997, eq. 8.10): p_a = p_w |cos| / d^2.
-float to_area(float pdf_w, const Vec3& from, const PathVertex& to) {
-    Vec3 v = to.it.p - from;
-    float d2 = length_sq(v);
-    if (!(d2 > 0.f)) return 0.f;
-    float c = length_sq(to.it.n) > 0.f ? absdot(to.it.n, v) / std::sqrt(d2) : 1.f;
-    return pdf_w * c / d2;
-}
-
-inline float remap0(float f) { return f != 0.f ? f : 1.f; }
-
 
 enum class Mis { Power, Balance, Uniform };
 
@@ -147,38 +114,11 @@ public:
             cam.push_back(z0);
         }
         int max_cam = max_depth_ < 0 ? INT_MAX : max_depth_ + 1;  // z0 .. z_max_depth
-        random_walk(scene, sampler, sr.ray, sr.weight, TransportMode::Radiance, max_cam, cam, stats);
+        random_walk(scene, sampler, sr.ray, sr.weight, TransportMode::Radiance, max_cam, rr_depth_, cam, stats);
 
         // 2. The light subpath: an emitter picked uniformly (as NEE), a ray of light leaving it.
-        size_t n_em = scene.emitters.size();
-        float u_pick = sampler.next_1d();
-        Vec2 u_pos = sampler.next_2d();
-        float u_extra = sampler.next_1d();
-        Vec2 u_dir = sampler.next_2d();
-        if (n_em > 0) {
-            const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n_em)), n_em - 1)];
-            Vec3 center;
-            float radius;
-            scene.bounding_sphere(center, radius);
-            es = e.sample_emission(u_pos, u_extra, u_dir, center, radius);
-            if (es.pdf_a > 0.f && es.pdf_w > 0.f) {
-                float pick = emitter_pick_prob(scene);
-                PathVertex y0;
-                y0.type = VType::Light;
-                y0.emitter = &e;
-                y0.it.p = es.p;
-                y0.it.n = es.n;
-                y0.it.eps = es.eps;
-                y0.pdf_fwd = pick * es.pdf_a;
-                light.push_back(y0);
-                Ray ray;
-                ray.o = es.p + es.n * es.eps;
-                ray.d = es.d;
-                int max_light = max_depth_ < 0 ? INT_MAX : max_depth_;  // y0 .. y_{max_depth - 1}
-                random_walk(scene, sampler, ray, es.weight / pick, TransportMode::Importance, max_light,
-                            light, stats);
-            }
-        }
+        int max_light = max_depth_ < 0 ? INT_MAX : max_depth_;  // y0 .. y_{max_depth - 1}
+        light_subpath(scene, sampler, max_light, rr_depth_, light, es, stats);
     }
 
     void trace_light_path(const Scene& scene, Sampler& sampler, int pixel, std::vector<Splat>& out,
@@ -307,102 +247,6 @@ private:
         return sum > 0.0 ? float(mine / sum) : 0.f;
     }
 
-    // pbrt-v4's RandomWalk: extends `path` (its start vertex, the camera or
-    // the light, already in it) from `ray`, carrying throughput `beta`. Each
-    // new vertex gets pdf_fwd and its predecessor's predecessor pdf_rev
-    // (Veach 1997, sec. 10.2.1), both through pdf_to from the vertex
-    // positions, exactly as the connections compute them: the weights are a
-    // partition of unity only if every strategy sees the same numbers (the
-    // sampled direction leaves an offset origin, and for vertices 1e-2 apart
-    // in a corner that moved densities by 1 %, measured by bdpt_mis_check).
-    void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode,
-                     int max_vertices, std::vector<PathVertex>& path, ThreadStats& stats) const {
-        BsdfContext ctx{mode};
-        Color thr(1.f);         // throughput since the start (Russian roulette)
-        float eta_scale = 1.f;  // undoes radiance scaling by eta^2 (Russian roulette)
-        for (int depth = 1;; ++depth) {  // depth: segments from the start to the new vertex
-            if (int(path.size()) >= max_vertices) break;
-            Interaction it;
-            ++stats.rays;
-            if (!scene.intersect(ray, it)) break;
-            const Shape& shape = *scene.shapes[it.shape];
-            PathVertex v;
-            v.it = it;
-            v.beta = beta;
-            v.bsdf = scene.bsdfs[shape.bsdf].get();
-            v.emitter = shape.emitter >= 0 ? scene.emitters[shape.emitter].get() : nullptr;
-            const size_t n = path.size();  // index of v
-            const PathVertex& prev = path[n - 1];
-            if (n == 1) {
-                v.pdf_fwd = prev.type == VType::Camera ? camera_pdf_a(scene, v) : pdf_to(scene, prev, nullptr, v);
-            } else if (prev.delta) {
-                v.pdf_fwd = 0.f;  // a delta: remap0 in the weights (pbrt-v4)
-                path[n - 2].pdf_rev = 0.f;
-            } else {
-                v.pdf_fwd = pdf_to(scene, prev, &path[n - 2], v);
-                path[n - 2].pdf_rev = pdf_to(scene, prev, &v, path[n - 2]);
-            }
-            path.push_back(v);
-            if (int(path.size()) >= max_vertices) break;
-
-            // Sample the next direction.
-            PathVertex& cur = path.back();
-            Vec3 wi = it.to_local(it.wi);
-            BsdfSample bs = cur.bsdf->sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
-            if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
-            Vec3 wo = it.to_world(bs.wo);
-            Color f = bs.weight;
-            if (mode == TransportMode::Importance) f *= shading_correction(it, it.wi, wo);
-            else eta_scale *= sqr(bs.eta);
-            beta *= f;
-            thr *= f;
-            cur.delta = bs.is_delta;
-            ray = it.spawn(wo);
-
-            // Russian roulette (Mitsuba: q = min(max(throughput) eta^2, 0.95)).
-            float rr_u = sampler.next_1d();
-            if (depth >= rr_depth_) {
-                float q = std::min(max_component(thr) * eta_scale, 0.95f);
-                if (!(rr_u < q)) break;
-                beta /= q;
-                thr /= q;
-            }
-        }
-    }
-
-    // The camera's area density of sampling the first vertex v (see the top).
-    float camera_pdf_a(const Scene& scene, const PathVertex& v) const {
-        ImportanceSample is = scene.sensor->sample_direction(v.it.p);
-        if (!is.valid) return 0.f;
-        float c = length_sq(v.it.n) > 0.f ? absdot(v.it.n, is.d) : 1.f;
-        return is.weight * c / (float(scene.sensor->width) * float(scene.sensor->height));
-    }
-
-    // Area density with which vertex v samples `next`, given it was reached
-    // from `prev` (pbrt-v4's Vertex::PDF).
-    float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, const PathVertex& next) const {
-        if (v.type == VType::Camera) return camera_pdf_a(scene, next);
-        Vec3 d = next.it.p - v.it.p;
-        float len = length(d);
-        if (!(len > 0.f)) return 0.f;
-        d = d / len;
-        if (v.type == VType::Light) return to_area(v.emitter->pdf_emission_w(v.it.n, d), v.it.p, next);
-        if (!prev) return 0.f;
-        BsdfContext ctx;
-        Vec3 wi = normalize(prev->it.p - v.it.p);
-        return to_area(v.bsdf->pdf_w(ctx, v.it.to_local(wi), v.it.to_local(d)), v.it.p, next);
-    }
-
-    // Area density with which light sampling picks v, a point on an area emitter (pbrt-v4 PdfLightOrigin).
-    float light_origin_pdf(const Scene& scene, const PathVertex& v, const PathVertex& ref) const {
-        float pd = v.emitter->pdf_direct(ref.it.p, v.it.p, v.it.n);
-        Vec3 d = v.it.p - ref.it.p;
-        float d2 = length_sq(d);
-        if (!(pd > 0.f) || !(d2 > 0.f)) return 0.f;
-        float cos_l = absdot(v.it.n, d) / std::sqrt(d2);
-        return emitter_pick_prob(scene) * pd * cos_l / d2;
-    }
-
     float heuristic(float r) const {
         switch (mis_) {
             case Mis::Balance: return r;
@@ -497,19 +341,9 @@ private:
         } else if (t == 1) {
             // A light vertex connected to the camera (light tracing's splat).
             PathVertex& y = light[s - 1];
-            if (!y.connectible()) return L;
-            ImportanceSample is = scene.sensor->sample_direction(y.it.p);
-            if (!is.valid) return L;
-            Color f = y.bsdf->eval(ctx_i, y.it.to_local(y.it.wi), y.it.to_local(is.d)) *
-                      shading_correction(y.it, y.it.wi, is.d);
-            if (is_black(f)) return L;
-            DirectSample ds;
-            ds.p = is.p;
-            ds.d = is.d;
-            ds.dist = is.dist;
-            ++stats.shadow_rays;
-            if (!scene.visible(y.it, ds)) return L;
-            L = y.beta * f * is.weight;
+            ImportanceSample is;
+            L = connect_to_sensor(scene, y, is, stats);
+            if (is_black(L)) return L;
             film = is.film;
             PathVertex z0;
             z0.type = VType::Camera;
@@ -581,20 +415,7 @@ private:
         return L;
     }
 
-    // Effect class of the full vertex string E z1 .. z_{t-1} y_{s-1} .. y1 L
-    // (DESIGN sec. 3): connection ends scatter through smooth lobes (D),
-    // walk vertices by the lobe they sampled; null boundaries are no vertices.
-    int classify(int s, int t) const {
-        const std::vector<PathVertex>& cam = cam_ref();
-        const std::vector<PathVertex>& light = light_ref();
-        PathClass pc;
-        int last_cam = s == 0 ? t - 2 : t - 1;  // for s = 0, z_{t-1} is the emitter
-        for (int i = 1; i <= last_cam; ++i)
-            if (!cam[i].null_surface()) pc.push(i == t - 1 ? false : cam[i].delta);
-        for (int i = s - 1; i >= 1; --i)
-            if (!light[i].null_surface()) pc.push(i == s - 1 ? false : light[i].delta);
-        return pc.classify();
-    }
+    int classify(int s, int t) const { return classify_strategy(cam_ref(), light_ref(), s, t); }
 
     static std::vector<PathVertex>& cam_ref() { return tl_paths().first; }
     static std::vector<PathVertex>& light_ref() { return tl_paths().second; }

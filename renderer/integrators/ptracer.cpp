@@ -18,15 +18,11 @@
 // delta position (point, spot) are invisible to the camera, as in `path`.
 #include <stdexcept>
 
-#include "integrators/common.h"
+#include <climits>
+
+#include "integrators/subpath.h"
 
 namespace rm {
-
-namespace {
-
-
-
-}  // namespace
 
 class LightTracer final : public Integrator {
 public:
@@ -53,99 +49,53 @@ public:
 
     void trace_light_path(const Scene& scene, Sampler& sampler, int, std::vector<Splat>& out,
                           ThreadStats& stats) const override {
-        const Sensor& sensor = *scene.sensor;
-        size_t n = scene.emitters.size();
-        // 1. Pick an emitter uniformly (as NEE does) and sample a ray of light leaving it.
-        float u_pick = sampler.next_1d();
-        Vec2 u_pos = sampler.next_2d();
-        float u_extra = sampler.next_1d();
-        Vec2 u_dir = sampler.next_2d();
-        if (n == 0) return;
-        ++stats.paths;
-        const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n)), n - 1)];
-        float inv_pick = 1.f / emitter_pick_prob(scene);
-        Vec3 center;
-        float radius;
-        scene.bounding_sphere(center, radius);
-        EmissionSample es = e.sample_emission(u_pos, u_extra, u_dir, center, radius);
-        if (!(es.pdf_a > 0.f) || !(es.pdf_w > 0.f)) return;
+        // 1. The light subpath y0 y1 .. (subpath.h: an emitter picked
+        //    uniformly, a ray of light leaving it, the adjoint random walk),
+        //    stopped where no requested class can follow. Vertex y_i joined
+        //    to the sensor makes a path of i + 1 segments: y0 .. y_{max_depth - 1}.
+        std::vector<PathVertex>& light = tl_light();
+        EmissionSample es;
+        const int max_vertices = max_depth_ < 0 ? INT_MAX : max_depth_;
+        WalkStop stop = [this](const std::vector<PathVertex>& p) { return !reachable(p); };
+        if (!scene.emitters.empty()) ++stats.paths;
+        if (!light_subpath(scene, sampler, max_vertices, rr_depth_, light, es, stats, &stop)) return;
+        const float inv_pick = 1.f / emitter_pick_prob(scene);
 
         // 2. The emitter seen directly: its sampled origin (or, at infinity,
         //    its sampled direction) connected to the sensor, s = 1, t = 1.
-        if (!hide_ && mask[kEmission]) connect_emitter(scene, e, es, inv_pick, out, stats);
+        if (!hide_ && mask[kEmission]) connect_emitter(scene, *light[0].emitter, es, inv_pick, out, stats);
 
-        // 3. Walk the light subpath L v1 v2 ...; `k` counts its vertices before
-        //    the current one (null boundaries are no vertices of the class),
-        //    `all_specular` says whether each of them scattered specularly.
-        Color beta = es.weight * inv_pick;  // flux carried by the path
-        Color thr(1.f);                     // its throughput since the emitter (Russian roulette)
-        int k = 0;
-        bool all_specular = true;
-        Ray ray;
-        ray.o = es.p + es.n * es.eps;
-        ray.d = es.d;
-        BsdfContext ctx{TransportMode::Importance};
-        for (int depth = 1;; ++depth) {  // depth: segments from the emitter to `it`
-            Interaction it;
-            ++stats.rays;
-            if (!scene.intersect(ray, it)) break;
-            const Bsdf& bsdf = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
-            Vec3 wi = it.to_local(it.wi);
-
-            // 4. Connect this vertex to the sensor (smooth lobes only); the
-            //    whole path then has depth + 1 segments. Its class comes from
-            //    the reversed vertex string E v_k+1 v_k .. v1 L (DESIGN sec. 3).
-            if (bsdf.has_smooth() && (max_depth_ < 0 || depth + 1 <= max_depth_)) {
-                int cls = k == 0 ? kDirect : (all_specular ? kCaustic : kIndirect);
-                if (mask[cls]) {
-                    ImportanceSample is = sensor.sample_direction(it.p);
-                    if (is.valid) {
-                        Color f = bsdf.eval(ctx, wi, it.to_local(is.d)) * shading_correction(it, it.wi, is.d);
-                        if (!is_black(f)) {
-                            DirectSample ds;
-                            ds.p = is.p;
-                            ds.d = is.d;
-                            ds.dist = is.dist;
-                            ++stats.shadow_rays;
-                            if (scene.visible(it, ds)) out.push_back({is.film, cls, beta * thr * f * is.weight});
-                        }
-                    }
-                }
-            }
-
-            // 5. Stop when the next vertex's connection would exceed max_depth,
-            //    or when no requested class can follow.
-            if (max_depth_ >= 0 && depth + 2 > max_depth_) break;
-            if (!reachable(k, all_specular, bsdf.flags() == kNull)) break;
-
-            // 6. Sample the adjoint BSDF for the next direction.
-            BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
-            if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
-            Vec3 wo = it.to_world(bs.wo);
-            thr *= bs.weight * shading_correction(it, it.wi, wo);
-            if (bsdf.flags() != kNull) {
-                ++k;
-                all_specular = all_specular && bs.is_delta;
-            }
-            ray = it.spawn(wo);
-
-            // 7. Russian roulette on the throughput (Mitsuba: q = min(max(thr), 0.95)).
-            float rr_u = sampler.next_1d();
-            if (depth >= rr_depth_) {
-                float q = std::min(max_component(thr), 0.95f);
-                if (!(rr_u < q)) break;
-                thr /= q;
-            }
+        // 3. Every later vertex joined to the sensor (t = 1; smooth lobes
+        //    only), filed under the class of E y_s .. y1 L (DESIGN sec. 3).
+        static const std::vector<PathVertex> no_camera;
+        for (int s = 2; s <= int(light.size()); ++s) {
+            int cls = classify_strategy(no_camera, light, s, 1);
+            if (!mask[cls]) continue;
+            ImportanceSample is;
+            Color L = connect_to_sensor(scene, light[s - 1], is, stats);
+            if (!is_black(L)) out.push_back({is.film, cls, L});
         }
     }
 
 private:
-    // Whether a class in `mask` can still come from a later vertex, given the
-    // state after the current vertex scatters (a null vertex changes nothing).
-    bool reachable(int k, bool all_specular, bool null_vertex) const {
-        if (null_vertex) return k == 0 ? (mask[kDirect] || mask[kCaustic] || mask[kIndirect])
-                                        : (mask[kIndirect] || (all_specular && mask[kCaustic]));
+    // Whether a class in `mask` can still come from a vertex after the last
+    // one of `p`, whichever lobe that vertex samples (a null vertex changes nothing).
+    bool reachable(const std::vector<PathVertex>& p) const {
+        int k = 0;  // scattering vertices among y1 .. y_{n-2}
+        bool all_specular = true;
+        for (size_t i = 1; i + 1 < p.size(); ++i)
+            if (!p[i].null_surface()) {
+                ++k;
+                all_specular = all_specular && p[i].delta;
+            }
+        bool null_last = p.size() > 1 && p.back().null_surface();
+        if (p.size() == 1 || (null_last && k == 0)) return mask[kDirect] || mask[kCaustic] || mask[kIndirect];
         return mask[kIndirect] || (all_specular && mask[kCaustic]);
+    }
+
+    static std::vector<PathVertex>& tl_light() {
+        thread_local std::vector<PathVertex> v;
+        return v;
     }
 
     void connect_emitter(const Scene& scene, const Emitter& e, const EmissionSample& es, float inv_pick,

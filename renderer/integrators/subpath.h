@@ -1,0 +1,75 @@
+// The subpath machinery shared by the bidirectional estimators (`ptracer`,
+// `bdpt`; SmallVCM's shared vertex and walk of vertexcm.hxx, pbrt-v4's
+// Vertex and RandomWalk in bdpt.cpp): one vertex record, one random walk
+// for camera and light subpaths (adjoint BSDFs with the shading-normal
+// correction in importance transport), the light subpath's start, the
+// area densities of bidirectional MIS, the t = 1 connection to the sensor
+// and the effect class of a strategy's vertex string.
+#pragma once
+#include <functional>
+#include <vector>
+
+#include "integrators/common.h"
+
+namespace rm {
+
+enum class VType : uint8_t { Camera, Light, Surface };
+
+// One vertex of either subpath. pdf_fwd is the area density with which the
+// vertex was sampled by its own subpath, pdf_rev the area density with which
+// the other direction would sample it (Veach 1997, sec. 10.2.1: p_i^->, p_i^<-).
+struct PathVertex {
+    VType type = VType::Surface;
+    Interaction it;        // p, n (zero for a delta-position light), wi towards the previous vertex
+    Color beta{0.f};       // throughput of the subpath up to this vertex (Veach's alpha_i)
+    float pdf_fwd = 0.f, pdf_rev = 0.f;
+    bool delta = false;    // the walk sampled a delta lobe here
+    const Bsdf* bsdf = nullptr;
+    const Emitter* emitter = nullptr;  // the light of a Light vertex, or the area emitter a surface carries
+    bool connectible() const { return type != VType::Surface || bsdf->has_smooth(); }
+    bool null_surface() const { return type == VType::Surface && bsdf->flags() == kNull; }
+};
+
+// Solid angle at `from` to area at `to` (Veach 1997, eq. 8.10): p_a = p_w |cos| / d^2.
+float to_area(float pdf_w, const Vec3& from, const PathVertex& to);
+inline float remap0(float f) { return f != 0.f ? f : 1.f; }
+
+// The camera's area density of sampling the first vertex v: W(v) |cos| / (W H),
+// W the importance of Sensor::sample_direction (bdpt.cpp explains why).
+float camera_pdf_a(const Scene& scene, const PathVertex& v);
+// Area density with which vertex v samples `next`, given it was reached
+// from `prev` (pbrt-v4's Vertex::PDF).
+float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, const PathVertex& next);
+// Area density with which light sampling picks v, a point on an area
+// emitter, from `ref` (pbrt-v4's PdfLightOrigin).
+float light_origin_pdf(const Scene& scene, const PathVertex& v, const PathVertex& ref);
+
+// Asked after each new vertex, before its next direction is sampled: true
+// stops the walk there (an estimator that can use no later vertex).
+using WalkStop = std::function<bool(const std::vector<PathVertex>&)>;
+
+// Extends `path` (its start vertex, the camera or the light, already in it)
+// from `ray` with throughput `beta`, up to max_vertices vertices in all.
+void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode, int max_vertices,
+                 int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const WalkStop* stop = nullptr);
+
+// A light subpath y0 y1 ..: an emitter picked uniformly (as next event
+// estimation), a ray of light leaving it (`es`), then the walk. Always
+// draws the same random numbers for its start. Returns false (and leaves
+// `light` empty) when the scene has no emitter or the sample failed.
+bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
+                   std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats,
+                   const WalkStop* stop = nullptr);
+
+// The t = 1 strategy (light tracing): light vertex y connected to the
+// sensor through its adjoint BSDF. Returns y.beta f W (zero when y is not
+// connectible, faces away, or is occluded) and the sensor sample in `is`.
+Color connect_to_sensor(const Scene& scene, const PathVertex& y, ImportanceSample& is, ThreadStats& stats);
+
+// Effect class (DESIGN sec. 3) of strategy (s, t)'s vertex string
+// E z1 .. z_{t-1} y_{s-1} .. y1 L: connection ends scatter through smooth
+// lobes (D), walk vertices by the lobe they sampled; null boundaries are
+// no vertices. For s = 0, z_{t-1} is the emitter.
+int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<PathVertex>& light, int s, int t);
+
+}  // namespace rm
