@@ -117,7 +117,8 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("emitter_samples", &IntegratorDesc::emitter_samples)
         .def_readwrite("bsdf_samples", &IntegratorDesc::bsdf_samples)
         .def_readwrite("mis", &IntegratorDesc::mis)
-        .def_readwrite("beta", &IntegratorDesc::beta);
+        .def_readwrite("beta", &IntegratorDesc::beta)
+        .def_readwrite("strategy_images", &IntegratorDesc::strategy_images);
 
     py::class_<Scene>(m, "Scene")
         .def(py::init<>())
@@ -442,6 +443,16 @@ PYBIND11_MODULE(_core, m) {
             py::dict eff;
             for (int k = 0; k < kNumEffects; ++k) eff[effect_name(k)] = to_numpy(std::move(out.effects[k]), {H, W, 3});
             r["effects"] = eff;
+            // Per-strategy images, keyed (s, t) (strategy_index order, integrator.h).
+            py::dict strat, strat_u;
+            for (int d = 1, k = 0; k < int(out.strategies.size()); ++d)
+                for (int s = 0; s <= d && k < int(out.strategies.size()); ++s, ++k) {
+                    py::tuple key = py::make_tuple(s, d + 1 - s);
+                    strat[key] = to_numpy(std::move(out.strategies[k]), {H, W, 3});
+                    strat_u[key] = to_numpy(std::move(out.strategies_unweighted[k]), {H, W, 3});
+                }
+            r["strategies"] = strat;
+            r["strategies_unweighted"] = strat_u;
             r["spp"] = out.spp;
             r["seconds"] = out.seconds;
             r["cancelled"] = out.cancelled;

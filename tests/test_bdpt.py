@@ -258,3 +258,75 @@ def test_stress_scenes_finite_nonnegative(path):
         assert "at infinity" in str(e), str(e)
         return
     assert_clean(res, path.stem)
+
+
+# -- per-strategy images (issue 4, point 4) -----------------------------------
+
+
+def _strategy_render(estimator, seed, spp=32, depth=3, res=16):
+    scene = rm.load_file(CORNELL, res=res)
+    return rm.render(scene, integrator={"type": estimator, "max_depth": depth, "strategy_images": depth},
+                     spp=spp, seed=seed)
+
+
+@pytest.mark.parametrize("estimator", ["bdpt", "ptracer"])
+def test_strategy_images_sum_to_the_image(estimator):
+    r = _strategy_render(estimator, seed=3)
+    expected = {(s, d + 1 - s) for d in (1, 2, 3) for s in range(d + 1)}
+    if estimator == "ptracer":
+        expected = {k for k in expected if k[1] == 1}
+    assert set(r.strategies) == expected == set(r.strategies_unweighted)
+    total = sum(r.strategies.values())
+    assert np.allclose(total, r.image, rtol=1e-5, atol=1e-7), np.abs(total - r.image).max()
+    # without the parameter nothing is kept
+    plain = rm.render(rm.load_file(CORNELL, res=16), integrator={"type": estimator, "max_depth": 3}, spp=4, seed=3)
+    assert plain.strategies == {} and plain.strategies_unweighted == {}
+
+
+def test_unweighted_strategies_each_estimate_their_depth():
+    """Every strategy of a depth, unweighted, is an unbiased estimate of that
+    depth's light (Veach 1997, sec. 10.2): over 8 seeds its image mean minus
+    the MIS-weighted depth total is tested for zero mean (one-sample t,
+    alpha = 0.01 Bonferroni over the strategies tested). bdpt leaves (1, 1)
+    to (0, 2), so that one is 0. Power: the same test rejects a strategy
+    scaled by 1.1."""
+    from scipy import stats as st
+
+    runs = [_strategy_render("bdpt", seed=40 + k) for k in range(8)]
+    keys = [k for k in runs[0].strategies_unweighted if sum(k) - 1 >= 2]
+    alpha = 0.01 / len(keys)
+    for scale in (1.0, 1.1):
+        worst = 1.0
+        for s, t in keys:
+            d = s + t - 1
+            diffs = [scale * r.strategies_unweighted[(s, t)].mean() -
+                     sum(v.mean() for (a, b), v in r.strategies.items() if a + b - 1 == d) for r in runs]
+            p = st.ttest_1samp(diffs, 0.0).pvalue
+            worst = min(worst, p)
+            if scale == 1.0:
+                assert p >= alpha, f"strategy ({s}, {t}) disagrees with its depth's total: p {p:.2e}"
+        if scale != 1.0:
+            assert worst < alpha, f"strategies scaled by {scale} went undetected (smallest p {worst:.2e})"
+    assert all(float(np.abs(r.strategies_unweighted[(1, 1)]).max()) == 0 for r in runs)
+
+
+def test_strategy_images_parameter_is_checked():
+    scene = rm.load_file(CORNELL, res=8)
+    for bad in (-1, 17):
+        with pytest.raises(rm.SceneError, match="strategy_images"):
+            rm.render(scene, integrator={"type": "bdpt", "strategy_images": bad}, spp=1)
+    with pytest.raises(rm.SceneError, match="strategy_images"):
+        rm.render(scene, integrator={"type": "path", "strategy_images": 2}, spp=1)
+
+
+def test_strategy_pyramid_figure(tmp_path):
+    from radiometer.analysis.strategies import strategy_pyramid
+
+    r = _strategy_render("bdpt", seed=5, spp=4)
+    for weighted in (False, True):
+        png = strategy_pyramid(r, tmp_path / f"p{weighted}.png", weighted=weighted)
+        img = __import__("matplotlib.image", fromlist=["imread"]).imread(str(png))
+        assert img.shape[0] > 100 and img.shape[1] > 100 and img[..., :3].std() > 0
+    plain = rm.render(rm.load_file(CORNELL, res=8), integrator="bdpt", spp=1)
+    with pytest.raises(ValueError, match="strategy_images"):
+        strategy_pyramid(plain, tmp_path / "none.png")

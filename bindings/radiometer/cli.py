@@ -102,6 +102,13 @@ def cmd_render(a) -> int:
     print(f"{out}: {res.image.shape[1]}x{res.image.shape[0]}, {res.integrator['type']}, {res.spp} spp, "
           f"{res.seconds:.2f} s, {st['rays'] / max(res.seconds, 1e-9) / 1e6:.1f} Mrays/s, "
           f"NaN samples {st['nan_samples']}, Inf samples {st['inf_samples']}")
+    if res.strategies:
+        from .analysis.strategies import strategy_pyramid
+
+        for weighted in (False, True):
+            png = out.with_name(out.stem + ("_strategies_weighted.png" if weighted else "_strategies.png"))
+            strategy_pyramid(res, png, weighted=weighted)
+            print(f"  per-strategy images ({'MIS-weighted' if weighted else 'unweighted'}): {png}")
     means = ", ".join(f"{k} {float(v.mean()):.4g}" for k, v in res.effects.items() if float(abs(v).max()) > 0)
     print(f"  mean radiance {float(res.image.mean()):.5g} (std. error {float(res.variance.mean()) ** 0.5 / res.image[..., 0].size ** 0.5:.2g}); "
           f"by effect: {means}")

@@ -17,9 +17,11 @@ INTEGRATOR_PARAMS = {
     "path": dict(_COMMON),
     "volpath": dict(_COMMON),
     # Light tracing; Mitsuba's samples_per_pass (wavefront sizing) is accepted and ignored.
-    "ptracer": dict(_COMMON, samples_per_pass=(int, None)),
+    # strategy_images D (bdpt and ptracer): keep one image per strategy (s, t)
+    # of path depth s + t - 1 <= D in RenderResult.strategies (0: none).
+    "ptracer": dict(_COMMON, samples_per_pass=(int, None), strategy_images=(int, 0)),
     # Bidirectional path tracing; mis in {"power", "balance", "uniform"}, beta the power heuristic's exponent.
-    "bdpt": dict(_COMMON, mis=(str, "power"), beta=(float, 2.0)),
+    "bdpt": dict(_COMMON, mis=(str, "power"), beta=(float, 2.0), strategy_images=(int, 0)),
     "direct": {"emitter_samples": (int, 1), "bsdf_samples": (int, 1), "hide_emitters": (bool, False),
                "shading_samples": (int, None)},
 }
@@ -47,6 +49,11 @@ class RenderResult:
     checkpoints: list = field(default_factory=list)  # [(spp, seconds, image, variance)]
     integrator: dict = field(default_factory=dict)
     seed: int = 0
+    # (s, t) -> (H, W, 3), when the integrator's strategy_images asked for
+    # them: MIS-weighted contributions (summing to the image when every
+    # depth is kept) and unweighted ones (each an estimate on its own).
+    strategies: dict = field(default_factory=dict)
+    strategies_unweighted: dict = field(default_factory=dict)
 
     def write_exr(self, path, **metadata):
         from .exr import write_exr
@@ -111,6 +118,9 @@ def _integrator_desc(spec, scene_integrator: IntegratorDesc):
             raise SceneError(f"{where}['mis']: must be 'power', 'balance' or 'uniform', got {out['mis']!r}")
         if not out["beta"] > 0:
             raise SceneError(f"{where}['beta']: must be > 0, got {out['beta']}")
+    if itype in ("bdpt", "ptracer") and not 0 <= out["strategy_images"] <= 16:
+        raise SceneError(f"{where}['strategy_images']: must be a path depth in 0..16 (0: none), "
+                         f"got {out['strategy_images']}")
     if itype == "direct":
         if "shading_samples" in out:  # Mitsuba: sets both counts
             out["emitter_samples"] = out["bsdf_samples"] = out.pop("shading_samples")
@@ -124,7 +134,8 @@ def _core_integrator(spec: dict):
 
     c = _core.IntegratorDesc()
     c.type = spec["type"]
-    for k in ("max_depth", "rr_depth", "hide_emitters", "emitter_samples", "bsdf_samples", "mis", "beta"):
+    for k in ("max_depth", "rr_depth", "hide_emitters", "emitter_samples", "bsdf_samples", "mis", "beta",
+              "strategy_images"):
         if k in spec:
             setattr(c, k, spec[k])
     return c
@@ -198,7 +209,12 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
                  effects_simulated=[e for e, m in zip(EFFECTS, mask) if m])
     result = RenderResult(image=r["image"], variance=r["variance"], effects=dict(r["effects"]), spp=r["spp"],
                           seconds=r["seconds"], stats=stats, checkpoints=list(r["checkpoints"]), integrator=spec,
-                          seed=int(seed))
+                          seed=int(seed), strategies=dict(r["strategies"]),
+                          strategies_unweighted=dict(r["strategies_unweighted"]))
+    if spec["type"] == "ptracer":  # light tracing makes only the t = 1 strategies
+        for d in (result.strategies, result.strategies_unweighted):
+            for k in [k for k in d if k[1] != 1]:
+                del d[k]
     if r["interrupted"]:
         raise RenderCancelled(result)
     return result

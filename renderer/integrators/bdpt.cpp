@@ -53,7 +53,9 @@ enum class Mis { Power, Balance, Uniform };
 class BdptIntegrator final : public Integrator {
 public:
     explicit BdptIntegrator(const IntegratorDesc& d)
-        : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), beta_(d.beta) {
+        : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), beta_(d.beta),
+          strategy_depth_(d.strategy_images) {
+        check_strategy_images("bdpt", strategy_depth_);
         if (d.mis == "power") mis_ = Mis::Power;
         else if (d.mis == "balance") mis_ = Mis::Balance;
         else if (d.mis == "uniform") mis_ = Mis::Uniform;
@@ -63,6 +65,7 @@ public:
     }
 
     bool is_light_tracer() const override { return true; }
+    int strategy_depth() const override { return strategy_depth_; }
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator 'bdpt' runs through the light-path driver, not camera rays");
     }
@@ -147,6 +150,8 @@ public:
                 Color L = connect(scene, sampler, es, s, t, sp.film, sp.effect, w, hidden, stats);
                 if (is_black(L) || !(w > 0.f)) continue;
                 sp.value = L * w;
+                sp.weight = w;
+                if (depth <= strategy_depth_) sp.strategy = strategy_index(s, t);
                 if (t > 1) {
                     sp.pixel = pixel;
                     sp.value *= film_scale;
@@ -427,6 +432,7 @@ private:
     int max_depth_, rr_depth_;
     bool hide_;
     float beta_;
+    int strategy_depth_;
     Mis mis_ = Mis::Power;
     mutable std::unique_ptr<FilterSampler> filter_;  // built by check_scene, before any path
 };

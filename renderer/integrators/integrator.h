@@ -69,7 +69,19 @@ struct Splat {
     int effect = 0;
     Color value{0.f};
     int pixel = -1;
+    int strategy = -1;   // strategy_index(s, t) when per-strategy images are kept
+    float weight = 1.f;  // the MIS weight already in `value` (value / weight: the unweighted strategy)
 };
+
+// Per-strategy images (Veach 1997, fig. 10.3 style; pbrt-v4's
+// visualize_strategies): the strategies (s, t) of path depth d = s + t - 1
+// are s = 0 .. d, numbered depth by depth, so depths 1 .. D hold
+// D (D + 3) / 2 of them.
+inline int strategy_index(int s, int t) {
+    int d = s + t - 1;
+    return (d - 1) * (d + 2) / 2 + s;
+}
+inline int num_strategies(int max_depth) { return max_depth * (max_depth + 3) / 2; }
 
 class Integrator {
 public:
@@ -86,6 +98,8 @@ public:
     virtual void trace_light_path(const Scene&, Sampler&, int pixel, std::vector<Splat>& out, ThreadStats&) const {}
     // Throws std::invalid_argument when this estimator cannot render `scene`.
     virtual void check_scene(const Scene&) const {}
+    // Depth up to which the light-path driver keeps per-strategy images (0: none).
+    virtual int strategy_depth() const { return 0; }
     // Radiance along one camera ray, split by effect class, into `out`.
     virtual void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
                         ThreadStats& stats) const = 0;

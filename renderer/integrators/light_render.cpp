@@ -80,9 +80,11 @@ struct ItemSplat {
 
 class SplatFilm {
 public:
-    SplatFilm(int w, int h, const FilterSampler& f) : w_(w), h_(h), filter_(f) {
+    SplatFilm(int w, int h, const FilterSampler& f, int n_strategies)
+        : w_(w), h_(h), n_strat_(n_strategies), filter_(f) {
         size_t n = size_t(w) * size_t(h);
         effects_.assign(n * kNumEffects * 3, 0.0);
+        strat_.assign(n * size_t(n_strat_) * 6, 0.0);
         batches_.assign(n * kBatches * 3, 0.0);
         norm_x_.resize(w);
         norm_y_.resize(h);
@@ -105,6 +107,7 @@ public:
                         e[c] += double(is.s.value[c]);
                         b[c] += double(is.s.value[c]);
                     }
+                    add_strategy(p, is.s, 1.0);
                     continue;
                 }
                 float x = is.s.film.x, y = is.s.film.y;
@@ -126,9 +129,37 @@ public:
                             e[c] += v;
                             b[c] += v;
                         }
+                        add_strategy(p, is.s, wgt);
                     }
                 }
             }
+    }
+
+    // The splat's strategy images: weighted, and unweighted (value / weight).
+    void add_strategy(size_t p, const Splat& s, double wgt) {
+        if (s.strategy < 0 || s.strategy >= n_strat_) return;
+        double* d = &strat_[(p * size_t(n_strat_) + size_t(s.strategy)) * 6];
+        double inv_w = s.weight > 0.f ? 1.0 / double(s.weight) : 0.0;
+        for (int c = 0; c < 3; ++c) {
+            d[c] += wgt * double(s.value[c]);
+            d[3 + c] += wgt * double(s.value[c]) * inv_w;
+        }
+    }
+
+    void develop_strategies(uint64_t paths, std::vector<std::vector<float>>& weighted,
+                            std::vector<std::vector<float>>& unweighted) const {
+        size_t n = size_t(w_) * size_t(h_);
+        weighted.assign(size_t(n_strat_), std::vector<float>(3 * n, 0.f));
+        unweighted.assign(size_t(n_strat_), std::vector<float>(3 * n, 0.f));
+        if (paths == 0) return;
+        double inv_m = 1.0 / double(paths);
+        for (size_t p = 0; p < n; ++p)
+            for (int k = 0; k < n_strat_; ++k)
+                for (int c = 0; c < 3; ++c) {
+                    const double* d = &strat_[(p * size_t(n_strat_) + size_t(k)) * 6];
+                    weighted[k][3 * p + c] = float(d[c] * inv_m);
+                    unweighted[k][3 * p + c] = float(d[3 + c] * inv_m);
+                }
     }
 
     // Estimates from the first `paths` light paths (see the top of the file).
@@ -169,8 +200,9 @@ public:
     }
 
 private:
-    int w_, h_;
+    int w_, h_, n_strat_;
     const FilterSampler& filter_;
+    std::vector<double> strat_;    // [pixel][strategy][weighted rgb, unweighted rgb] sums
     std::vector<double> effects_;  // [pixel][effect][channel] sums
     std::vector<double> batches_;  // [pixel][batch][channel] sums
     std::vector<double> norm_x_, norm_y_;
@@ -238,12 +270,13 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
     const SensorDesc& sd = scene.sensor_desc;
     int W = sensor.width, H = sensor.height;
     FilterSampler filter(sd.rfilter, sd.filter_radius, sd.filter_stddev);
-    double film_bytes = double(W) * double(H) * 3.0 * (kNumEffects + kBatches) * sizeof(double);
+    const int n_strat = integrator.strategy_depth() > 0 ? num_strategies(integrator.strategy_depth()) : 0;
+    double film_bytes = double(W) * double(H) * 3.0 * (kNumEffects + kBatches + 2 * n_strat) * sizeof(double);
     if (film_bytes > 16.0 * (1ull << 30))
         throw std::invalid_argument("render: a " + std::to_string(W) + "x" + std::to_string(H) +
                                     " film needs " + std::to_string(int(film_bytes / (1ull << 30))) +
-                                    " GiB of light-tracing buffers (limit 16 GiB); lower the resolution");
-    SplatFilm film(W, H, filter);
+                                    " GiB of light-tracing buffers (limit 16 GiB); lower the resolution or strategy_images");
+    SplatFilm film(W, H, filter, n_strat);
 
     int threads = opts.threads > 0 ? opts.threads : int(std::max(1u, std::thread::hardware_concurrency()));
     RenderOutput out;
@@ -335,6 +368,7 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
     out.seconds = since(t0);
     out.stats = stats;
     film.develop(paths_done, out.image, out.variance, &out.effects);
+    if (n_strat > 0) film.develop_strategies(paths_done, out.strategies, out.strategies_unweighted);
     return out;
 }
 

@@ -26,7 +26,11 @@ namespace rm {
 
 class LightTracer final : public Integrator {
 public:
-    explicit LightTracer(const IntegratorDesc& d) : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters) {}
+    explicit LightTracer(const IntegratorDesc& d)
+        : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), strategy_depth_(d.strategy_images) {
+        check_strategy_images("ptracer", strategy_depth_);
+    }
+    int strategy_depth() const override { return strategy_depth_; }
 
     bool is_light_tracer() const override { return true; }
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
@@ -73,7 +77,10 @@ public:
             if (!mask[cls]) continue;
             ImportanceSample is;
             Color L = connect_to_sensor(scene, light[s - 1], is, stats);
-            if (!is_black(L)) out.push_back({is.film, cls, L});
+            if (is_black(L)) continue;
+            Splat sp{is.film, cls, L};
+            if (s <= strategy_depth_) sp.strategy = strategy_index(s, 1);
+            out.push_back(sp);
         }
     }
 
@@ -110,7 +117,7 @@ private:
             Color le = e.eval_environment(w);
             if (is_black(le)) return;
             ++stats.shadow_rays;
-            if (!scene.occluded(r)) out.push_back({is.film, kEmission, le * (inv_pick * is.weight / es.pdf_w)});
+            if (!scene.occluded(r)) out.push_back(emission_splat(is.film, le * (inv_pick * is.weight / es.pdf_w)));
             return;
         }
         // A delta position is never hit by a camera ray (Mitsuba's point and
@@ -129,11 +136,19 @@ private:
         ds.d = is.d;
         ds.dist = is.dist;
         ++stats.shadow_rays;
-        if (scene.visible(from, ds)) out.push_back({is.film, kEmission, le * (inv_pick * is.weight)});
+        if (scene.visible(from, ds)) out.push_back(emission_splat(is.film, le * (inv_pick * is.weight)));
+    }
+
+    // The emitter seen directly: strategy (1, 1).
+    Splat emission_splat(Vec2 film, Color value) const {
+        Splat sp{film, kEmission, value};
+        if (strategy_depth_ >= 1) sp.strategy = strategy_index(1, 1);
+        return sp;
     }
 
     int max_depth_, rr_depth_;
     bool hide_;
+    int strategy_depth_;
 };
 
 std::unique_ptr<Integrator> make_ptracer_integrator(const IntegratorDesc& d) { return std::make_unique<LightTracer>(d); }

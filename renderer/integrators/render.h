@@ -32,6 +32,10 @@ struct RenderOutput {
     bool cancelled = false;
     std::vector<float> image, variance;
     std::vector<std::vector<float>> effects;  // kNumEffects images
+    // Per strategy (strategy_index order, integrator.h), when asked for: the
+    // MIS-weighted contributions (they sum to the image over all strategies)
+    // and the unweighted ones (each alone an estimate of its depth's light).
+    std::vector<std::vector<float>> strategies, strategies_unweighted;
     std::vector<Checkpoint> checkpoints;
     ThreadStats stats;
     int threads = 0;

@@ -2,6 +2,8 @@
 #include "integrators/subpath.h"
 
 #include <algorithm>
+#include <stdexcept>
+#include <string>
 
 namespace rm {
 
@@ -162,6 +164,13 @@ int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<Path
     for (int i = s - 1; i >= 1; --i)
         if (!light[i].null_surface()) pc.push(i == s - 1 ? false : light[i].delta);
     return pc.classify();
+}
+
+void check_strategy_images(const char* integrator, int strategy_images) {
+    if (strategy_images < 0 || strategy_images > 16)
+        throw std::invalid_argument(std::string("integrator '") + integrator +
+                                    "': strategy_images must be a path depth in 0..16 (0: none), not " +
+                                    std::to_string(strategy_images));
 }
 
 }  // namespace rm

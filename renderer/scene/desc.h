@@ -63,6 +63,8 @@ struct IntegratorDesc {
     // bdpt: MIS heuristic ("power", "balance", "uniform") and the power heuristic's exponent
     std::string mis = "power";
     float beta = 2.f;
+    // bdpt, ptracer: keep one image per strategy (s, t) of path depth s + t - 1 <= this (0: none)
+    int strategy_images = 0;
 };
 
 }  // namespace rm
