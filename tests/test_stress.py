@@ -31,10 +31,10 @@ from radiometer.render import INTEGRATOR_PARAMS
 
 # Every estimator: each must survive every scene.
 ESTIMATORS = ["path", "direct", "ptracer", "bdpt"]
-# Estimators that refuse emitters at infinity (constant, directional) for
-# now, with a clear error naming the emitter; on such scenes the test asserts
-# that refusal instead of an image.
-REFUSES_INFINITE = {"bdpt"}
+# Estimators that refuse emitters at infinity (constant, directional), with
+# a clear error naming the emitter; on such scenes the test asserts that
+# refusal instead of an image. None at present (bdpt supports them).
+REFUSES_INFINITE = set()
 # Regions an estimator cannot light by construction, with the reason; its
 # image there is still checked for NaN, Inf and negative values.
 CANNOT_LIGHT = {

@@ -34,8 +34,12 @@
 // other filters any consistent choice keeps the weights a partition of
 // unity, hence the estimator unbiased (Veach 1997, sec. 9.2.1).
 //
-// Not supported (refused by check_scene): emitters at infinity (constant,
-// directional), and sensors without importance (radiance/irradiance meters).
+// Emitters at infinity (constant, directional) as pbrt-v4's BDPT: a camera
+// path that leaves the scene ends on a Light vertex at infinity (s = 0);
+// light subpaths start on the disk outside the scene, y1 with the disk's
+// planar density times |cos|, y0 with its direction's light-sampling
+// density (subpath.cpp). Not supported (refused by check_scene): sensors
+// without importance (radiance/irradiance meters).
 #include <climits>
 #include <stdexcept>
 
@@ -75,14 +79,6 @@ public:
             throw std::invalid_argument("integrator 'bdpt': sensor '" + scene.sensor_desc.type +
                                         "' cannot be reached by light subpaths (bdpt connects to cameras with a "
                                         "film); use integrator 'path' or a perspective or orthographic camera");
-        Vec3 c;
-        float r;
-        scene.bounding_sphere(c, r);
-        for (const auto& e : scene.emitters)
-            if (e->is_environment() || (e->is_delta() && std::isinf(e->sample_direct(c, Vec2(0.5f, 0.5f), 0.5f).dist)))
-                throw std::invalid_argument("integrator 'bdpt': emitter '" + e->id +
-                                            "' is at infinity (constant or directional), which bdpt does not "
-                                            "support yet; use integrator 'path'");
         const SensorDesc& sd = scene.sensor_desc;
         filter_ = std::make_unique<FilterSampler>(sd.rfilter, sd.filter_radius, sd.filter_stddev);
     }
@@ -141,6 +137,7 @@ public:
         for (int t = 1; t <= nc; ++t)
             for (int s = 0; s <= nl; ++s) {
                 if (s > int(light.size()) && s != 1) continue;
+                if (s > 0 && cam[t - 1].type == VType::Light) continue;  // an escaped camera path: s = 0 only
                 int depth = s + t - 1;
                 if (depth < 1 || (s == 1 && t == 1)) continue;
                 if (max_depth_ >= 0 && depth > max_depth_) continue;
@@ -182,10 +179,13 @@ public:
                     // fresh one, whose densities come from the same functions).
                     if (s + t - 1 < 2) continue;
                     if (max_depth_ >= 0 && s + t - 1 > max_depth_) continue;
-                    if (s == 0 && !(cam[t - 1].emitter && cam[t - 1].type == VType::Surface)) continue;
+                    if (s == 0 && !(cam[t - 1].emitter && (cam[t - 1].type == VType::Surface || cam[t - 1].infinite)))
+                        continue;
+                    if (s > 0 && cam[t - 1].type != VType::Surface) continue;
+                    if (s > 1 && light[s - 1].type != VType::Surface) continue;
                     if (s > 0 && (!cam[t - 1].connectible() || !light[s - 1].connectible())) continue;
                     // s = 1 behind a one-sided area light carries nothing (and has no light-sampling density)
-                    if (s == 1 && !light[0].emitter->is_delta() &&
+                    if (s == 1 && !light[0].emitter->is_delta() && !light[0].infinite &&
                         !(dot(light[0].it.n, cam[t - 1].it.p - light[0].it.p) > 0.f))
                         continue;
                     fast.push_back(mis_weight(scene, s, t));
@@ -226,8 +226,7 @@ private:
                 p = em->is_delta() ? emitter_pick_prob(scene) : light_origin_pdf(scene, x[k], x[k - 1]);
             } else {
                 if (x[i + 1].delta) continue;
-                p = i == k - 1 ? to_area(em->pdf_emission_w(x[k].it.n, normalize(x[i].it.p - x[k].it.p)), x[k].it.p, x[i])
-                               : pdf_to(scene, x[i + 1], &x[i + 2], x[i]);
+                p = i == k - 1 ? emitter_pdf_to(scene, x[k], x[i]) : pdf_to(scene, x[i + 1], &x[i + 2], x[i]);
             }
             pl[i] = p != 0.0 ? p : 1.0;
         }
@@ -287,9 +286,7 @@ private:
 
         pt->pdf_rev = s > 0 ? pdf_to(scene, *qs, qs_m, *pt) : light_origin_pdf(scene, *pt, *pt_m);
         if (pt_m)
-            pt_m->pdf_rev = s > 0 ? pdf_to(scene, *pt, qs, *pt_m)
-                                  : to_area(pt->emitter->pdf_emission_w(pt->it.n, normalize(pt_m->it.p - pt->it.p)),
-                                            pt->it.p, *pt_m);
+            pt_m->pdf_rev = s > 0 ? pdf_to(scene, *pt, qs, *pt_m) : emitter_pdf_to(scene, *pt, *pt_m);
         if (qs) qs->pdf_rev = pdf_to(scene, *pt, pt_m, *qs);
         if (qs_m) qs_m->pdf_rev = pdf_to(scene, *qs, pt, *qs_m);
         pt->delta = false;  // the ends of a connection (or the emitter an s = 0 path ends on)
@@ -340,8 +337,13 @@ private:
         if (s == 0) {
             // The camera subpath found an emitter.
             const PathVertex& z = cam[t - 1];
-            if (z.type != VType::Surface || !z.emitter) return L;
-            L = z.beta * z.emitter->eval(z.it, z.it.wi);
+            if (z.infinite) {  // it left the scene: every environment emitter's radiance
+                for (const Emitter* env : scene.environment) L += env->eval_environment(-z.it.wi);
+                L = z.beta * L;
+            } else {
+                if (z.type != VType::Surface || !z.emitter) return L;
+                L = z.beta * z.emitter->eval(z.it, z.it.wi);
+            }
             if (is_black(L)) return L;
         } else if (t == 1) {
             // A light vertex connected to the camera (light tracing's splat).
@@ -377,11 +379,20 @@ private:
             PathVertex y0;
             y0.type = VType::Light;
             y0.emitter = &e;
-            y0.it.p = ds.p;
-            y0.it.n = e.is_delta() ? Vec3(0.f) : ds.n;
-            float pdf_a = 1.f;
-            if (!e.is_delta()) pdf_a = ds.pdf_w * std::fabs(dot(ds.n, ds.d)) / (ds.dist * ds.dist);
-            y0.pdf_fwd = pick * pdf_a;
+            if (e.is_infinite()) {
+                y0.infinite = true;
+                Ray toward;
+                toward.o = z.it.p;
+                toward.d = ds.d;
+                y0.it.p = far_point(scene, toward);
+                y0.pdf_fwd = light_origin_pdf(scene, y0, z);
+            } else {
+                y0.it.p = ds.p;
+                y0.it.n = e.is_delta() ? Vec3(0.f) : ds.n;
+                float pdf_a = 1.f;
+                if (!e.is_delta()) pdf_a = ds.pdf_w * std::fabs(dot(ds.n, ds.d)) / (ds.dist * ds.dist);
+                y0.pdf_fwd = pick * pdf_a;
+            }
             bool had = !light.empty();
             PathVertex saved;
             if (had) saved = light[0];
@@ -395,7 +406,7 @@ private:
             // Connect y_{s-1} and z_{t-1}: f_L f_E / d^2, the cosines inside the evals.
             PathVertex& y = light[s - 1];
             PathVertex& z = cam[t - 1];
-            if (!y.connectible() || !z.connectible()) return L;
+            if (y.type != VType::Surface || z.type != VType::Surface || !y.connectible() || !z.connectible()) return L;
             Vec3 d = y.it.p - z.it.p;
             float d2 = length_sq(d);
             if (!(d2 > 0.f)) return L;

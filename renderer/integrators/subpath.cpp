@@ -8,6 +8,7 @@
 namespace rm {
 
 float to_area(float pdf_w, const Vec3& from, const PathVertex& to) {
+    if (to.infinite) return pdf_w;
     Vec3 v = to.it.p - from;
     float d2 = length_sq(v);
     if (!(d2 > 0.f)) return 0.f;
@@ -15,7 +16,28 @@ float to_area(float pdf_w, const Vec3& from, const PathVertex& to) {
     return pdf_w * c / d2;
 }
 
+float emitter_pdf_to(const Scene& scene, const PathVertex& v, const PathVertex& next) {
+    Vec3 d = next.it.p - v.it.p;
+    float len = length(d);
+    if (!(len > 0.f)) return 0.f;
+    d = d / len;
+    if (v.infinite) {
+        Vec3 c;
+        float r;
+        scene.bounding_sphere(c, r);
+        float rd = infinite_disk_radius(r);
+        float pdf = 1.f / (kPi * rd * rd);
+        return length_sq(next.it.n) > 0.f ? pdf * absdot(next.it.n, d) : pdf;
+    }
+    return to_area(v.emitter->pdf_emission_w(v.it.n, d), v.it.p, next);
+}
+
 float camera_pdf_a(const Scene& scene, const PathVertex& v) {
+    if (v.infinite) {  // per steradian: the camera's directional importance over the film
+        ImportanceSample is = scene.sensor->eval_direction(normalize(-v.it.wi), nullptr);
+        if (!is.valid) return 0.f;
+        return is.weight / (float(scene.sensor->width) * float(scene.sensor->height));
+    }
     ImportanceSample is = scene.sensor->sample_direction(v.it.p);
     if (!is.valid) return 0.f;
     float c = length_sq(v.it.n) > 0.f ? absdot(v.it.n, is.d) : 1.f;
@@ -28,7 +50,7 @@ float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, co
     float len = length(d);
     if (!(len > 0.f)) return 0.f;
     d = d / len;
-    if (v.type == VType::Light) return to_area(v.emitter->pdf_emission_w(v.it.n, d), v.it.p, next);
+    if (v.type == VType::Light) return emitter_pdf_to(scene, v, next);
     if (!prev) return 0.f;
     BsdfContext ctx;
     Vec3 wi = normalize(prev->it.p - v.it.p);
@@ -36,12 +58,28 @@ float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, co
 }
 
 float light_origin_pdf(const Scene& scene, const PathVertex& v, const PathVertex& ref) {
+    if (v.infinite) {
+        float sum = 0.f;
+        for (const auto& e : scene.emitters)
+            if (e->is_infinite()) sum += e->pdf_direct(ref.it.p, v.it.p, Vec3(0.f));
+        return emitter_pick_prob(scene) * sum;
+    }
     float pd = v.emitter->pdf_direct(ref.it.p, v.it.p, v.it.n);
     Vec3 d = v.it.p - ref.it.p;
     float d2 = length_sq(d);
     if (!(pd > 0.f) || !(d2 > 0.f)) return 0.f;
     float cos_l = absdot(v.it.n, d) / std::sqrt(d2);
     return emitter_pick_prob(scene) * pd * cos_l / d2;
+}
+
+// A point along `ray` beyond the scene's bounding sphere: where a vertex at
+// infinity sits, so that directions computed from the scene towards it are
+// the ray's direction.
+Vec3 far_point(const Scene& scene, const Ray& ray) {
+    Vec3 c;
+    float r;
+    scene.bounding_sphere(c, r);
+    return ray.o + ray.d * (2.f * (r + length(ray.o - c)) + 1.f);
 }
 
 // Each new vertex gets pdf_fwd and its predecessor's predecessor pdf_rev
@@ -59,7 +97,32 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
         if (int(path.size()) >= max_vertices) break;
         Interaction it;
         ++stats.rays;
-        if (!scene.intersect(ray, it)) break;
+        if (!scene.intersect(ray, it)) {
+            // A camera path leaving the scene ends on the environment: a
+            // Light vertex at infinity, for the s = 0 strategy (pbrt-v4).
+            if (mode == TransportMode::Radiance && !scene.environment.empty()) {
+                PathVertex v;
+                v.type = VType::Light;
+                v.infinite = true;
+                v.emitter = scene.environment[0];
+                v.it.p = far_point(scene, ray);
+                v.it.wi = -ray.d;
+                v.beta = beta;
+                const size_t n = path.size();
+                const PathVertex& prev = path[n - 1];
+                if (n == 1) {
+                    v.pdf_fwd = camera_pdf_a(scene, v);
+                } else if (prev.delta) {
+                    v.pdf_fwd = 0.f;
+                    path[n - 2].pdf_rev = 0.f;
+                } else {
+                    v.pdf_fwd = pdf_to(scene, prev, &path[n - 2], v);
+                    path[n - 2].pdf_rev = pdf_to(scene, prev, &v, path[n - 2]);
+                }
+                path.push_back(v);
+            }
+            break;
+        }
         const Shape& shape = *scene.shapes[it.shape];
         PathVertex v;
         v.it = it;
@@ -130,6 +193,11 @@ bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int r
     y0.it.n = es.n;
     y0.it.eps = es.eps;
     y0.pdf_fwd = pick * es.pdf_a;
+    y0.infinite = e.is_infinite();
+    // At infinity y0's own density is that of its direction under light
+    // sampling (pbrt-v4's GenerateLightSubpath); y1's comes from the origin
+    // disk through emitter_pdf_to.
+    if (y0.infinite) y0.pdf_fwd = light_origin_pdf(scene, y0, y0);
     light.push_back(y0);
     if (stop && (*stop)(light)) return true;
     Ray ray;

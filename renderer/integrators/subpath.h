@@ -24,14 +24,21 @@ struct PathVertex {
     Color beta{0.f};       // throughput of the subpath up to this vertex (Veach's alpha_i)
     float pdf_fwd = 0.f, pdf_rev = 0.f;
     bool delta = false;    // the walk sampled a delta lobe here
+    bool infinite = false; // a Light vertex at infinity (directional, environment): it.p is a far point along its direction
     const Bsdf* bsdf = nullptr;
     const Emitter* emitter = nullptr;  // the light of a Light vertex, or the area emitter a surface carries
     bool connectible() const { return type != VType::Surface || bsdf->has_smooth(); }
     bool null_surface() const { return type == VType::Surface && bsdf->flags() == kNull; }
 };
 
-// Solid angle at `from` to area at `to` (Veach 1997, eq. 8.10): p_a = p_w |cos| / d^2.
+// Solid angle at `from` to area at `to` (Veach 1997, eq. 8.10): p_a = p_w |cos| / d^2;
+// a vertex at infinity keeps the solid-angle density (pbrt-v4's ConvertDensity).
 float to_area(float pdf_w, const Vec3& from, const PathVertex& to);
+// Area density with which the emitter of vertex v (a Light vertex, or a
+// surface carrying an area emitter) sends light to `next`; for emitters at
+// infinity the planar density of the light ray's origin disk times
+// |cos| at next (pbrt-v4's Vertex::PDFLight).
+float emitter_pdf_to(const Scene& scene, const PathVertex& v, const PathVertex& next);
 inline float remap0(float f) { return f != 0.f ? f : 1.f; }
 
 // The camera's area density of sampling the first vertex v: W(v) |cos| / (W H),
@@ -41,8 +48,14 @@ float camera_pdf_a(const Scene& scene, const PathVertex& v);
 // from `prev` (pbrt-v4's Vertex::PDF).
 float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, const PathVertex& next);
 // Area density with which light sampling picks v, a point on an area
-// emitter, from `ref` (pbrt-v4's PdfLightOrigin).
+// emitter, from `ref` (pbrt-v4's PdfLightOrigin); for a vertex at infinity
+// the solid-angle density of its direction, summed over the emitters at
+// infinity (pbrt-v4's InfiniteLightDensity).
 float light_origin_pdf(const Scene& scene, const PathVertex& v, const PathVertex& ref);
+
+// A point along `ray` beyond the scene's bounding sphere, where a vertex at
+// infinity in the ray's direction is placed.
+Vec3 far_point(const Scene& scene, const Ray& ray);
 
 // Asked after each new vertex, before its next direction is sampled: true
 // stops the walk there (an estimator that can use no later vertex).

@@ -200,6 +200,7 @@ public:
         dir_ = normalize(xf.vector(Vec3(0, 0, 1)));
         if (!is_finite(dir_)) throw std::invalid_argument("emitter '" + d.id + "': direction is zero");
         delta_ = true;
+        infinite_ = true;
     }
     DirectSample sample_direct(const Vec3&, Vec2, float) const override {
         DirectSample ds;
@@ -215,7 +216,7 @@ public:
     // weight = E pi r^2.
     EmissionSample sample_emission(Vec2 u_pos, float, Vec2, const Vec3& c, float radius) const override {
         EmissionSample es;
-        float r = radius * 1.001f + 1e-6f;
+        float r = infinite_disk_radius(radius);
         Vec2 q = warp::square_to_uniform_disk_concentric(u_pos);
         Frame fr(dir_);
         es.p = c + (fr.s * q.x + fr.t * q.y) * r - dir_ * r;
@@ -236,6 +237,7 @@ public:
     explicit ConstantEmitter(const EmitterDesc& d) : radiance_(d.radiance) {
         check_color(radiance_, d.id, "radiance");
         environment_ = true;
+        infinite_ = true;
     }
     DirectSample sample_direct(const Vec3&, Vec2 u, float) const override {
         DirectSample ds;
@@ -254,7 +256,7 @@ public:
     // UniformInfiniteLight::SampleLe): weight = L 4 pi * pi r^2.
     EmissionSample sample_emission(Vec2 u_pos, float, Vec2 u_dir, const Vec3& c, float radius) const override {
         EmissionSample es;
-        float r = radius * 1.001f + 1e-6f;
+        float r = infinite_disk_radius(radius);
         es.d = warp::square_to_uniform_sphere(u_dir);
         Vec2 q = warp::square_to_uniform_disk_concentric(u_pos);
         Frame fr(es.d);

@@ -73,10 +73,17 @@ public:
     virtual float pdf_emission_w(const Vec3& n, const Vec3& w) const { return 0.f; }
     bool is_delta() const { return delta_; }
     bool is_environment() const { return environment_; }
+    // At infinity: directional and environment emitters (their light rays
+    // start on the disk of infinite_disk_radius around the scene).
+    bool is_infinite() const { return infinite_; }
 
 protected:
-    bool delta_ = false, environment_ = false;
+    bool delta_ = false, environment_ = false, infinite_ = false;
 };
+
+// Radius of the disk outside the scene's bounding sphere (of radius r) on
+// which emitters at infinity start their light rays (pbrt-v4's SampleLe).
+inline float infinite_disk_radius(float scene_radius) { return scene_radius * 1.001f + 1e-6f; }
 
 // Area light on `shape`, radiance on the side its normal points to (one-sided, like Mitsuba).
 std::unique_ptr<Emitter> make_area_emitter(const EmitterDesc& desc, const Shape* shape);
