@@ -139,6 +139,22 @@ def test_area_light_rough_glass_plastic_match_path():
                       effects=NO_CAUSTIC)
 
 
+SPHERE_LIGHT = {"type": "sphere", "center": [0.5, -0.4, 1.3], "radius": 0.15,
+                "emitter": {"type": "area", "radiance": _rgb([8.0, 7.0, 6.0])}}
+
+
+def test_sphere_light_matches_path():
+    """A sphere light: next event estimation (s = 1) samples the cone it
+    subtends, light subpaths start by area; the weights account for both
+    (and the brute-force check above covers the sphere light with glossy
+    objects). Diffuse surfaces only here: with the rough glass and
+    plastic of GLOSSY, this small bright light makes `path`'s estimate
+    heavy-tailed (glossy paths that must hit it by chance; measured: block
+    mean z +4.0, +4.1, +4.3 over three seeds while the image ratio
+    bdpt / path was 0.993, 0.998, 1.004)."""
+    compare_with_path(small_scene(SPHERE_LIGHT), 512, 512, where="sphere light")
+
+
 def test_directional_light_matches_path():
     """A delta direction at infinity: light subpaths start on the disk
     outside the scene (y1 with the disk's planar density), no s = 0."""
@@ -212,7 +228,7 @@ def _mis_check(scene, n=3000, **integ):
 @pytest.mark.parametrize("mis", [{}, {"mis": "balance"}, {"mis": "uniform"}, {"beta": 3.0}],
                          ids=lambda m: "-".join(str(v) for v in m.values()) or "power")
 @pytest.mark.parametrize("which", ["cornell", "mirror_ball_point", "glossy_area", "mirror_caustic_ortho",
-                                   "environment_glossy", "directional_glossy"])
+                                   "environment_glossy", "directional_glossy", "sphere_light_glossy"])
 def test_mis_weights_match_brute_force(which, mis):
     """For every strategy (s, t) of random subpath pairs, bdpt's linear-time
     weight (ratio recursion) equals the weight from every strategy's full path
@@ -230,6 +246,8 @@ def test_mis_weights_match_brute_force(which, mis):
         scene = small_scene(AREA, res=8, extra=GLOSSY)
     elif which == "environment_glossy":  # vertices at infinity: escaped camera paths, light subpaths from the disk
         scene = small_scene({"type": "constant", "radiance": _rgb(1.0)}, res=8, extra=GLOSSY)
+    elif which == "sphere_light_glossy":  # next event estimation samples the sphere's cone, light subpaths its area
+        scene = small_scene(SPHERE_LIGHT, res=8, extra=GLOSSY)
     elif which == "directional_glossy":
         scene = small_scene({"type": "directional", "direction": [0.3, 0.5, -0.8], "irradiance": _rgb(1.0)}, res=8,
                             extra=GLOSSY)

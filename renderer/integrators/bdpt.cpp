@@ -188,8 +188,13 @@ public:
                     if (s == 1 && !light[0].emitter->is_delta() && !light[0].infinite &&
                         !(dot(light[0].it.n, cam[t - 1].it.p - light[0].it.p) > 0.f))
                         continue;
+                    // s = 1: y0 as next event estimation would have sampled it (its density, as the renderer's)
+                    float saved_fwd = light.empty() ? 0.f : light[0].pdf_fwd;
+                    if (s == 1 && !light[0].infinite && !light[0].emitter->is_delta())
+                        light[0].pdf_fwd = light_origin_pdf(scene, light[0], cam[t - 1]);
                     fast.push_back(mis_weight(scene, s, t));
                     brute.push_back(brute_weight(scene, s, t));
+                    if (!light.empty()) light[0].pdf_fwd = saved_fwd;
                     strategy.push_back(s * 1000 + t);
                 }
         }
@@ -222,7 +227,7 @@ private:
         }
         for (int i = k; i >= 1; --i) {
             double p;
-            if (i == k) {
+            if (i == k) {  // next event estimation's density (strategy s' = 1); p_le below for s' >= 2
                 p = em->is_delta() ? emitter_pick_prob(scene) : light_origin_pdf(scene, x[k], x[k - 1]);
             } else {
                 if (x[i + 1].delta) continue;
@@ -230,11 +235,20 @@ private:
             }
             pl[i] = p != 0.0 ? p : 1.0;
         }
+        // The light subpath's own density of x_k (sample_emission by area),
+        // for strategies with s' >= 2 light vertices.
+        // (Where next event estimation cannot reach x_k, both keep the
+        // remapped density, as nee_over_emission's ratio of 1 does.)
+        double p_le = pl[k];
+        if (!em->is_delta() && !x[k].infinite && light_origin_pdf(scene, x[k], x[k - 1]) > 0.f) {
+            double a = double(emitter_pick_prob(scene)) * em->pdf_emission_a(x[k].it.p);
+            if (a > 0.0) p_le = a;
+        }
         // Strategy with tt camera vertices x_0 .. x_{tt-1} and the rest from the light.
         auto density = [&](int tt) {
             double p = 1.0;
             for (int i = 1; i < tt; ++i) p *= pc[i];
-            for (int i = tt; i <= k; ++i) p *= pl[i];
+            for (int i = tt; i <= k; ++i) p *= (i == k && tt < k) ? p_le : pl[i];
             return p;
         };
         auto valid = [&](int tt) {
@@ -292,16 +306,28 @@ private:
         pt->delta = false;  // the ends of a connection (or the emitter an s = 0 path ends on)
         if (qs) qs->delta = false;
 
+        // The emitter vertex's density differs between strategy s' = 1 (next
+        // event estimation: p_NEE) and s' >= 2 (light subpath: p_LE); the
+        // ratio chain carries the one stored for the current strategy, so
+        // each alternative's ratio is corrected by m(s') (nee_over_emission,
+        // c = p_NEE / p_LE; 1 for emitters whose two densities agree).
+        float c = s >= 2 ? nee_over_emission(scene, light[0], light[1])
+                         : s == 1 ? nee_over_emission(scene, light[0], *pt) : nee_over_emission(scene, *pt, *pt_m);
+        auto m = [&](int s_alt) {
+            if (s_alt == 0 || c == 1.f) return 1.f;
+            if (s_alt == 1) return s >= 2 ? c : 1.f;
+            return s >= 2 ? 1.f : 1.f / c;
+        };
         float sum = 0.f, ri = 1.f;
         for (int i = t - 1; i > 0; --i) {  // strategies with fewer camera vertices
             ri *= remap0(cam[i].pdf_rev) / remap0(cam[i].pdf_fwd);
-            if (!cam[i].delta && !cam[i - 1].delta) sum += heuristic(ri);
+            if (!cam[i].delta && !cam[i - 1].delta) sum += heuristic(ri * m(s + t - i));
         }
         ri = 1.f;
         for (int i = s - 1; i >= 0; --i) {  // strategies with fewer light vertices
             ri *= remap0(light[i].pdf_rev) / remap0(light[i].pdf_fwd);
             bool delta_before = i > 0 ? light[i - 1].delta : light[0].emitter->is_delta();
-            if (!light[i].delta && !delta_before) sum += heuristic(ri);
+            if (!light[i].delta && !delta_before) sum += heuristic(ri * m(i));
         }
 
         pt->pdf_rev = sv.pt_rev;

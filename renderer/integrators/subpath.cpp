@@ -72,6 +72,14 @@ float light_origin_pdf(const Scene& scene, const PathVertex& v, const PathVertex
     return emitter_pick_prob(scene) * pd * cos_l / d2;
 }
 
+float nee_over_emission(const Scene& scene, const PathVertex& y0, const PathVertex& adj) {
+    if (y0.infinite || !y0.emitter || y0.emitter->is_delta()) return 1.f;
+    float le = emitter_pick_prob(scene) * y0.emitter->pdf_emission_a(y0.it.p);
+    float nee = light_origin_pdf(scene, y0, adj);
+    if (!(le > 0.f) || !(nee > 0.f) || !std::isfinite(nee / le)) return 1.f;
+    return nee / le;
+}
+
 // A point along `ray` beyond the scene's bounding sphere: where a vertex at
 // infinity sits, so that directions computed from the scene towards it are
 // the ray's direction.

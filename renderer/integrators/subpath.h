@@ -57,6 +57,15 @@ float light_origin_pdf(const Scene& scene, const PathVertex& v, const PathVertex
 // infinity in the ray's direction is placed.
 Vec3 far_point(const Scene& scene, const Ray& ray);
 
+// A path's emitter vertex y0 is sampled by area when a light subpath starts
+// (sample_emission) but by light sampling from its neighbour `adj` in next
+// event estimation (s = 1), which for a sphere samples the cone it
+// subtends: the two densities differ. Returns p_NEE(y0) / p_LE(y0), both
+// per unit area with the emitter pick, for the MIS weights (1 for delta
+// and infinite emitters, whose two densities are the same, and where either
+// is 0).
+float nee_over_emission(const Scene& scene, const PathVertex& y0, const PathVertex& adj);
+
 // Asked after each new vertex, before its next direction is sampled: true
 // stops the walk there (an estimator that can use no later vertex).
 using WalkStop = std::function<bool(const std::vector<PathVertex>&)>;

@@ -23,10 +23,13 @@ public:
     }
     DirectSample sample_direct(const Vec3& ref, Vec2 u, float u_extra) const override {
         DirectSample ds;
-        PositionSample ps = shape_->sample_position(u, u_extra);
+        PositionSample ps;
+        float cone_pdf_w = 0.f;
+        bool by_direction = shape_->sample_direction(ref, u, ps, cone_pdf_w);  // the sphere's cone
+        if (!by_direction) ps = shape_->sample_position(u, u_extra);
         Vec3 v = ps.p - ref;
         float d2 = length_sq(v);
-        if (!(d2 > 0.f) || ps.pdf_a <= 0.f) return ds;
+        if (!(d2 > 0.f) || (!by_direction && ps.pdf_a <= 0.f)) return ds;
         float dist = std::sqrt(d2);
         ds.p = ps.p;
         ds.n = ps.n;
@@ -34,9 +37,12 @@ public:
         ds.d = v / dist;
         ds.dist = dist;
         float cos_l = -dot(ps.n, ds.d);  // > 0 when the emitting side faces ref
-        if (cos_l <= 0.f) return ds;     // back side: emits nothing (pdf_w 0 marks a failed sample)
+        // Back side: emits nothing (pdf_w 0 marks a failed sample). A cone
+        // sample is on the visible cap by construction (a rim sample's cosine
+        // may round to <= 0; dropping it would lose its share).
+        if (cos_l <= 0.f && !by_direction) return ds;
         // Area to solid angle: p_w = p_a d^2 / |cos theta_l| (Veach 1997, eq. 8.10).
-        ds.pdf_w = ps.pdf_a * d2 / cos_l;
+        ds.pdf_w = by_direction ? cone_pdf_w : ps.pdf_a * d2 / cos_l;
         ds.radiance = radiance_;
         return ds;
     }
@@ -45,6 +51,8 @@ public:
         float d2 = length_sq(v);
         float cos_l = -dot(n, v) / std::sqrt(d2);
         if (cos_l <= 0.f || !(d2 > 0.f)) return 0.f;
+        float pd = shape_->pdf_direction(ref, p);
+        if (pd >= 0.f) return pd;
         return d2 / (cos_l * shape_->area());
     }
     Color eval(const Interaction& it, const Vec3& w) const override {
@@ -72,6 +80,7 @@ public:
         if (!(c > 0.f) || !(es.pdf_a > 0.f)) return Color(0.f);
         return radiance_ * (c / es.pdf_a);
     }
+    float pdf_emission_a(const Vec3&) const override { return 1.f / shape_->area(); }
     float pdf_emission_w(const Vec3& n, const Vec3& w) const override {
         float c = dot(n, w);
         return c > 0.f ? c * kInvPi : 0.f;

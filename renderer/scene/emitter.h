@@ -71,6 +71,8 @@ public:
     // reverse densities of bidirectional MIS (Veach 1997, sec. 10.2).
     // 0 for directional and environment emitters.
     virtual float pdf_emission_w(const Vec3& n, const Vec3& w) const { return 0.f; }
+    // Area density of sample_emission's origin at p (area emitters; 0 otherwise).
+    virtual float pdf_emission_a(const Vec3& p) const { return 0.f; }
     bool is_delta() const { return delta_; }
     bool is_environment() const { return environment_; }
     // At infinity: directional and environment emitters (their light rays

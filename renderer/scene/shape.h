@@ -32,6 +32,14 @@ public:
     // Fills the geometric part of `it` for a hit reported by Embree.
     virtual void fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const = 0;
     virtual PositionSample sample_position(Vec2 u, float u_extra) const = 0;
+    // Sampling by solid angle as seen from `ref`, for shapes that can do
+    // better than by area (the sphere's cone of directions). Returns false
+    // where the shape has none for this ref (then: area sampling); on true,
+    // `ps` holds the point and `pdf_w` its solid-angle density.
+    virtual bool sample_direction(const Vec3& ref, Vec2 u, PositionSample& ps, float& pdf_w) const { return false; }
+    // The density sample_direction gives the point p seen from ref, or a
+    // negative value where it does not apply (area sampling's density holds).
+    virtual float pdf_direction(const Vec3& ref, const Vec3& p) const { return -1.f; }
     virtual float area() const = 0;
     virtual Vec3 bbox_min() const = 0;
     virtual Vec3 bbox_max() const = 0;
@@ -67,6 +75,8 @@ public:
     RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) override;
     void fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const override;
     PositionSample sample_position(Vec2 u, float u_extra) const override;
+    bool sample_direction(const Vec3& ref, Vec2 u, PositionSample& ps, float& pdf_w) const override;
+    float pdf_direction(const Vec3& ref, const Vec3& p) const override;
     float area() const override { return 4.f * kPi * float(r_ * r_); }
     Vec3 bbox_min() const override;
     Vec3 bbox_max() const override;
