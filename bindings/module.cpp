@@ -106,7 +106,19 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("rfilter", &SensorDesc::rfilter)
         .def_readwrite("filter_radius", &SensorDesc::filter_radius)
         .def_readwrite("filter_stddev", &SensorDesc::filter_stddev)
-        .def_readwrite("shape", &SensorDesc::shape);
+        .def_readwrite("shape", &SensorDesc::shape)
+        .def_readwrite("medium", &SensorDesc::medium);
+
+    py::class_<MediumDesc>(m, "MediumDesc")
+        .def(py::init<>())
+        .def_readwrite("type", &MediumDesc::type)
+        .def_readwrite("id", &MediumDesc::id)
+        .def_property("sigma_t", [](const MediumDesc& d) { return color_tuple(d.sigma_t); },
+                      [](MediumDesc& d, py::object v) { d.sigma_t = to_color(v); })
+        .def_property("albedo", [](const MediumDesc& d) { return color_tuple(d.albedo); },
+                      [](MediumDesc& d, py::object v) { d.albedo = to_color(v); })
+        .def_readwrite("phase", &MediumDesc::phase)
+        .def_readwrite("g", &MediumDesc::g);
 
     py::class_<IntegratorDesc>(m, "IntegratorDesc")
         .def(py::init<>())
@@ -141,6 +153,9 @@ PYBIND11_MODULE(_core, m) {
                  return s.add_disk(id, to_matrix(m4), bsdf, flip);
              },
              py::arg("id"), py::arg("to_world"), py::arg("bsdf"), py::arg("flip_normals") = false)
+        .def("add_medium", &Scene::add_medium)
+        .def("set_shape_media", &Scene::set_shape_media, py::arg("shape"), py::arg("interior"), py::arg("exterior"))
+        .def_property_readonly("medium_count", [](const Scene& s) { return s.media.size(); })
         .def("add_area_emitter", &Scene::add_area_emitter)
         .def("add_emitter", &Scene::add_emitter)
         .def("set_sensor", &Scene::set_sensor)

@@ -72,6 +72,16 @@ rfilter    box (radius 0.5), tent: radius [1], gaussian: stddev [0.5]
 sampler    independent: sample_count [4] -> SensorDesc.spp, seed (accepted).
 integrator direct path volpath ptracer bdpt photonmapper sppm; its parameters
            (ints, floats, bools, strings) go unchecked to IntegratorDesc.params.
+medium     homogeneous: sigma_t [1] + albedo [0.75] (Mitsuba 3), or sigma_a +
+               sigma_s (Mitsuba 0.6's form; albedo = sigma_s / sigma_t, 0
+               where sigma_t is 0), scale [1] multiplying the coefficients;
+               each an rgb or a float; sample_emitters [true] (only true);
+               one nested phase [isotropic]. Nested in a shape as `interior`
+               / `exterior` (or referenced by those names), in a sensor as
+               `medium`; declared at the top level for refs.
+           heterogeneous (grid volumes, gridvolume .vol files): rejected as
+               not implemented yet.
+phase      isotropic; hg: g [0.8] in (-1, 1).
 
 Decisions where Mitsuba leaves a choice (see also the functions' comments)
 -------------------------------------------------------------------------
@@ -102,6 +112,7 @@ from .scene_desc import (
     BsdfDesc,
     EmitterDesc,
     IntegratorDesc,
+    MediumDesc,
     SceneDesc,
     SceneError,
     SensorDesc,
@@ -156,12 +167,14 @@ PLUGINS = {
     "rfilter": ("box", "tent", "gaussian"),
     "sampler": ("independent",),
     "integrator": ("direct", "path", "volpath", "ptracer", "bdpt", "photonmapper", "sppm"),
+    "medium": ("homogeneous", "heterogeneous"),
+    "phase": ("isotropic", "hg"),
+    "volume": ("gridvolume", "constvolume"),
 }
 _CATEGORY_OF = {t: c for c, types in PLUGINS.items() for t in types}
 
 # XML tags of Mitsuba 3 that are outside the subset, for a precise message.
-_UNSUPPORTED_TAGS = ("texture", "medium", "phase", "volume", "include", "alias", "path",
-                     "spectrum_file")
+_UNSUPPORTED_TAGS = ("texture", "include", "alias", "path", "spectrum_file")
 _PROPERTY_TAGS = ("float", "integer", "boolean", "string", "rgb", "spectrum", "point",
                   "vector", "transform")
 
@@ -346,6 +359,18 @@ class _Params:
                 self.used_children.add(i)
                 out.append(child)
         return out
+
+    def named_child(self, category, name):
+        """The nested plugin of `category` given under `name` (XML: its name
+        attribute or the <ref>'s name; dicts: the key), or None."""
+        found = None
+        for i, (n, child) in enumerate(self.node.children):
+            if child.category == category and n == name:
+                if found is not None:
+                    raise self.error(f"more than one nested {category} named '{name}'", child.place)
+                self.used_children.add(i)
+                found = child
+        return found
 
     def child(self, category):
         kids = self.children(category)
@@ -1116,6 +1141,59 @@ class _Builder:
         p.done()
         return b
 
+    # -- media ---------------------------------------------------------------
+
+    def medium(self, node):
+        return self.cached(node, self._medium)
+
+    def _medium(self, node):
+        p, t = _Params(node), node.type
+        if t == "heterogeneous":
+            raise p.error("heterogeneous (grid) media are not implemented yet; only 'homogeneous' is")
+        m = MediumDesc(type=t, id=node.id or node.place)
+        given_3 = p.has("sigma_t") or p.has("albedo")
+        given_06 = p.has("sigma_a") or p.has("sigma_s")
+        if given_3 and given_06:
+            raise p.error("give either sigma_t + albedo or sigma_a + sigma_s, not both")
+        scale = p.float("scale", 1.0, check="nonneg")
+        if given_06:
+            sa = np.array(p.rgb("sigma_a", 0.0))
+            ss = np.array(p.rgb("sigma_s", 0.0))
+            st = sa + ss
+            albedo = np.divide(ss, st, out=np.zeros(3), where=st > 0)
+        else:
+            st = np.array(p.rgb("sigma_t", 1.0))
+            albedo = np.array(p.rgb("albedo", 0.75))
+            if np.any(albedo > 1.0):
+                raise p.error(f"albedo must lie in [0, 1], got {tuple(albedo.tolist())}",
+                              node.props["albedo"].place)
+        m.sigma_t = tuple(float(x) for x in st * scale)
+        m.albedo = tuple(float(x) for x in albedo)
+        if not all(math.isfinite(x) for x in m.sigma_t):
+            raise p.error(f"sigma_t * scale overflows: {m.sigma_t}")
+        if not p.bool("sample_emitters", True):
+            raise p.error("sample_emitters = false is not supported (next event estimation is always on)",
+                          node.props["sample_emitters"].place)
+        ph = p.child("phase")
+        if ph is not None:
+            pp = _Params(ph)
+            m.phase = ph.type
+            if ph.type == "hg":
+                m.g = pp.float("g", 0.8)
+                if not -1.0 < m.g < 1.0:
+                    raise pp.error(f"parameter 'g' must lie in (-1, 1), got {m.g}", ph.props["g"].place)
+            pp.done()
+        p.done()
+        return m
+
+    def _media_of(self, p):
+        """(interior, exterior) MediumDescs nested in or referenced by a shape."""
+        out = []
+        for name in ("interior", "exterior"):
+            node = p.named_child("medium", name)
+            out.append(None if node is None else self.medium(node))
+        return tuple(out)
+
     # -- emitters ------------------------------------------------------------
 
     def emitter(self, node):
@@ -1208,6 +1286,7 @@ class _Builder:
                 raise p.error(f"only an irradiancemeter can be nested in a shape, got "
                               f"'{sensor.type}'", sensor.place)
             s.sensor = self.sensor(sensor, on_shape=True)
+        s.interior, s.exterior = self._media_of(p)
         p.done()
         return s
 
@@ -1244,6 +1323,8 @@ class _Builder:
         p, t = _Params(node), node.type
         s = SensorDesc(type=t)
         self._film(p.child("film"), s)
+        med = p.named_child("medium", "medium")
+        s.medium = None if med is None else self.medium(med)
         sampler = p.child("sampler")
         s.spp = 4
         if sampler is not None:
@@ -1421,6 +1502,8 @@ def _assemble(nodes, ids, source, base_dir):
             sensors.append((b.sensor(node), node.place))
         elif cat == "bsdf":
             b.bsdf(node)  # a declaration for refs; validate it even if unused
+        elif cat == "medium":
+            b.medium(node)  # a declaration for refs; validate it even if unused
         elif cat == "integrator":
             integrators.append((b.integrator(node), node.place))
         else:

@@ -7,7 +7,12 @@
 //   hide_emitters  directly visible emitters appear black
 // Structure after pbrt-v4's PathIntegrator::Li (integrators.cpp): one loop,
 // direct lighting in its own helper (common.cpp).
+// `volpath` is this estimator under another name (DESIGN: "volpath, alias of
+// path with media"): in a scene with media (Scene::features.has_media) both
+// run the media-aware loop of volpath.cpp; a scene without media runs the
+// surface loop below and never touches media code (one branch per camera ray).
 #include "integrators/common.h"
+#include "integrators/volpath.h"
 
 namespace rm {
 
@@ -17,6 +22,10 @@ public:
 
     void sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
                 ThreadStats& stats) const override {
+        if (scene.features.has_media) {
+            volpath_sample(scene, sampler, camera_ray, out, stats, VolPathParams{max_depth_, rr_depth_, hide_}, mask);
+            return;
+        }
         Ray ray = camera_ray;
         Color beta(1.f);
         float eta_scale = 1.f;  // undoes radiance scaling by eta^2 for Russian roulette
@@ -97,6 +106,8 @@ public:
             }
         }
     }
+
+    bool supports_media() const override { return true; }
 
 private:
     int max_depth_, rr_depth_;

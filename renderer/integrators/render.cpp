@@ -102,6 +102,10 @@ RenderOutput render(const Scene& scene, const Integrator& integrator, const Rend
     if (opts.spp < 0) throw std::invalid_argument("render: spp must be >= 0");
     if (!(opts.seconds >= 0)) throw std::invalid_argument("render: seconds must be >= 0");
     if (opts.spp == 0 && opts.seconds <= 0) throw std::invalid_argument("render: give spp or seconds");
+    if (scene.features.has_media && !integrator.supports_media())
+        throw std::invalid_argument("integrator '" + integrator.type +
+                                    "' does not support participating media yet, and this scene has media; "
+                                    "use integrator 'volpath' (or 'path', the same estimator)");
     if (integrator.is_light_tracer()) return render_light_paths(scene, integrator, opts, poll);
     const Sensor& sensor = *scene.sensor;
     const SensorDesc& sd = scene.sensor_desc;

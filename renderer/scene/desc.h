@@ -51,6 +51,18 @@ struct SensorDesc {
     float filter_radius = 2.f;         // box: 0.5, tent: 1, gaussian: 4 * stddev
     float filter_stddev = 0.5f;        // gaussian
     int shape = -1;                    // irradiancemeter: index of the shape it measures
+    int medium = -1;                   // index of the medium the sensor sits in (-1: vacuum)
+};
+
+// A participating medium (Mitsuba 3's `homogeneous`): the loader resolves
+// sigma_t + albedo or sigma_a + sigma_s, and `scale`, into these two.
+struct MediumDesc {
+    std::string type = "homogeneous";
+    std::string id;                 // for error messages
+    Color sigma_t{1.f};             // extinction per unit length, scale applied
+    Color albedo{0.75f};            // sigma_s / sigma_t, in [0, 1]
+    std::string phase = "isotropic";  // isotropic | hg
+    float g = 0.f;                    // hg asymmetry, in (-1, 1)
 };
 
 struct IntegratorDesc {
