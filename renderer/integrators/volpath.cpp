@@ -110,10 +110,15 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
     // kill per event on top multiplies the weight of a long walk (hundreds of
     // events in a dense, bright medium) by 1/0.95^n, a heavy tail that made
     // every 512 spp render of translucent_slab fail the block test's mean z
-    // (-4 to -6; -1 without that roulette). max_depth bounds the walk.
+    // (-4 to -6; -1 without that roulette). Beyond kLongWalk events the 0.95
+    // cap returns, so that a walk in a dense white medium (albedo 1, which
+    // never absorbs) with max_depth -1 ends in about 20 more events instead
+    // of wandering for (size * sigma_t)^2 events.
+    constexpr int kLongWalk = 1024;
     auto roulette = [&](float rr_u) {
         if (depth < prm.rr_depth) return true;
         float q = max_component(beta) * eta_scale;
+        if (depth >= kLongWalk) q = std::min(q, 0.95f);
         if (q >= 1.f) return true;
         if (!(rr_u < q)) return false;
         beta /= q;
