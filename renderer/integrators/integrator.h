@@ -109,6 +109,10 @@ public:
     // The render driver refuses a scene with media for one that does not
     // (rather than render it as if the media were vacuum).
     virtual bool supports_media() const { return false; }
+    // The estimator that renders `scene` (called once per render, before any
+    // sample): `path` hands a scene with media to its media-aware loop
+    // (volpath.cpp), so that its own surface loop has no media code at all.
+    virtual const Integrator& for_scene(const Scene&) const { return *this; }
     std::string type;  // the estimator's name, for messages (set by make_integrator)
     // Radiance along one camera ray, split by effect class, into `out`.
     virtual void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,

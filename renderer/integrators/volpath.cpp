@@ -260,4 +260,27 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
     }
 }
 
+namespace {
+
+class VolPathIntegrator final : public Integrator {
+public:
+    explicit VolPathIntegrator(const IntegratorDesc& d) : prm_{d.max_depth, d.rr_depth, d.hide_emitters} {
+        type = d.type;
+    }
+    bool supports_media() const override { return true; }
+    void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
+                ThreadStats& stats) const override {
+        volpath_sample(scene, sampler, ray, out, stats, prm_, mask);
+    }
+
+private:
+    VolPathParams prm_;
+};
+
+}  // namespace
+
+std::unique_ptr<Integrator> make_volpath_integrator(const IntegratorDesc& d) {
+    return std::make_unique<VolPathIntegrator>(d);
+}
+
 }  // namespace rm

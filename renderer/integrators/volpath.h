@@ -13,4 +13,7 @@ struct VolPathParams {
 void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
                     ThreadStats& stats, const VolPathParams& prm, const EffectMask& mask);
 
+// `path`'s twin for scenes with media (Integrator::for_scene).
+std::unique_ptr<Integrator> make_volpath_integrator(const IntegratorDesc& d);
+
 }  // namespace rm
