@@ -109,6 +109,17 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("shape", &SensorDesc::shape)
         .def_readwrite("medium", &SensorDesc::medium);
 
+    py::class_<GridDesc>(m, "GridDesc")
+        .def(py::init<>())
+        .def_readwrite("nx", &GridDesc::nx)
+        .def_readwrite("ny", &GridDesc::ny)
+        .def_readwrite("nz", &GridDesc::nz)
+        .def_readwrite("channels", &GridDesc::channels)
+        .def_property("data", [](const GridDesc& d) { return d.data; },
+                      [](GridDesc& d, py::object v) { d.data = flat<float>(v, 1, "grid data"); })
+        .def_property("to_world", [](const GridDesc& d) { return d.to_world; },
+                      [](GridDesc& d, py::object v) { d.to_world = to_matrix(v); });
+
     py::class_<MediumDesc>(m, "MediumDesc")
         .def(py::init<>())
         .def_readwrite("type", &MediumDesc::type)
@@ -117,6 +128,9 @@ PYBIND11_MODULE(_core, m) {
                       [](MediumDesc& d, py::object v) { d.sigma_t = to_color(v); })
         .def_property("albedo", [](const MediumDesc& d) { return color_tuple(d.albedo); },
                       [](MediumDesc& d, py::object v) { d.albedo = to_color(v); })
+        .def_readwrite("sigma_t_grid", &MediumDesc::sigma_t_grid)
+        .def_readwrite("albedo_grid", &MediumDesc::albedo_grid)
+        .def_readwrite("scale", &MediumDesc::scale)
         .def_readwrite("phase", &MediumDesc::phase)
         .def_readwrite("g", &MediumDesc::g);
 

@@ -50,6 +50,15 @@ def _medium_index(scene, media, m, source):
         c.albedo = tuple(float(x) for x in m.albedo)
         c.phase = m.phase
         c.g = float(m.g)
+        c.scale = float(m.scale)
+        for name in ("sigma_t_grid", "albedo_grid"):
+            g = getattr(m, name)
+            if g is not None:
+                cg = _core.GridDesc()
+                cg.nz, cg.ny, cg.nx, cg.channels = (int(v) for v in g.data.shape)
+                cg.data = np.ascontiguousarray(g.data, np.float32).reshape(-1, 1)
+                cg.to_world = np.asarray(g.to_world, np.float64)
+                setattr(c, name, cg)
         try:
             media[id(m)] = scene.add_medium(c)
         except ValueError as e:

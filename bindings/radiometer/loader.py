@@ -79,8 +79,14 @@ medium     homogeneous: sigma_t [1] + albedo [0.75] (Mitsuba 3), or sigma_a +
                one nested phase [isotropic]. Nested in a shape as `interior`
                / `exterior` (or referenced by those names), in a sensor as
                `medium`; declared at the top level for refs.
-           heterogeneous (grid volumes, gridvolume .vol files): rejected as
-               not implemented yet.
+           heterogeneous: as homogeneous, but sigma_t and albedo may each be
+               a nested volume of that name; has_spectral_extinction
+               accepted. The renderer tracks it with a global majorant
+               (delta tracking; ratio tracking for shadow rays).
+volume     gridvolume: filename (Mitsuba's .vol, version 3, float32, 1 or 3
+               channels), to_world (maps the unit cube), use_grid_bbox
+               [false], filter_type ['trilinear'], wrap_mode ['clamp'], raw,
+               accel (accepted); constvolume: value [1].
 phase      isotropic; hg: g [0.8] in (-1, 1).
 
 Decisions where Mitsuba leaves a choice (see also the functions' comments)
@@ -104,6 +110,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import struct
 import xml.parsers.expat
 
 import numpy as np
@@ -111,6 +118,7 @@ import numpy as np
 from .scene_desc import (
     BsdfDesc,
     EmitterDesc,
+    GridDesc,
     IntegratorDesc,
     MediumDesc,
     SceneDesc,
@@ -966,6 +974,45 @@ def _read_obj(path, flip_tex_coords, err):
     return p, np.asarray(tris, dtype=np.uint32), n, uv
 
 
+def _read_vol(path, err):
+    """Mitsuba's binary grid format: 'VOL', version 3, int32 encoding (1 =
+    float32), int32 xres, yres, zres, channels, 6 float32 bounding box
+    (min, max), then xres*yres*zres*channels float32, x fastest. Returns
+    ((z, y, x, channels) float32 array, (bbox_min, bbox_max))."""
+    with open(path, "rb") as f:
+        raw = f.read()
+    if len(raw) < 48 or raw[:3] != b"VOL":
+        raise SceneError(f"{err}: '{path}' is not a Mitsuba .vol file (no 'VOL' header)")
+    version = raw[3]
+    enc, nx, ny, nz, ch = struct.unpack("<5i", raw[4:24])
+    if version != 3 or enc != 1:
+        raise SceneError(f"{err}: '{path}': only version 3 float32 .vol files are supported "
+                         f"(version {version}, encoding {enc})")
+    if min(nx, ny, nz) < 1 or ch not in (1, 3):
+        raise SceneError(f"{err}: '{path}': bad resolution {nx}x{ny}x{nz} or channel count {ch}")
+    bbox = np.frombuffer(raw[24:48], "<f4").astype(np.float64)
+    n = nx * ny * nz * ch
+    if len(raw) != 48 + 4 * n:
+        raise SceneError(f"{err}: '{path}': expected {n} values ({48 + 4 * n} bytes), file has {len(raw)} bytes")
+    data = np.frombuffer(raw[48:], "<f4").astype(np.float32).reshape(nz, ny, nx, ch)
+    if not np.all(np.isfinite(data)):
+        raise SceneError(f"{err}: '{path}': non-finite values")
+    return data, (bbox[:3], bbox[3:])
+
+
+def write_vol(path, data, bbox=((0, 0, 0), (1, 1, 1))):
+    """Writes `data` ((z, y, x) or (z, y, x, channels) floats) as a Mitsuba
+    version 3 float32 .vol file."""
+    a = np.asarray(data, np.float32)
+    if a.ndim == 3:
+        a = a[..., None]
+    nz, ny, nx, ch = a.shape
+    with open(path, "wb") as f:
+        f.write(b"VOL" + bytes([3]) + struct.pack("<5i", 1, nx, ny, nz, ch))
+        f.write(np.asarray(bbox, "<f4").reshape(6).tobytes())
+        f.write(np.ascontiguousarray(a, "<f4").tobytes())
+
+
 def _read_ply(path, err):
     """PLY (ascii or binary) through plyfile; Mitsuba's names: x y z, nx ny nz,
     u v | texture_u texture_v | s t, face list vertex_indices | vertex_index.
@@ -1148,9 +1195,21 @@ class _Builder:
 
     def _medium(self, node):
         p, t = _Params(node), node.type
-        if t == "heterogeneous":
-            raise p.error("heterogeneous (grid) media are not implemented yet; only 'homogeneous' is")
         m = MediumDesc(type=t, id=node.id or node.place)
+        if t == "heterogeneous":
+            # sigma_t and albedo: a nested volume (gridvolume, constvolume)
+            # named so, or a plain value as for `homogeneous`.
+            for name in ("sigma_t", "albedo"):
+                vol = p.named_child("volume", name)
+                if vol is None:
+                    continue
+                if p.has(name):
+                    raise p.error(f"'{name}' given both as a value and as a nested volume", vol.place)
+                value = self.volume(vol)
+                if isinstance(value, GridDesc):
+                    setattr(m, name + "_grid", value)
+                else:  # constvolume: its value stands in for the parameter
+                    node.props[name] = _Prop("rgb", np.array(value), vol.place)
         given_3 = p.has("sigma_t") or p.has("albedo")
         given_06 = p.has("sigma_a") or p.has("sigma_s")
         if given_3 and given_06:
@@ -1169,6 +1228,9 @@ class _Builder:
                               node.props["albedo"].place)
         m.sigma_t = tuple(float(x) for x in st * scale)
         m.albedo = tuple(float(x) for x in albedo)
+        m.scale = scale
+        if t == "heterogeneous":
+            p.bool("has_spectral_extinction", True)  # an optimisation hint in Mitsuba; no effect here
         if not all(math.isfinite(x) for x in m.sigma_t):
             raise p.error(f"sigma_t * scale overflows: {m.sigma_t}")
         if not p.bool("sample_emitters", True):
@@ -1185,6 +1247,35 @@ class _Builder:
             pp.done()
         p.done()
         return m
+
+    def volume(self, node):
+        return self.cached(node, self._volume)
+
+    def _volume(self, node):
+        """gridvolume -> GridDesc; constvolume -> its value (3 floats)."""
+        p, t = _Params(node), node.type
+        if t == "constvolume":
+            v = p.rgb("value", 1.0)
+            p.done()
+            return v
+        filename = p.string("filename")
+        path = filename if os.path.isabs(filename) else os.path.join(self.base_dir, filename)
+        if not os.path.isfile(path):
+            raise p.error(f"volume file not found: '{filename}' (looked for {path})", node.props["filename"].place)
+        data, bbox = _read_vol(path, f"{node.place}: {node.label()}")
+        m = p.transform("to_world")
+        m = np.eye(4) if m is None else m
+        if p.bool("use_grid_bbox", False):
+            lo, hi = bbox
+            if not np.all(hi > lo):
+                raise p.error(f"use_grid_bbox: the file's bounding box {lo.tolist()} .. {hi.tolist()} is empty")
+            m = m @ _translate(lo) @ np.diag([*(hi - lo), 1.0])
+        p.string("filter_type", "trilinear", ("trilinear",))
+        p.string("wrap_mode", "clamp", ("clamp",))
+        p.bool("raw", False)  # linear RGB values either way (no spectral upsampling here)
+        p.bool("accel", True)  # Mitsuba's majorant grid; ours is one global majorant
+        p.done()
+        return GridDesc(data=data, to_world=m)
 
     def _media_of(self, p):
         """(interior, exterior) MediumDescs nested in or referenced by a shape."""

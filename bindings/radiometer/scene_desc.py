@@ -61,11 +61,22 @@ class EmitterDesc:
 
 
 @dataclass
+class GridDesc:
+    """A gridvolume: (nz, ny, nx, channels) float32 values over the unit cube
+    of its local space, mapped to the world by to_world."""
+    data: np.ndarray = field(default_factory=lambda: np.zeros((1, 1, 1, 1), np.float32))
+    to_world: np.ndarray = field(default_factory=_eye)
+
+
+@dataclass
 class MediumDesc:
-    type: str = "homogeneous"
+    type: str = "homogeneous"  # homogeneous heterogeneous
     id: str = ""  # its id, or the place it came from, for error messages
     sigma_t: tuple = field(default_factory=lambda: _rgb(1.0))  # per unit length, scale applied
     albedo: tuple = field(default_factory=lambda: _rgb(0.75))
+    sigma_t_grid: Optional[GridDesc] = None  # heterogeneous: replaces sigma_t (scale applied by the renderer)
+    albedo_grid: Optional[GridDesc] = None  # heterogeneous: replaces albedo
+    scale: float = 1.0
     phase: str = "isotropic"  # isotropic | hg
     g: float = 0.0  # hg
 

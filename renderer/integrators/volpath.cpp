@@ -23,9 +23,12 @@
 //    hero's, however long the walk; a per-event average instead multiplies
 //    bounded factors into an exponentially growing weight (measured: mean z
 //    -13 on translucent_slab at 512 spp, fireflies beside the shadow edge).
+//    Heterogeneous (grid) media: delta tracking with null collisions against
+//    a majorant, the same per-channel bookkeeping (see free_flight_tracking).
 // 3. Next event estimation from every scattering vertex (surface or medium)
 //    with the transmittance of the shadow ray through media and null
-//    boundaries (Scene::transmittance, Beer-Lambert), combined with BSDF /
+//    boundaries (Scene::transmittance: Beer-Lambert, or ratio tracking in
+//    grid media), combined with BSDF /
 //    phase-function sampling by the power heuristic (Veach 1997, eq. 9.13).
 //    An emitter hit after crossing null boundaries is weighted against the
 //    light sample from the last scattering vertex.
@@ -59,7 +62,7 @@ Color direct_through_media(const Scene& scene, const Interaction& it, int medium
     if (is_black(f)) return Color(0.f);
     ++stats.shadow_rays;
     int m = it.kind == VertexKind::Medium ? medium : Scene::medium_after(it, ds.d, medium);
-    Color tr = scene.transmittance(it, ds, m, stats.rays);
+    Color tr = scene.transmittance(it, ds, m, stats.rays, sampler);
     if (is_black(tr)) return Color(0.f);
     float light_pdf = ds.pdf_w * emitter_pick_prob(scene);
     float w = ds.is_delta ? 1.f : mis_power(light_pdf, pdf_of(ds.d));
@@ -124,6 +127,58 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         beta /= q;
         return true;
     };
+    // Free flight through a medium up to the next surface at t_hit, with the
+    // hero channel's extinction. Each event rescales beta and r_u by the
+    // event's per-channel density over the hero's, which equals its
+    // contribution over the hero's density (hence one `rescale`).
+    enum { kPassed, kScattered, kAbsorbed };
+    // Homogeneous: free-flight distance of density sigma_t exp(-sigma_t t)
+    // (mean 1 / sigma_t); at a collision, scatter with probability
+    // sigma_s / sigma_t of the hero, else absorb (the seed). Density of
+    // collide-and-scatter per channel: sigma_s Tr(t); of passing: Tr(t_hit).
+    auto free_flight_homogeneous = [&](const Medium& med, float t_hit, float& t) -> int {
+        float u_t = sampler.next_1d(), u_scatter = sampler.next_1d();
+        float s = med.sigma_t[hero];
+        t = s > 0.f ? -std::log1p(-u_t) / s : kInf;
+        if (t < t_hit) {
+            if (!(u_scatter * med.sigma_t[hero] < med.sigma_s[hero])) return kAbsorbed;
+            Color p = med.sigma_s * med.transmittance(t);
+            return rescale(p / p[hero]) ? kScattered : kAbsorbed;
+        }
+        Color tr = med.transmittance(t_hit);
+        return tr[hero] > 0.f && rescale(tr / tr[hero]) ? kPassed : kAbsorbed;
+    };
+    // Heterogeneous: delta tracking with null collisions against the
+    // majorant (Woodcock et al. 1965; the null-scattering path integral of
+    // Miller et al. 2019, sec. 4): tentative collisions at rate
+    // majorant[hero]; absorb, scatter or pass on (null) with probabilities
+    // sigma_a, sigma_s, sigma_n = majorant - sigma_t over the majorant (hero).
+    auto free_flight_tracking = [&](const Medium& med, const Ray& r, float t_hit, float& t) -> int {
+        const Color& maj = med.majorant;
+        float m = maj[hero];
+        t = 0.f;
+        for (int i = 0; i < (1 << 20); ++i) {
+            float u_t = sampler.next_1d(), u_e = sampler.next_1d();
+            float dt = m > 0.f ? -std::log1p(-u_t) / m : kInf;
+            if (!(t + dt < t_hit)) {
+                Color tm = Medium::exp_neg(maj, t_hit - t);
+                return tm[hero] > 0.f && rescale(tm / tm[hero]) ? kPassed : kAbsorbed;
+            }
+            t += dt;
+            Color st, ss;
+            med.coefficients(r.o + r.d * t, st, ss);
+            Color tm = Medium::exp_neg(maj, dt);
+            float p_absorb = (st[hero] - ss[hero]) / m, p_scatter = ss[hero] / m;
+            if (u_e < p_absorb) return kAbsorbed;
+            if (u_e < p_absorb + p_scatter) {
+                Color p = ss * tm;
+                return rescale(p / p[hero]) ? kScattered : kAbsorbed;
+            }
+            Color p = (maj - st) * tm;
+            if (!(p[hero] > 0.f) || !rescale(p / p[hero])) return kAbsorbed;
+        }
+        return kAbsorbed;
+    };
     for (int guard = 0; guard < (1 << 20); ++guard) {
         // 1. Find the next surface along the ray.
         Interaction it;
@@ -136,17 +191,10 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         //    extinction; r_u tracks every channel's path density over the hero's.
         if (medium >= 0) {
             const Medium& med = *scene.media[medium];
-            float u_t = sampler.next_1d(), u_scatter = sampler.next_1d();
-            float s = med.sigma_t[hero];
-            float t = s > 0.f ? -std::log1p(-u_t) / s : kInf;
-            if (t < t_hit) {
-                // A real collision at distance t: scatter with probability
-                // sigma_s/sigma_t of the hero channel, else absorb. Density of
-                // collision-and-scatter per channel c: sigma_s[c] Tr_c(t), which
-                // is also the contribution f_c, so f / p_hero = p / p_hero.
-                if (!(u_scatter * med.sigma_t[hero] < med.sigma_s[hero])) break;  // absorbed
-                Color p = med.sigma_s * med.transmittance(t);
-                if (!rescale(p / p[hero])) break;
+            float t = 0.f;
+            int event = med.homogeneous ? free_flight_homogeneous(med, t_hit, t) : free_flight_tracking(med, ray, t_hit, t);
+            if (event == kAbsorbed) break;
+            if (event == kScattered) {
                 ++depth;
                 if (prm.max_depth >= 0 && depth >= prm.max_depth) break;
                 Interaction mi;
@@ -184,10 +232,6 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                 if (!pc.can_reach(mask, true)) break;
                 continue;
             }
-            // No collision before the surface (or the end of the ray): the
-            // density per channel is Tr_c(d), equal to the contribution.
-            Color tr = med.transmittance(t_hit);
-            if (!(tr[hero] > 0.f) || !rescale(tr / tr[hero])) break;
         }
         int cls = pc.classify();
 

@@ -235,7 +235,8 @@ bool Scene::visible(const Interaction& from, const DirectSample& ds) const {
     return !occluded(r);
 }
 
-Color Scene::transmittance(const Interaction& from, const DirectSample& ds, int medium, uint64_t& rays) const {
+Color Scene::transmittance(const Interaction& from, const DirectSample& ds, int medium, uint64_t& rays,
+                           Sampler& sampler) const {
     Ray r;
     if (from.kind == VertexKind::Medium) {
         r.o = from.p;
@@ -267,11 +268,11 @@ Color Scene::transmittance(const Interaction& from, const DirectSample& ds, int 
         Interaction it;
         ++rays;
         if (!intersect(r, it)) {
-            if (medium >= 0) tr *= media[medium]->transmittance(remaining);
+            if (medium >= 0) tr *= media[medium]->segment_transmittance(r.o, r.d, remaining, sampler);
             return tr;
         }
         if (bsdfs[shapes[it.shape]->bsdf]->flags() != kNull) return Color(0.f);
-        if (medium >= 0) tr *= media[medium]->transmittance(it.t);
+        if (medium >= 0) tr *= media[medium]->segment_transmittance(r.o, r.d, it.t, sampler);
         if (is_black(tr)) return tr;
         medium = medium_after(it, r.d, medium);
         Vec3 d = r.d;

@@ -65,7 +65,10 @@ public:
     // surface blocks it (returns 0). Beer-Lambert exp(-sigma_t d) per
     // segment, exact for homogeneous media (no sampling noise). `rays`
     // counts the intersection queries.
-    Color transmittance(const Interaction& from, const DirectSample& ds, int medium, uint64_t& rays) const;
+    // Heterogeneous media estimate their segments by ratio tracking with
+    // `sampler`'s random numbers.
+    Color transmittance(const Interaction& from, const DirectSample& ds, int medium, uint64_t& rays,
+                        Sampler& sampler) const;
     // The medium on the side of `it` that direction d points to: its shape's
     // interior or exterior when the shape is a medium boundary, else `current`.
     static int medium_after(const Interaction& it, const Vec3& d, int current) {
