@@ -69,6 +69,87 @@ Color direct_through_media(const Scene& scene, const Interaction& it, int medium
     return f * tr * ds.radiance * (w / light_pdf);
 }
 
+// Path throughput under spectral MIS (hero channel): one channel, drawn
+// uniformly per path, drives every free-flight distance and
+// scatter/absorb choice; r_u holds each channel's path density divided by the
+// hero's. The estimate is f / mean_c p_c = (f / p_hero) / mean(r_u); both
+// are rescaled after each update so that mean(r_u) = 1 and `beta` is the
+// estimate itself (no overflow however long the walk).
+struct SpectralThroughput {
+    explicit SpectralThroughput(int h) : hero(h) {}
+    int hero;
+    Color beta{1.f}, r_u{1.f};
+    // `ratio`: an event's contribution over the hero's density, which for
+    // every medium event here equals its per-channel density over the hero's.
+    bool rescale(const Color& ratio) {
+        r_u *= ratio;
+        beta *= ratio;
+        float m = average(r_u);
+        if (!(m > 0.f) || !std::isfinite(m)) return false;
+        r_u /= m;
+        beta /= m;
+        return true;
+    }
+};
+
+// Free flight through a medium up to the next surface at t_hit, with the
+// hero channel's extinction; `t` receives the scattering distance.
+enum FlightEvent { kPassed, kScattered, kAbsorbed };
+
+// Homogeneous: free-flight distance of density sigma_t exp(-sigma_t t)
+// (mean 1 / sigma_t); at a collision, scatter with probability
+// sigma_s / sigma_t of the hero, else absorb (the seed). Density of
+// collide-and-scatter per channel: sigma_s Tr(t); of passing: Tr(t_hit).
+FlightEvent free_flight_homogeneous(const Medium& med, float t_hit, Sampler& sampler, SpectralThroughput& th,
+                                    float& t) {
+    int h = th.hero;
+    float u_t = sampler.next_1d(), u_scatter = sampler.next_1d();
+    float s = med.sigma_t[h];
+    t = s > 0.f ? -std::log1p(-u_t) / s : kInf;
+    if (t < t_hit) {
+        if (!(u_scatter * med.sigma_t[h] < med.sigma_s[h])) return kAbsorbed;
+        Color p = med.sigma_s * med.transmittance(t);
+        return th.rescale(p / p[h]) ? kScattered : kAbsorbed;
+    }
+    Color tr = med.transmittance(t_hit);
+    return tr[h] > 0.f && th.rescale(tr / tr[h]) ? kPassed : kAbsorbed;
+}
+
+// Heterogeneous: delta tracking with null collisions against the majorant
+// (Woodcock et al. 1965; the null-scattering path integral of Miller et al.
+// 2019, sec. 4): tentative collisions at rate majorant[hero]; absorb,
+// scatter or pass on (null) with probabilities sigma_a, sigma_s and
+// sigma_n = majorant - sigma_t over the majorant (the hero's). Per-channel
+// densities: sigma_s Tm, sigma_n Tm (Tm the majorant's transmittance).
+FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, Sampler& sampler,
+                                 SpectralThroughput& th, float& t) {
+    int h = th.hero;
+    const Color& maj = med.majorant;
+    float m = maj[h];
+    t = 0.f;
+    for (int i = 0; i < (1 << 20); ++i) {
+        float u_t = sampler.next_1d(), u_e = sampler.next_1d();
+        float dt = m > 0.f ? -std::log1p(-u_t) / m : kInf;
+        if (!(t + dt < t_hit)) {
+            Color tm = Medium::exp_neg(maj, t_hit - t);
+            return tm[h] > 0.f && th.rescale(tm / tm[h]) ? kPassed : kAbsorbed;
+        }
+        t += dt;
+        Color st, ss;
+        med.coefficients(r.o + r.d * t, st, ss);
+        Color tm = Medium::exp_neg(maj, dt);
+        float p_absorb = (st[h] - ss[h]) / m, p_scatter = ss[h] / m;
+        if (u_e < p_absorb) return kAbsorbed;
+        if (u_e < p_absorb + p_scatter) {
+            Color p = ss * tm;
+            return th.rescale(p / p[h]) ? kScattered : kAbsorbed;
+        }
+        Color p = (maj - st) * tm;
+        if (!(p[h] > 0.f) || !th.rescale(p / p[h])) return kAbsorbed;
+    }
+    return kAbsorbed;
+}
+
 }  // namespace
 
 void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
@@ -81,7 +162,6 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
     ray.tmin = 0.f;
     int medium = scene.sensor_desc.medium;
     bool enclosed = false;  // the current medium is a shape's interior behind a non-null boundary (B vertices)
-    Color beta(1.f);
     float eta_scale = 1.f;
     PathClass pc;
     float prev_pdf_w = 0.f;
@@ -89,24 +169,8 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
     Vec3 prev_p;
     BsdfContext ctx;
     int depth = 0;  // scattering vertices so far (surface or medium; null boundaries excluded)
-    // Spectral MIS (hero channel): one channel drives every free-flight
-    // distance and scatter/absorb choice of the path; r_u holds each
-    // channel's path density divided by the hero's. The estimate is
-    // f / mean_c p_c = (f / p_hero) / mean(r_u); both are rescaled after each
-    // update so that mean(r_u) = 1 and `beta` is the estimate itself.
-    int hero = std::min(int(sampler.next_1d() * 3.f), 2);
-    Color r_u(1.f);
-    auto rescale = [&](const Color& ratio) {
-        // `ratio`: the event's contribution over the hero's density, which
-        // here equals the event's per-channel density over the hero's.
-        r_u *= ratio;
-        beta *= ratio;
-        float m = average(r_u);
-        if (!(m > 0.f) || !std::isfinite(m)) return false;
-        r_u /= m;
-        beta /= m;
-        return true;
-    };
+    SpectralThroughput th(std::min(int(sampler.next_1d() * 3.f), 2));
+    Color& beta = th.beta;
     // Russian roulette only once the throughput has fallen below 1 (pbrt-v4's
     // rule), not Mitsuba's min(throughput, 0.95) of the surface loop: in a
     // medium the analog walk already ends paths by absorption, and a 5 %
@@ -127,58 +191,6 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         beta /= q;
         return true;
     };
-    // Free flight through a medium up to the next surface at t_hit, with the
-    // hero channel's extinction. Each event rescales beta and r_u by the
-    // event's per-channel density over the hero's, which equals its
-    // contribution over the hero's density (hence one `rescale`).
-    enum { kPassed, kScattered, kAbsorbed };
-    // Homogeneous: free-flight distance of density sigma_t exp(-sigma_t t)
-    // (mean 1 / sigma_t); at a collision, scatter with probability
-    // sigma_s / sigma_t of the hero, else absorb (the seed). Density of
-    // collide-and-scatter per channel: sigma_s Tr(t); of passing: Tr(t_hit).
-    auto free_flight_homogeneous = [&](const Medium& med, float t_hit, float& t) -> int {
-        float u_t = sampler.next_1d(), u_scatter = sampler.next_1d();
-        float s = med.sigma_t[hero];
-        t = s > 0.f ? -std::log1p(-u_t) / s : kInf;
-        if (t < t_hit) {
-            if (!(u_scatter * med.sigma_t[hero] < med.sigma_s[hero])) return kAbsorbed;
-            Color p = med.sigma_s * med.transmittance(t);
-            return rescale(p / p[hero]) ? kScattered : kAbsorbed;
-        }
-        Color tr = med.transmittance(t_hit);
-        return tr[hero] > 0.f && rescale(tr / tr[hero]) ? kPassed : kAbsorbed;
-    };
-    // Heterogeneous: delta tracking with null collisions against the
-    // majorant (Woodcock et al. 1965; the null-scattering path integral of
-    // Miller et al. 2019, sec. 4): tentative collisions at rate
-    // majorant[hero]; absorb, scatter or pass on (null) with probabilities
-    // sigma_a, sigma_s, sigma_n = majorant - sigma_t over the majorant (hero).
-    auto free_flight_tracking = [&](const Medium& med, const Ray& r, float t_hit, float& t) -> int {
-        const Color& maj = med.majorant;
-        float m = maj[hero];
-        t = 0.f;
-        for (int i = 0; i < (1 << 20); ++i) {
-            float u_t = sampler.next_1d(), u_e = sampler.next_1d();
-            float dt = m > 0.f ? -std::log1p(-u_t) / m : kInf;
-            if (!(t + dt < t_hit)) {
-                Color tm = Medium::exp_neg(maj, t_hit - t);
-                return tm[hero] > 0.f && rescale(tm / tm[hero]) ? kPassed : kAbsorbed;
-            }
-            t += dt;
-            Color st, ss;
-            med.coefficients(r.o + r.d * t, st, ss);
-            Color tm = Medium::exp_neg(maj, dt);
-            float p_absorb = (st[hero] - ss[hero]) / m, p_scatter = ss[hero] / m;
-            if (u_e < p_absorb) return kAbsorbed;
-            if (u_e < p_absorb + p_scatter) {
-                Color p = ss * tm;
-                return rescale(p / p[hero]) ? kScattered : kAbsorbed;
-            }
-            Color p = (maj - st) * tm;
-            if (!(p[hero] > 0.f) || !rescale(p / p[hero])) return kAbsorbed;
-        }
-        return kAbsorbed;
-    };
     for (int guard = 0; guard < (1 << 20); ++guard) {
         // 1. Find the next surface along the ray.
         Interaction it;
@@ -192,7 +204,8 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         if (medium >= 0) {
             const Medium& med = *scene.media[medium];
             float t = 0.f;
-            int event = med.homogeneous ? free_flight_homogeneous(med, t_hit, t) : free_flight_tracking(med, ray, t_hit, t);
+            FlightEvent event = med.homogeneous ? free_flight_homogeneous(med, t_hit, sampler, th, t)
+                                                : free_flight_tracking(med, ray, t_hit, sampler, th, t);
             if (event == kAbsorbed) break;
             if (event == kScattered) {
                 ++depth;
