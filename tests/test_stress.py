@@ -105,6 +105,7 @@ MEDIA_SCENES = {
     "media_light_inside": {"lit": [(slice(12, 20), slice(12, 20), "fog around the lights")]},
     "media_camera_in_fog": {"lit": [(*ALL, "fog and room")]},
     "media_camera_in_glass": {"lit": [(*ALL, "environment through the medium and the glass")]},
+    "media_grid_sparse": {"lit": [(*ALL, "backlight through the cloud")]},
 }
 SUPPORTS_MEDIA = {"path", "volpath"}
 MEDIA_REFUSAL = "does not support participating media"
