@@ -106,7 +106,33 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("rfilter", &SensorDesc::rfilter)
         .def_readwrite("filter_radius", &SensorDesc::filter_radius)
         .def_readwrite("filter_stddev", &SensorDesc::filter_stddev)
-        .def_readwrite("shape", &SensorDesc::shape);
+        .def_readwrite("shape", &SensorDesc::shape)
+        .def_readwrite("medium", &SensorDesc::medium);
+
+    py::class_<GridDesc>(m, "GridDesc")
+        .def(py::init<>())
+        .def_readwrite("nx", &GridDesc::nx)
+        .def_readwrite("ny", &GridDesc::ny)
+        .def_readwrite("nz", &GridDesc::nz)
+        .def_readwrite("channels", &GridDesc::channels)
+        .def_property("data", [](const GridDesc& d) { return d.data; },
+                      [](GridDesc& d, py::object v) { d.data = flat<float>(v, 1, "grid data"); })
+        .def_property("to_world", [](const GridDesc& d) { return d.to_world; },
+                      [](GridDesc& d, py::object v) { d.to_world = to_matrix(v); });
+
+    py::class_<MediumDesc>(m, "MediumDesc")
+        .def(py::init<>())
+        .def_readwrite("type", &MediumDesc::type)
+        .def_readwrite("id", &MediumDesc::id)
+        .def_property("sigma_t", [](const MediumDesc& d) { return color_tuple(d.sigma_t); },
+                      [](MediumDesc& d, py::object v) { d.sigma_t = to_color(v); })
+        .def_property("albedo", [](const MediumDesc& d) { return color_tuple(d.albedo); },
+                      [](MediumDesc& d, py::object v) { d.albedo = to_color(v); })
+        .def_readwrite("sigma_t_grid", &MediumDesc::sigma_t_grid)
+        .def_readwrite("albedo_grid", &MediumDesc::albedo_grid)
+        .def_readwrite("scale", &MediumDesc::scale)
+        .def_readwrite("phase", &MediumDesc::phase)
+        .def_readwrite("g", &MediumDesc::g);
 
     py::class_<IntegratorDesc>(m, "IntegratorDesc")
         .def(py::init<>())
@@ -142,6 +168,9 @@ PYBIND11_MODULE(_core, m) {
                  return s.add_disk(id, to_matrix(m4), bsdf, flip);
              },
              py::arg("id"), py::arg("to_world"), py::arg("bsdf"), py::arg("flip_normals") = false)
+        .def("add_medium", &Scene::add_medium)
+        .def("set_shape_media", &Scene::set_shape_media, py::arg("shape"), py::arg("interior"), py::arg("exterior"))
+        .def_property_readonly("medium_count", [](const Scene& s) { return s.media.size(); })
         .def("add_area_emitter", &Scene::add_area_emitter)
         .def("add_emitter", &Scene::add_emitter)
         .def("set_sensor", &Scene::set_sensor)

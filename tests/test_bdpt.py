@@ -291,9 +291,15 @@ STRESS = ROOT / "stress"
 @pytest.mark.parametrize("path", sorted(p for p in STRESS.glob("*.xml") if not p.stem.endswith("_ref")),
                          ids=lambda p: p.stem)
 def test_stress_scenes_finite_nonnegative(path):
-    """No NaN, Inf or negative value anywhere, emitters at infinity included."""
+    """No NaN, Inf or negative value anywhere, emitters at infinity included;
+    scenes with media (not supported by bdpt yet) are refused with a message
+    saying so."""
     scene = rm.load_file(path)
-    res = rm.render(scene, integrator="bdpt", spp=16, seed=0)
+    try:
+        res = rm.render(scene, integrator="bdpt", spp=16, seed=0)
+    except ValueError as e:
+        assert path.stem.startswith("media_") and "does not support participating media" in str(e), str(e)
+        return
     assert_clean(res, path.stem)
 
 

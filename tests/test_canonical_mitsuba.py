@@ -30,11 +30,13 @@ for each scene, including the floor's measured false-alarm rates, in the
 scene's card.md.
 
 Media and subsurface scenes (homogeneous_slab, fog_room, vandehulst_slab,
-translucent_slab, translucent_object, volumetric_caustic): our loader
-rejects <medium> until issue 6, so their comparisons are skipped (never
-removed); their references are checked for form here, and the two with an
-independent answer (Beer-Lambert; the slab's diffuse transmittance) are
-checked against it.
+translucent_slab, translucent_object, volumetric_caustic): our `volpath`
+(the same estimator as `path` on a scene with media, tests/test_media.py)
+against the reference with the same blocked z-test and reference variance
+floor, at the budgets and block sizes of MEDIA (measured per scene in its
+card.md); their references are also checked for form, and the two with an
+independent answer (Beer-Lambert; the slab's diffuse transmittance) against
+it. `ptracer` and `bdpt` refuse media for now (issue 6, later parts).
 """
 import math
 from pathlib import Path
@@ -67,7 +69,26 @@ SURFACE = {
 }
 MEDIA = ["homogeneous_slab", "fog_room", "vandehulst_slab", "translucent_slab", "translucent_object",
          "volumetric_caustic"]
-MEDIA_SKIP = "media not supported by our estimators yet (issue 6)"
+# Our volpath's budget per media scene, the block size of the comparison and
+# the bias its power check must reject (the reference scaled by it). Budgets:
+# the block test's mean z is biased negative for a heavy-tailed estimator
+# (a render that misses the rare paths is low and estimates its own variance
+# low too), so each scene gets the budget at which independent seeds pass
+# (measured, card.md). volumetric_caustic's L S S V E paths are found only by
+# phase sampling through the glass sphere onto a small light: at 1024 spp
+# 2 of 3 seeds failed with 4 x 4 blocks (mean z -3.7, -4.8) while 4 pooled
+# renders (4096 spp) matched (image mean ratio 1.0035 +- 0.0043, mean z
+# -2.4 shrinking with budget: skew, not bias); 16 x 16 blocks (256 pixels x
+# 1024 samples each) pass 3 of 3 and see a 2 % bias in 2 of 3 seeds (the
+# reference's own noise, 10 % per pixel, limits what any budget can see).
+MEDIA_CI = {
+    "homogeneous_slab": {"spp": 512, "k": 4, "power": 1.01},
+    "fog_room": {"spp": 1024, "k": 4, "power": 1.01},
+    "translucent_slab": {"spp": 512, "k": 4, "power": 1.01},
+    "translucent_object": {"spp": 512, "k": 4, "power": 1.01},
+    "volumetric_caustic": {"spp": 1024, "k": 16, "power": 1.02},
+    "vandehulst_slab": {"spp": 1 << 18, "k": 1, "power": 1.02},
+}
 
 
 def _reference(name, shape=(RES, RES, 3), min_spp=16384):
@@ -146,26 +167,35 @@ def test_media_reference_is_well_formed(name):
     assert float(ref.image.max()) > 0, f"{name}: the reference is black"
 
 
-@pytest.mark.skip(reason=MEDIA_SKIP)
 @pytest.mark.parametrize("name", MEDIA)
 def test_volpath_matches_mitsuba_reference(name):
-    """Once media load (issue 6): our volpath against the reference, as the
-    surface scenes above (power check: 1 % overall)."""
+    """Our volpath against the reference, as the surface scenes above, with
+    MEDIA_CI's budget, block size and power check."""
+    cfg = MEDIA_CI[name]
     shape = (1, 1, 3) if name == "vandehulst_slab" else (RES, RES, 3)
     ref = _reference(name, shape=shape, min_spp=8192)
     total = int(ref.metadata["total_spp"])
     params = {} if name == "vandehulst_slab" else {"res": RES}
     scene = rm.load_file(ROOT / name / "scene.xml", **params)
-    res = rm.render(scene, integrator="volpath", spp=4096 if name == "vandehulst_slab" else 512, seed=1)
+    res = rm.render(scene, integrator="volpath", spp=cfg["spp"], seed=1)
+    assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, res.stats
+    floor = reference_variance_floor(ref.variance, total, res.spp)
+    s = cfg["power"]
     if name == "vandehulst_slab":  # one pixel: no blocks
-        floor = reference_variance_floor(ref.variance, total, res.spp)
         r = z_test(res.image, np.maximum(res.variance, floor), ref.image, ref.variance, alpha=ALPHA)
         assert r.passed, r.summary()
+        r = z_test(res.image, np.maximum(res.variance, floor), ref.image * s, ref.variance * s * s, alpha=ALPHA)
+        assert not r.passed, f"a {(s - 1) * 100:.0f} % bias went undetected: {r.summary()}"
         return
-    passed, msg = _compare(res, ref.image, ref.variance, total)
-    assert passed, f"{name}: ours differs from Mitsuba's reference:\n{msg}"
-    passed, msg = _compare(res, ref.image * 1.01, ref.variance * 1.01 ** 2, total)
-    assert not passed, f"{name}: a 1 % bias went undetected:\n{msg}"
+
+    def compare(image, variance):
+        return blocked_z_test(res.image, res.variance, image, variance, b_splatted=False, alpha=ALPHA,
+                              var_a_floor=floor, k=cfg["k"])
+
+    passed, msg = compare(ref.image, ref.variance)
+    assert passed, f"{name}: ours ({res.spp} spp) differs from Mitsuba's reference:\n{msg}"
+    passed, msg = compare(ref.image * s, ref.variance * s * s)
+    assert not passed, f"{name}: a {(s - 1) * 100:.0f} % bias went undetected:\n{msg}"
 
 
 # Fully covered pixels of each slab (card.md), and its optical thickness.
@@ -281,9 +311,9 @@ def test_vandehulst_reflectance_reference_matches_published():
     assert np.all(2 * norm.sf(np.abs((v - VDH_R * 1.01) / se)) < ALPHA / 3)
 
 
-@pytest.mark.skip(reason="media not supported by our estimators yet (issue 6)")
 def test_volpath_matches_vandehulst_reflectance():
-    """Our volpath against the published reflectance, once media land."""
+    """Our volpath against the published reflectance (tests/test_media.py
+    also holds it, and T_d, to Mitsuba's references)."""
     scene = rm.load_file(ROOT / "vandehulst_slab_reflectance" / "scene.xml")
     res = rm.render(scene, integrator="volpath", spp=1 << 16, seed=1)
     v, se = float(res.image[0, 0, 0]), float(np.sqrt(res.variance[0, 0, 0]) + VDH_R_SE)

@@ -91,13 +91,33 @@ SCENES = {
 }
 
 
+# Medium stress scenes (issue 6): what must be lit, as SCENES. Estimators
+# without media support must refuse them with the documented error
+# (Integrator::supports_media, checked by the render driver) rather than
+# render the media as vacuum; the others get the sanity checks above.
+MEDIA_SCENES = {
+    "media_sigma_t_1e4": {"lit": [(*ALL, "box surface, floor and backlight")]},
+    "media_sigma_t_1e-6": {"lit": [(*ALL, "backlight through the (empty) box")]},
+    "media_albedo_1": {"lit": [(slice(12, 20), slice(12, 20), "the white medium")]},
+    "media_hg_0.99": {"lit": [(slice(12, 20), slice(12, 20), "the forward-scattering medium")]},
+    "media_hg_-0.99": {"lit": [(slice(12, 20), slice(12, 20), "the back-scattering medium")]},
+    "media_zero_channel": {"lit": [(*ALL, "backlight")]},
+    "media_light_inside": {"lit": [(slice(12, 20), slice(12, 20), "fog around the lights")]},
+    "media_camera_in_fog": {"lit": [(*ALL, "fog and room")]},
+    "media_camera_in_glass": {"lit": [(*ALL, "environment through the medium and the glass")]},
+    "media_grid_sparse": {"lit": [(*ALL, "backlight through the cloud")]},
+}
+SUPPORTS_MEDIA = {"path", "volpath"}
+MEDIA_REFUSAL = "does not support participating media"
+
+
 def test_scene_list_matches_folder():
     """Every stress scene in the folder is tested (the *_ref.xml files are
     references, not stress scenes) and the README card lists each."""
     on_disk = {p.stem for p in STRESS.glob("*.xml") if not p.stem.endswith("_ref")}
-    assert on_disk == set(SCENES)
+    assert on_disk == set(SCENES) | set(MEDIA_SCENES)
     card = (STRESS / "README.md").read_text()
-    for name in SCENES:
+    for name in list(SCENES) + list(MEDIA_SCENES):
         assert f"{name}.xml" in card, name
 
 
@@ -175,6 +195,46 @@ def block_means(image, variance, b=4):
     img = np.asarray(image, np.float64).reshape(h // b, b, w // b, b, c).mean(axis=(1, 3))
     var = np.asarray(variance, np.float64).reshape(h // b, b, w // b, b, c).sum(axis=(1, 3)) / b ** 4
     return img, var
+
+
+@pytest.mark.parametrize("estimator", ESTIMATORS + ["volpath"])
+@pytest.mark.parametrize("name", sorted(MEDIA_SCENES))
+def test_media_finite_nonnegative_and_lit(name, estimator):
+    where = f"{name} / {estimator}"
+    if estimator not in SUPPORTS_MEDIA:
+        with pytest.raises(ValueError, match=f"integrator '{estimator}' {MEDIA_REFUSAL}"):
+            render(STRESS / f"{name}.xml", estimator, SPP, 0)
+        return
+    res = render(STRESS / f"{name}.xml", estimator, SPP, 0)
+    assert_sane(res, where)
+    for rows, cols, what in MEDIA_SCENES[name]["lit"]:
+        m = float(res.image[rows, cols].mean())
+        assert m > 0, f"{where}: {what} must be lit, mean {m:g}"
+
+
+def test_media_nearly_empty_equals_no_medium():
+    """sigma_t 1e-6 (optical depth 1e-6 across the box): equal to the same
+    scene without the medium up to noise (4x4 block means, z-test at ALPHA);
+    and nothing is filed as volume scattering beyond ~1e-6 of the image."""
+    thin = render(STRESS / "media_sigma_t_1e-6.xml", "volpath", 128, 1)
+    plain = render(STRESS / "media_sigma_t_1e-6_ref.xml", "path", 128, 2)
+    a, va = block_means(thin.image, thin.variance)
+    b, vb = block_means(plain.image, plain.variance)
+    t = z_test(a, va, b, vb, alpha=ALPHA)
+    assert t.passed, t.summary()
+    assert thin.effects["volume"].sum() <= 1e-3 * thin.image.sum()
+
+
+def test_media_zero_channel_green_sees_the_backlight():
+    """sigma_t (2, 0, 2): the green channel neither attenuates nor scatters,
+    so every pixel's green is the backlight, 1, in expectation (z-test,
+    var_b = 0); red and blue are dimmed where the view crosses the cube."""
+    res = render(STRESS / "media_zero_channel.xml", "volpath", 256, 1)
+    assert_sane(res, "media_zero_channel")
+    t = z_test(res.image[..., 1:2], res.variance[..., 1:2], np.ones_like(res.image[..., 1:2]), None, alpha=ALPHA)
+    assert t.passed, t.summary()
+    centre = res.image[12:20, 12:20]
+    assert centre[..., 0].mean() < 0.9 and centre[..., 2].mean() < 0.9
 
 
 # --- scale: the whole Cornell box scaled by 1e-4 and 1e4 ----------------------

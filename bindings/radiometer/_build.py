@@ -37,12 +37,42 @@ def _emitter(e) -> "_core.EmitterDesc":
     return c
 
 
+def _medium_index(scene, media, m, source):
+    """Index of MediumDesc `m` in the C++ scene (added once per object; refs
+    share one), -1 for None."""
+    if m is None:
+        return -1
+    if id(m) not in media:
+        c = _core.MediumDesc()
+        c.type = m.type
+        c.id = m.id
+        c.sigma_t = tuple(float(x) for x in m.sigma_t)
+        c.albedo = tuple(float(x) for x in m.albedo)
+        c.phase = m.phase
+        c.g = float(m.g)
+        c.scale = float(m.scale)
+        for name in ("sigma_t_grid", "albedo_grid"):
+            g = getattr(m, name)
+            if g is not None:
+                cg = _core.GridDesc()
+                cg.nz, cg.ny, cg.nx, cg.channels = (int(v) for v in g.data.shape)
+                cg.data = np.ascontiguousarray(g.data, np.float32).reshape(-1, 1)
+                cg.to_world = np.asarray(g.to_world, np.float64)
+                setattr(c, name, cg)
+        try:
+            media[id(m)] = scene.add_medium(c)
+        except ValueError as e:
+            raise SceneError(f"{source}: {e}") from None
+    return media[id(m)]
+
+
 def build_scene(desc: SceneDesc) -> "_core.Scene":
     """Builds and commits the C++ scene. C++ errors about a part are re-raised
     as SceneError naming that part."""
     scene = _core.Scene()
     default_bsdf = None
     sensor_shape = -1
+    media = {}
     for i, s in enumerate(desc.shapes):
         where = s.id or f"shape #{i}"
         try:
@@ -67,6 +97,9 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
                 scene.add_area_emitter(idx, _emitter(s.emitter))
             if s.sensor is not None:
                 sensor_shape = idx
+            if s.interior is not None or s.exterior is not None:
+                scene.set_shape_media(idx, _medium_index(scene, media, s.interior, desc.source),
+                                      _medium_index(scene, media, s.exterior, desc.source))
         except (ValueError, RuntimeError) as e:
             if isinstance(e, SceneError):
                 raise
@@ -89,6 +122,7 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
     c.filter_radius = float(sd.filter_radius)
     c.filter_stddev = float(sd.filter_stddev)
     c.shape = sensor_shape
+    c.medium = _medium_index(scene, media, sd.medium, desc.source)
     if sd.type == "irradiancemeter" and sensor_shape < 0:
         raise SceneError(f"{desc.source}: sensor 'irradiancemeter' must be nested in a shape")
     try:

@@ -72,6 +72,22 @@ rfilter    box (radius 0.5), tent: radius [1], gaussian: stddev [0.5]
 sampler    independent: sample_count [4] -> SensorDesc.spp, seed (accepted).
 integrator direct path volpath ptracer bdpt photonmapper sppm; its parameters
            (ints, floats, bools, strings) go unchecked to IntegratorDesc.params.
+medium     homogeneous: sigma_t [1] + albedo [0.75] (Mitsuba 3), or sigma_a +
+               sigma_s (Mitsuba 0.6's form; albedo = sigma_s / sigma_t, 0
+               where sigma_t is 0), scale [1] multiplying the coefficients;
+               each an rgb or a float; sample_emitters [true] (only true);
+               one nested phase [isotropic]. Nested in a shape as `interior`
+               / `exterior` (or referenced by those names), in a sensor as
+               `medium`; declared at the top level for refs.
+           heterogeneous: as homogeneous, but sigma_t and albedo may each be
+               a nested volume of that name; has_spectral_extinction
+               accepted. The renderer tracks it with a global majorant
+               (delta tracking; ratio tracking for shadow rays).
+volume     gridvolume: filename (Mitsuba's .vol, version 3, float32, 1 or 3
+               channels), to_world (maps the unit cube), use_grid_bbox
+               [false], filter_type ['trilinear'], wrap_mode ['clamp'], raw,
+               accel (accepted); constvolume: value [1].
+phase      isotropic; hg: g [0.8] in (-1, 1).
 
 Decisions where Mitsuba leaves a choice (see also the functions' comments)
 -------------------------------------------------------------------------
@@ -94,6 +110,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import struct
 import xml.parsers.expat
 
 import numpy as np
@@ -101,7 +118,9 @@ import numpy as np
 from .scene_desc import (
     BsdfDesc,
     EmitterDesc,
+    GridDesc,
     IntegratorDesc,
+    MediumDesc,
     SceneDesc,
     SceneError,
     SensorDesc,
@@ -156,12 +175,14 @@ PLUGINS = {
     "rfilter": ("box", "tent", "gaussian"),
     "sampler": ("independent",),
     "integrator": ("direct", "path", "volpath", "ptracer", "bdpt", "photonmapper", "sppm"),
+    "medium": ("homogeneous", "heterogeneous"),
+    "phase": ("isotropic", "hg"),
+    "volume": ("gridvolume", "constvolume"),
 }
 _CATEGORY_OF = {t: c for c, types in PLUGINS.items() for t in types}
 
 # XML tags of Mitsuba 3 that are outside the subset, for a precise message.
-_UNSUPPORTED_TAGS = ("texture", "medium", "phase", "volume", "include", "alias", "path",
-                     "spectrum_file")
+_UNSUPPORTED_TAGS = ("texture", "include", "alias", "path", "spectrum_file")
 _PROPERTY_TAGS = ("float", "integer", "boolean", "string", "rgb", "spectrum", "point",
                   "vector", "transform")
 
@@ -346,6 +367,18 @@ class _Params:
                 self.used_children.add(i)
                 out.append(child)
         return out
+
+    def named_child(self, category, name):
+        """The nested plugin of `category` given under `name` (XML: its name
+        attribute or the <ref>'s name; dicts: the key), or None."""
+        found = None
+        for i, (n, child) in enumerate(self.node.children):
+            if child.category == category and n == name:
+                if found is not None:
+                    raise self.error(f"more than one nested {category} named '{name}'", child.place)
+                self.used_children.add(i)
+                found = child
+        return found
 
     def child(self, category):
         kids = self.children(category)
@@ -941,6 +974,45 @@ def _read_obj(path, flip_tex_coords, err):
     return p, np.asarray(tris, dtype=np.uint32), n, uv
 
 
+def _read_vol(path, err):
+    """Mitsuba's binary grid format: 'VOL', version 3, int32 encoding (1 =
+    float32), int32 xres, yres, zres, channels, 6 float32 bounding box
+    (min, max), then xres*yres*zres*channels float32, x fastest. Returns
+    ((z, y, x, channels) float32 array, (bbox_min, bbox_max))."""
+    with open(path, "rb") as f:
+        raw = f.read()
+    if len(raw) < 48 or raw[:3] != b"VOL":
+        raise SceneError(f"{err}: '{path}' is not a Mitsuba .vol file (no 'VOL' header)")
+    version = raw[3]
+    enc, nx, ny, nz, ch = struct.unpack("<5i", raw[4:24])
+    if version != 3 or enc != 1:
+        raise SceneError(f"{err}: '{path}': only version 3 float32 .vol files are supported "
+                         f"(version {version}, encoding {enc})")
+    if min(nx, ny, nz) < 1 or ch not in (1, 3):
+        raise SceneError(f"{err}: '{path}': bad resolution {nx}x{ny}x{nz} or channel count {ch}")
+    bbox = np.frombuffer(raw[24:48], "<f4").astype(np.float64)
+    n = nx * ny * nz * ch
+    if len(raw) != 48 + 4 * n:
+        raise SceneError(f"{err}: '{path}': expected {n} values ({48 + 4 * n} bytes), file has {len(raw)} bytes")
+    data = np.frombuffer(raw[48:], "<f4").astype(np.float32).reshape(nz, ny, nx, ch)
+    if not np.all(np.isfinite(data)):
+        raise SceneError(f"{err}: '{path}': non-finite values")
+    return data, (bbox[:3], bbox[3:])
+
+
+def write_vol(path, data, bbox=((0, 0, 0), (1, 1, 1))):
+    """Writes `data` ((z, y, x) or (z, y, x, channels) floats) as a Mitsuba
+    version 3 float32 .vol file."""
+    a = np.asarray(data, np.float32)
+    if a.ndim == 3:
+        a = a[..., None]
+    nz, ny, nx, ch = a.shape
+    with open(path, "wb") as f:
+        f.write(b"VOL" + bytes([3]) + struct.pack("<5i", 1, nx, ny, nz, ch))
+        f.write(np.asarray(bbox, "<f4").reshape(6).tobytes())
+        f.write(np.ascontiguousarray(a, "<f4").tobytes())
+
+
 def _read_ply(path, err):
     """PLY (ascii or binary) through plyfile; Mitsuba's names: x y z, nx ny nz,
     u v | texture_u texture_v | s t, face list vertex_indices | vertex_index.
@@ -1116,6 +1188,103 @@ class _Builder:
         p.done()
         return b
 
+    # -- media ---------------------------------------------------------------
+
+    def medium(self, node):
+        return self.cached(node, self._medium)
+
+    def _medium(self, node):
+        p, t = _Params(node), node.type
+        m = MediumDesc(type=t, id=node.id or node.place)
+        if t == "heterogeneous":
+            # sigma_t and albedo: a nested volume (gridvolume, constvolume)
+            # named so, or a plain value as for `homogeneous`.
+            for name in ("sigma_t", "albedo"):
+                vol = p.named_child("volume", name)
+                if vol is None:
+                    continue
+                if p.has(name):
+                    raise p.error(f"'{name}' given both as a value and as a nested volume", vol.place)
+                value = self.volume(vol)
+                if isinstance(value, GridDesc):
+                    setattr(m, name + "_grid", value)
+                else:  # constvolume: its value stands in for the parameter
+                    node.props[name] = _Prop("rgb", np.array(value), vol.place)
+        given_3 = p.has("sigma_t") or p.has("albedo")
+        given_06 = p.has("sigma_a") or p.has("sigma_s")
+        if given_3 and given_06:
+            raise p.error("give either sigma_t + albedo or sigma_a + sigma_s, not both")
+        scale = p.float("scale", 1.0, check="nonneg")
+        if given_06:
+            sa = np.array(p.rgb("sigma_a", 0.0))
+            ss = np.array(p.rgb("sigma_s", 0.0))
+            st = sa + ss
+            albedo = np.divide(ss, st, out=np.zeros(3), where=st > 0)
+        else:
+            st = np.array(p.rgb("sigma_t", 1.0))
+            albedo = np.array(p.rgb("albedo", 0.75))
+            if np.any(albedo > 1.0):
+                raise p.error(f"albedo must lie in [0, 1], got {tuple(albedo.tolist())}",
+                              node.props["albedo"].place)
+        m.sigma_t = tuple(float(x) for x in st * scale)
+        m.albedo = tuple(float(x) for x in albedo)
+        m.scale = scale
+        if t == "heterogeneous":
+            p.bool("has_spectral_extinction", True)  # an optimisation hint in Mitsuba; no effect here
+        if not all(math.isfinite(x) for x in m.sigma_t):
+            raise p.error(f"sigma_t * scale overflows: {m.sigma_t}")
+        if not p.bool("sample_emitters", True):
+            raise p.error("sample_emitters = false is not supported (next event estimation is always on)",
+                          node.props["sample_emitters"].place)
+        ph = p.child("phase")
+        if ph is not None:
+            pp = _Params(ph)
+            m.phase = ph.type
+            if ph.type == "hg":
+                m.g = pp.float("g", 0.8)
+                if not -1.0 < m.g < 1.0:
+                    raise pp.error(f"parameter 'g' must lie in (-1, 1), got {m.g}", ph.props["g"].place)
+            pp.done()
+        p.done()
+        return m
+
+    def volume(self, node):
+        return self.cached(node, self._volume)
+
+    def _volume(self, node):
+        """gridvolume -> GridDesc; constvolume -> its value (3 floats)."""
+        p, t = _Params(node), node.type
+        if t == "constvolume":
+            v = p.rgb("value", 1.0)
+            p.done()
+            return v
+        filename = p.string("filename")
+        path = filename if os.path.isabs(filename) else os.path.join(self.base_dir, filename)
+        if not os.path.isfile(path):
+            raise p.error(f"volume file not found: '{filename}' (looked for {path})", node.props["filename"].place)
+        data, bbox = _read_vol(path, f"{node.place}: {node.label()}")
+        m = p.transform("to_world")
+        m = np.eye(4) if m is None else m
+        if p.bool("use_grid_bbox", False):
+            lo, hi = bbox
+            if not np.all(hi > lo):
+                raise p.error(f"use_grid_bbox: the file's bounding box {lo.tolist()} .. {hi.tolist()} is empty")
+            m = m @ _translate(lo) @ np.diag([*(hi - lo), 1.0])
+        p.string("filter_type", "trilinear", ("trilinear",))
+        p.string("wrap_mode", "clamp", ("clamp",))
+        p.bool("raw", False)  # linear RGB values either way (no spectral upsampling here)
+        p.bool("accel", True)  # Mitsuba's majorant grid; ours is one global majorant
+        p.done()
+        return GridDesc(data=data, to_world=m)
+
+    def _media_of(self, p):
+        """(interior, exterior) MediumDescs nested in or referenced by a shape."""
+        out = []
+        for name in ("interior", "exterior"):
+            node = p.named_child("medium", name)
+            out.append(None if node is None else self.medium(node))
+        return tuple(out)
+
     # -- emitters ------------------------------------------------------------
 
     def emitter(self, node):
@@ -1208,6 +1377,7 @@ class _Builder:
                 raise p.error(f"only an irradiancemeter can be nested in a shape, got "
                               f"'{sensor.type}'", sensor.place)
             s.sensor = self.sensor(sensor, on_shape=True)
+        s.interior, s.exterior = self._media_of(p)
         p.done()
         return s
 
@@ -1244,6 +1414,8 @@ class _Builder:
         p, t = _Params(node), node.type
         s = SensorDesc(type=t)
         self._film(p.child("film"), s)
+        med = p.named_child("medium", "medium")
+        s.medium = None if med is None else self.medium(med)
         sampler = p.child("sampler")
         s.spp = 4
         if sampler is not None:
@@ -1421,6 +1593,8 @@ def _assemble(nodes, ids, source, base_dir):
             sensors.append((b.sensor(node), node.place))
         elif cat == "bsdf":
             b.bsdf(node)  # a declaration for refs; validate it even if unused
+        elif cat == "medium":
+            b.medium(node)  # a declaration for refs; validate it even if unused
         elif cat == "integrator":
             integrators.append((b.integrator(node), node.place))
         else:

@@ -61,6 +61,27 @@ class EmitterDesc:
 
 
 @dataclass
+class GridDesc:
+    """A gridvolume: (nz, ny, nx, channels) float32 values over the unit cube
+    of its local space, mapped to the world by to_world."""
+    data: np.ndarray = field(default_factory=lambda: np.zeros((1, 1, 1, 1), np.float32))
+    to_world: np.ndarray = field(default_factory=_eye)
+
+
+@dataclass
+class MediumDesc:
+    type: str = "homogeneous"  # homogeneous heterogeneous
+    id: str = ""  # its id, or the place it came from, for error messages
+    sigma_t: tuple = field(default_factory=lambda: _rgb(1.0))  # per unit length, scale applied
+    albedo: tuple = field(default_factory=lambda: _rgb(0.75))
+    sigma_t_grid: Optional[GridDesc] = None  # heterogeneous: replaces sigma_t (scale applied by the renderer)
+    albedo_grid: Optional[GridDesc] = None  # heterogeneous: replaces albedo
+    scale: float = 1.0
+    phase: str = "isotropic"  # isotropic | hg
+    g: float = 0.0  # hg
+
+
+@dataclass
 class ShapeDesc:
     type: str = "mesh"  # mesh sphere disk (rectangle, cube, obj, ply become meshes)
     id: str = ""
@@ -75,6 +96,8 @@ class ShapeDesc:
     bsdf: Optional[BsdfDesc] = None  # None: diffuse 0.5 (Mitsuba's default)
     emitter: Optional[EmitterDesc] = None  # an area emitter attached to this shape
     sensor: Optional["SensorDesc"] = None  # an irradiancemeter attached to this shape
+    interior: Optional[MediumDesc] = None  # medium inside (against the normal)
+    exterior: Optional[MediumDesc] = None  # medium outside (the normal's side)
 
 
 @dataclass
@@ -90,6 +113,7 @@ class SensorDesc:
     filter_radius: float = 2.0
     filter_stddev: float = 0.5
     spp: int = 4  # from the sampler's sample_count
+    medium: Optional[MediumDesc] = None  # the medium the sensor sits in
 
 
 @dataclass

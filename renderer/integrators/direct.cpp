@@ -102,6 +102,7 @@ std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& d, const Effec
         throw std::invalid_argument("integrator '" + d.type + "' is not implemented yet");
     }
     r->mask = mask;
+    r->type = d.type;
     return r;
 }
 

@@ -27,15 +27,24 @@ inline EffectMask all_effects() { EffectMask m; m.fill(true); return m; }
 
 // Tracks a camera path's vertex string E v1 v2 ... to file each contribution
 // under exactly one class: emission = LE, direct = LDE, caustic = LS+DE,
-// specular = L(anything)SE, indirect = every other surface path.
+// specular = L(anything)SE, indirect = every other surface path; a path
+// with a medium vertex V is volume, one with a subsurface vertex B (and no
+// V) is subsurface (DESIGN section 3: volume, then subsurface, take
+// precedence). B: a scattering event in a medium entered through a shape
+// with a non-null BSDF (a dielectric) into its interior, i.e. inside a
+// translucent object; V: any other medium scattering event (fog around the
+// camera, media behind index-matched null boundaries).
 struct PathClass {
     int scatter_vertices = 0;  // v1..vk so far
     bool first_specular = false;
     bool rest_specular = true;  // v2..vk all specular
+    bool volume = false, subsurface = false;
     // Class of a contribution from an emitter reached right after the vertices
     // pushed so far (E v1 .. vk L). For next event estimation at v_{k+1},
     // classify a copy after push(false).
     int classify() const {
+        if (volume) return kVolume;
+        if (subsurface) return kSubsurface;
         if (scatter_vertices == 0) return kEmission;
         if (first_specular) return kSpecular;
         if (scatter_vertices == 1) return kDirect;
@@ -46,9 +55,19 @@ struct PathClass {
         if (scatter_vertices == 1) first_specular = is_delta;
         else rest_specular = rest_specular && is_delta;
     }
+    // A medium vertex: V, or B when `enclosed` (see above).
+    void push_medium(bool enclosed) {
+        push(false);
+        if (enclosed) subsurface = true;
+        else volume = true;
+    }
     // Can any class in `mask` still be produced once the current vertex
-    // (the next one to be pushed) scatters or samples a light?
-    bool can_reach(const EffectMask& m) const {
+    // (the next one to be pushed) scatters or samples a light? `media`: the
+    // scene has media, so a later vertex may still be V or B.
+    bool can_reach(const EffectMask& m, bool media = false) const {
+        if (volume) return m[kVolume];
+        if (subsurface) return m[kSubsurface] || (media && m[kVolume]);
+        if (media && (m[kVolume] || m[kSubsurface])) return true;
         if (scatter_vertices == 0) return m[kDirect] || m[kSpecular] || m[kCaustic] || m[kIndirect];
         if (first_specular) return m[kSpecular];
         if (scatter_vertices == 1) return m[kCaustic] || m[kIndirect];
@@ -100,6 +119,15 @@ public:
     virtual void check_scene(const Scene&) const {}
     // Depth up to which the light-path driver keeps per-strategy images (0: none).
     virtual int strategy_depth() const { return 0; }
+    // Whether this estimator transports light through participating media.
+    // The render driver refuses a scene with media for one that does not
+    // (rather than render it as if the media were vacuum).
+    virtual bool supports_media() const { return false; }
+    // The estimator that renders `scene` (called once per render, before any
+    // sample): `path` hands a scene with media to its media-aware loop
+    // (volpath.cpp), so that its own surface loop has no media code at all.
+    virtual const Integrator& for_scene(const Scene&) const { return *this; }
+    std::string type;  // the estimator's name, for messages (set by make_integrator)
     // Radiance along one camera ray, split by effect class, into `out`.
     virtual void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
                         ThreadStats& stats) const = 0;

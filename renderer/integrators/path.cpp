@@ -7,13 +7,28 @@
 //   hide_emitters  directly visible emitters appear black
 // Structure after pbrt-v4's PathIntegrator::Li (integrators.cpp): one loop,
 // direct lighting in its own helper (common.cpp).
+// `volpath` is this estimator under another name (DESIGN: "volpath, alias of
+// path with media"): a scene with media (Scene::features.has_media) is
+// rendered by the media-aware loop of volpath.cpp (for_scene hands it over,
+// once per render); a scene without media runs the surface loop below,
+// which has no media code at all.
 #include "integrators/common.h"
+#include "integrators/volpath.h"
 
 namespace rm {
 
 class PathIntegrator final : public Integrator {
 public:
-    explicit PathIntegrator(const IntegratorDesc& d) : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters) {}
+    explicit PathIntegrator(const IntegratorDesc& d)
+        : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), media_(make_volpath_integrator(d)) {}
+
+    bool supports_media() const override { return true; }
+    const Integrator& for_scene(const Scene& scene) const override {
+        if (!scene.features.has_media) return *this;
+        media_->mask = mask;
+        media_->type = type;
+        return *media_;
+    }
 
     void sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
                 ThreadStats& stats) const override {
@@ -101,6 +116,7 @@ public:
 private:
     int max_depth_, rr_depth_;
     bool hide_;
+    std::unique_ptr<Integrator> media_;  // the media-aware twin (volpath.cpp)
 };
 
 std::unique_ptr<Integrator> make_path_integrator(const IntegratorDesc& d) { return std::make_unique<PathIntegrator>(d); }

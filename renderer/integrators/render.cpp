@@ -97,11 +97,16 @@ int next_pass_end(const RenderOptions& opts, const std::vector<int>& checkpoints
     return std::min(s1, spp_done == 0 ? 1 : spp_done + std::min(spp_done, 64));
 }
 
-RenderOutput render(const Scene& scene, const Integrator& integrator, const RenderOptions& opts, const PollFn& poll) {
+RenderOutput render(const Scene& scene, const Integrator& requested, const RenderOptions& opts, const PollFn& poll) {
     if (!scene.committed()) throw std::logic_error("render: scene is not committed");
+    const Integrator& integrator = requested.for_scene(scene);
     if (opts.spp < 0) throw std::invalid_argument("render: spp must be >= 0");
     if (!(opts.seconds >= 0)) throw std::invalid_argument("render: seconds must be >= 0");
     if (opts.spp == 0 && opts.seconds <= 0) throw std::invalid_argument("render: give spp or seconds");
+    if (scene.features.has_media && !integrator.supports_media())
+        throw std::invalid_argument("integrator '" + integrator.type +
+                                    "' does not support participating media yet, and this scene has media; "
+                                    "use integrator 'volpath' (or 'path', the same estimator)");
     if (integrator.is_light_tracer()) return render_light_paths(scene, integrator, opts, poll);
     const Sensor& sensor = *scene.sensor;
     const SensorDesc& sd = scene.sensor_desc;

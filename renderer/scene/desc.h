@@ -51,6 +51,31 @@ struct SensorDesc {
     float filter_radius = 2.f;         // box: 0.5, tent: 1, gaussian: 4 * stddev
     float filter_stddev = 0.5f;        // gaussian
     int shape = -1;                    // irradiancemeter: index of the shape it measures
+    int medium = -1;                   // index of the medium the sensor sits in (-1: vacuum)
+};
+
+// A participating medium (Mitsuba 3's `homogeneous`): the loader resolves
+// sigma_t + albedo or sigma_a + sigma_s, and `scale`, into these two.
+// A grid volume (Mitsuba 3's `gridvolume`): nx * ny * nz voxels of
+// `channels` (1 or 3) floats, x fastest, over the unit cube of its local
+// space; `to_world` maps that cube into the world. Trilinear, clamped.
+struct GridDesc {
+    int nx = 0, ny = 0, nz = 0, channels = 1;
+    std::vector<float> data;
+    Matrix4 to_world = identity4();
+};
+
+struct MediumDesc {
+    std::string type = "homogeneous";  // homogeneous | heterogeneous
+    std::string id;                 // for error messages
+    Color sigma_t{1.f};             // extinction per unit length, scale applied
+    Color albedo{0.75f};            // sigma_s / sigma_t, in [0, 1]
+    // heterogeneous: a grid (nx > 0) replaces the constant above; the
+    // medium's `scale` is applied to sigma_t_grid's values by the renderer.
+    GridDesc sigma_t_grid, albedo_grid;
+    float scale = 1.f;
+    std::string phase = "isotropic";  // isotropic | hg
+    float g = 0.f;                    // hg asymmetry, in (-1, 1)
 };
 
 struct IntegratorDesc {

@@ -131,15 +131,34 @@ void Scene::set_sensor(const SensorDesc& desc) {
     sensor_shape_ = desc.shape;
 }
 
+int Scene::add_medium(const MediumDesc& desc) {
+    if (committed_) throw std::logic_error("scene is already committed");
+    media.push_back(std::make_unique<Medium>(desc));
+    return int(media.size()) - 1;
+}
+
+void Scene::set_shape_media(int shape, int interior, int exterior) {
+    if (shape < 0 || shape >= int(shapes.size())) throw std::invalid_argument("set_shape_media: shape index out of range");
+    for (int m : {interior, exterior})
+        if (m < -1 || m >= int(media.size()))
+            throw std::invalid_argument("shape '" + shapes[shape]->id + "': medium index out of range");
+    shapes[shape]->medium_interior = interior;
+    shapes[shape]->medium_exterior = exterior;
+}
+
 void Scene::commit() {
     if (!sensor) throw std::invalid_argument("scene has no sensor");
+    if (sensor_desc.medium < -1 || sensor_desc.medium >= int(media.size()))
+        throw std::invalid_argument("sensor: medium index out of range");
     rtcCommitScene(scene_);
     check_embree();
     for (const auto& s : shapes) {
         uint32_t f = bsdfs[s->bsdf]->flags();
         if (f & (kDeltaReflection | kDeltaTransmission)) features.has_delta_bsdf = true;
         if (f & kSmooth) features.has_smooth_bsdf = true;
+        if (s->medium_interior >= 0 || s->medium_exterior >= 0) features.has_media = true;
     }
+    if (sensor_desc.medium >= 0) features.has_media = true;
     committed_ = true;
 }
 
@@ -164,7 +183,8 @@ bool Scene::intersect(const Ray& ray, Interaction& it) const {
     const Shape& s = *shapes[rh.hit.geomID];
     // Every field is set here or by fill_interaction (no second zeroing).
     it.kind = VertexKind::Surface;
-    it.medium_inside = it.medium_outside = -1;
+    it.medium_inside = s.medium_interior;
+    it.medium_outside = s.medium_exterior;
     it.valid = true;
     it.t = rh.ray.tfar;
     it.shape = int(rh.hit.geomID);
@@ -213,6 +233,52 @@ bool Scene::visible(const Interaction& from, const DirectSample& ds) const {
     r.d = d / dist;
     r.tmax = dist * (1.f - 1e-4f);
     return !occluded(r);
+}
+
+Color Scene::transmittance(const Interaction& from, const DirectSample& ds, int medium, uint64_t& rays,
+                           Sampler& sampler) const {
+    Ray r;
+    if (from.kind == VertexKind::Medium) {
+        r.o = from.p;
+        r.d = ds.d;
+    } else {
+        r = from.spawn(ds.d);
+    }
+    // The far end as in visible(): pushed off the light's surface.
+    Vec3 to = ds.p;
+    bool infinite = std::isinf(ds.dist);
+    if (!infinite && length_sq(ds.n) > 0.f) {
+        float eps_to = ds.eps > 0.f ? ds.eps : hit_epsilon(to, 0.f);
+        to = to + ds.n * (dot(ds.n, r.o - to) >= 0.f ? eps_to : -eps_to);
+    }
+    if (!infinite) {
+        Vec3 d = to - r.o;
+        float dist = length(d);
+        if (!(dist > 0.f)) return Color(1.f);
+        r.d = d / dist;
+    }
+    Color tr(1.f);
+    // Each step crosses one index-matched surface; a bound keeps a shadow ray
+    // caught between coincident surfaces from looping (it is then dropped).
+    for (int step = 0; step < 1024; ++step) {
+        float remaining = infinite ? kInf : dot(to - r.o, r.d);
+        if (!(remaining > 0.f)) return tr;
+        r.tmin = 0.f;
+        r.tmax = infinite ? kInf : remaining * (1.f - 1e-4f);
+        Interaction it;
+        ++rays;
+        if (!intersect(r, it)) {
+            if (medium >= 0) tr *= media[medium]->segment_transmittance(r.o, r.d, remaining, sampler);
+            return tr;
+        }
+        if (bsdfs[shapes[it.shape]->bsdf]->flags() != kNull) return Color(0.f);
+        if (medium >= 0) tr *= media[medium]->segment_transmittance(r.o, r.d, it.t, sampler);
+        if (is_black(tr)) return tr;
+        medium = medium_after(it, r.d, medium);
+        Vec3 d = r.d;
+        r = it.spawn(d);
+    }
+    return Color(0.f);
 }
 
 }  // namespace rm

@@ -11,6 +11,7 @@
 #include "scene/bsdf.h"
 #include "scene/desc.h"
 #include "scene/emitter.h"
+#include "scene/medium.h"
 #include "scene/records.h"
 #include "scene/sensor.h"
 #include "scene/shape.h"
@@ -24,7 +25,7 @@ struct SceneFeatures {
     bool has_area_emitters = false;
     bool has_delta_emitters = false;
     bool has_environment = false;
-    bool has_media = false;          // always false until media land
+    bool has_media = false;          // some shape or the sensor references a medium
 };
 
 class Scene {
@@ -43,6 +44,12 @@ public:
     void add_area_emitter(int shape, const EmitterDesc& desc);
     void add_emitter(const EmitterDesc& desc);
     void set_sensor(const SensorDesc& desc);
+    // Media: add_medium returns its index; a shape's interior and exterior
+    // media (-1: none) make it a medium boundary (Mitsuba 3's
+    // `interior` / `exterior` references). The sensor's medium is
+    // SensorDesc::medium.
+    int add_medium(const MediumDesc& desc);
+    void set_shape_media(int shape, int interior, int exterior);
     void commit();  // builds the BVH; the scene is read-only afterwards
 
     // Closest hit in (ray.tmin, ray.tmax); fills `it` (wi = -ray.d).
@@ -51,11 +58,29 @@ public:
     bool occluded(const Ray& ray) const;
     // Shadow ray from `from` to the point p (or to infinity along d).
     bool visible(const Interaction& from, const DirectSample& ds) const;
+    // Shadow ray through media (volpath): the transmittance from `from` (a
+    // surface point, or a medium point when from.kind == Medium) to the
+    // sample `ds`, starting in `medium` and tracking it across medium
+    // boundaries; index-matched (null BSDF) surfaces pass light, any other
+    // surface blocks it (returns 0). Beer-Lambert exp(-sigma_t d) per
+    // segment, exact for homogeneous media (no sampling noise). `rays`
+    // counts the intersection queries.
+    // Heterogeneous media estimate their segments by ratio tracking with
+    // `sampler`'s random numbers.
+    Color transmittance(const Interaction& from, const DirectSample& ds, int medium, uint64_t& rays,
+                        Sampler& sampler) const;
+    // The medium on the side of `it` that direction d points to: its shape's
+    // interior or exterior when the shape is a medium boundary, else `current`.
+    static int medium_after(const Interaction& it, const Vec3& d, int current) {
+        if (it.medium_inside < 0 && it.medium_outside < 0) return current;
+        return dot(d, it.n) > 0.f ? it.medium_outside : it.medium_inside;
+    }
 
     std::vector<std::unique_ptr<Shape>> shapes;
     std::vector<std::unique_ptr<Bsdf>> bsdfs;
     std::vector<std::unique_ptr<Emitter>> emitters;
     std::vector<const Emitter*> environment;  // emitters hit by escaping rays
+    std::vector<std::unique_ptr<Medium>> media;
     std::unique_ptr<Sensor> sensor;
     SensorDesc sensor_desc;
     SceneFeatures features;

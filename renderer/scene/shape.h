@@ -27,6 +27,7 @@ public:
     int bsdf = -1;     // index into Scene::bsdfs
     int emitter = -1;  // index into Scene::emitters, area light attached to this shape
     bool flip_normals = false;
+    int medium_interior = -1, medium_exterior = -1;  // indices into Scene::media; -1: none
 
     virtual RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) = 0;
     // Fills the geometric part of `it` for a hit reported by Embree.

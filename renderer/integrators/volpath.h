@@ -1,0 +1,19 @@
+// The media-aware camera-ray loop shared by `path` and `volpath` (volpath.cpp).
+#pragma once
+#include "integrators/integrator.h"
+
+namespace rm {
+
+struct VolPathParams {
+    int max_depth = -1, rr_depth = 5;
+    bool hide = false;
+};
+
+// Radiance along one camera ray through a scene with media, split by effect class.
+void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
+                    ThreadStats& stats, const VolPathParams& prm, const EffectMask& mask);
+
+// `path`'s twin for scenes with media (Integrator::for_scene).
+std::unique_ptr<Integrator> make_volpath_integrator(const IntegratorDesc& d);
+
+}  // namespace rm

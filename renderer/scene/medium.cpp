@@ -1,0 +1,121 @@
+#include "scene/medium.h"
+
+#include <stdexcept>
+
+namespace rm {
+
+Grid::Grid(const GridDesc& d, const std::string& who) : nx_(d.nx), ny_(d.ny), nz_(d.nz), ch_(d.channels) {
+    if (nx_ < 1 || ny_ < 1 || nz_ < 1 || (ch_ != 1 && ch_ != 3))
+        throw std::invalid_argument(who + ": grid needs a positive resolution and 1 or 3 channels");
+    size_t n = size_t(nx_) * size_t(ny_) * size_t(nz_) * size_t(ch_);
+    if (d.data.size() != n)
+        throw std::invalid_argument(who + ": grid has " + std::to_string(d.data.size()) + " values, expected " +
+                                    std::to_string(n));
+    data_ = d.data;
+    max_ = Color(0.f);
+    for (size_t i = 0; i < n; ++i) {
+        float v = data_[i];
+        if (!(v >= 0.f) || !std::isfinite(v))
+            throw std::invalid_argument(who + ": grid values must be finite and >= 0, got " + std::to_string(v));
+        int c = ch_ == 1 ? -1 : int(i % 3);
+        if (c < 0) max_ = vmax(max_, Color(v));
+        else max_[c] = std::max(max_[c], v);
+    }
+    if (!xf_.set(d.to_world.data())) throw std::invalid_argument(who + ": singular grid to_world");
+}
+
+Color Grid::voxel(int x, int y, int z) const {
+    x = std::min(std::max(x, 0), nx_ - 1);
+    y = std::min(std::max(y, 0), ny_ - 1);
+    z = std::min(std::max(z, 0), nz_ - 1);
+    size_t i = ((size_t(z) * ny_ + y) * nx_ + x) * ch_;
+    return ch_ == 1 ? Color(data_[i]) : Color(data_[i], data_[i + 1], data_[i + 2]);
+}
+
+Color Grid::eval(const Vec3& p_world) const {
+    Vec3 u = xf_.inv_point(p_world);
+    float fx = u.x * nx_ - 0.5f, fy = u.y * ny_ - 0.5f, fz = u.z * nz_ - 0.5f;
+    float x0 = std::floor(fx), y0 = std::floor(fy), z0 = std::floor(fz);
+    float tx = fx - x0, ty = fy - y0, tz = fz - z0;
+    int ix = int(x0), iy = int(y0), iz = int(z0);
+    Color c00 = lerp(tx, voxel(ix, iy, iz), voxel(ix + 1, iy, iz));
+    Color c10 = lerp(tx, voxel(ix, iy + 1, iz), voxel(ix + 1, iy + 1, iz));
+    Color c01 = lerp(tx, voxel(ix, iy, iz + 1), voxel(ix + 1, iy, iz + 1));
+    Color c11 = lerp(tx, voxel(ix, iy + 1, iz + 1), voxel(ix + 1, iy + 1, iz + 1));
+    return lerp(tz, lerp(ty, c00, c10), lerp(ty, c01, c11));
+}
+
+Medium::Medium(const MediumDesc& d) : id(d.id) {
+    const std::string who = "medium '" + d.id + "'";
+    if (d.type != "homogeneous" && d.type != "heterogeneous")
+        throw std::invalid_argument(who + ": unknown type '" + d.type + "' (known: homogeneous, heterogeneous)");
+    for (int c = 0; c < 3; ++c) {
+        if (!(d.sigma_t[c] >= 0.f) || !std::isfinite(d.sigma_t[c]))
+            throw std::invalid_argument(who + ": sigma_t must be finite and >= 0, got " + std::to_string(d.sigma_t[c]));
+        if (!(d.albedo[c] >= 0.f && d.albedo[c] <= 1.f))
+            throw std::invalid_argument(who + ": albedo must lie in [0, 1], got " + std::to_string(d.albedo[c]));
+    }
+    if (!(d.scale >= 0.f) || !std::isfinite(d.scale))
+        throw std::invalid_argument(who + ": scale must be finite and >= 0");
+    sigma_t = d.sigma_t;
+    sigma_s = d.sigma_t * d.albedo;
+    homogeneous = d.type == "homogeneous";
+    if (!homogeneous) {
+        sigma_t_const_ = d.sigma_t;
+        albedo_const_ = d.albedo;
+        scale_ = d.scale;
+        if (d.sigma_t_grid.nx > 0) sigma_t_grid_ = std::make_unique<Grid>(d.sigma_t_grid, who + " sigma_t");
+        if (d.albedo_grid.nx > 0) {
+            albedo_grid_ = std::make_unique<Grid>(d.albedo_grid, who + " albedo");
+            if (max_component(albedo_grid_->max_value()) > 1.f)
+                throw std::invalid_argument(who + ": albedo grid values must lie in [0, 1]");
+        }
+        majorant = sigma_t_grid_ ? sigma_t_grid_->max_value() * scale_ : sigma_t_const_;
+    } else {
+        majorant = sigma_t;
+    }
+    try {
+        phase = make_phase(d.phase, d.g);
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(who + ": " + e.what());
+    }
+}
+
+void Medium::coefficients(const Vec3& p, Color& sig_t, Color& sig_s) const {
+    if (homogeneous) {
+        sig_t = sigma_t;
+        sig_s = sigma_s;
+        return;
+    }
+    sig_t = sigma_t_grid_ ? sigma_t_grid_->eval(p) * scale_ : sigma_t_const_;
+    // Interpolation never exceeds the largest voxel, so sig_t <= majorant.
+    sig_t = vmin(sig_t, majorant);
+    Color a = albedo_grid_ ? albedo_grid_->eval(p) : albedo_const_;
+    sig_s = sig_t * a;
+}
+
+Color Medium::segment_transmittance(const Vec3& o, const Vec3& d, float t1, Sampler& sampler) const {
+    if (homogeneous) return transmittance(t1);
+    // Ratio tracking (Novak et al. 2014, eq. 6) with one scalar majorant for
+    // all channels: T = prod_i (1 - sigma_t(x_i) / mu) over the tentative
+    // collisions x_i of a free flight of density mu exp(-mu t).
+    float mu = max_component(majorant);
+    Color tr(1.f);
+    if (!(mu > 0.f)) return tr;
+    float t = 0.f;
+    for (int i = 0; i < (1 << 20); ++i) {
+        t += -std::log1p(-sampler.next_1d()) / mu;
+        if (!(t < t1)) return tr;
+        Color st, ss;
+        coefficients(o + d * t, st, ss);
+        tr *= Color(1.f) - st / mu;
+        // Russian roulette once the estimate is small (unbiased: survivors x2).
+        if (max_component(tr) < 0.1f) {
+            if (sampler.next_1d() < 0.5f) return Color(0.f);
+            tr *= 2.f;
+        }
+    }
+    return Color(0.f);
+}
+
+}  // namespace rm
