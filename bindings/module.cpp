@@ -117,7 +117,18 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("emitter_samples", &IntegratorDesc::emitter_samples)
         .def_readwrite("bsdf_samples", &IntegratorDesc::bsdf_samples)
         .def_readwrite("mis", &IntegratorDesc::mis)
-        .def_readwrite("beta", &IntegratorDesc::beta);
+        .def_readwrite("beta", &IntegratorDesc::beta)
+        .def_readwrite("direct_samples", &IntegratorDesc::direct_samples)
+        .def_readwrite("global_photons", &IntegratorDesc::global_photons)
+        .def_readwrite("caustic_photons", &IntegratorDesc::caustic_photons)
+        .def_readwrite("global_lookup_radius", &IntegratorDesc::global_lookup_radius)
+        .def_readwrite("caustic_lookup_radius", &IntegratorDesc::caustic_lookup_radius)
+        .def_readwrite("lookup_size", &IntegratorDesc::lookup_size)
+        .def_readwrite("gather_rays", &IntegratorDesc::gather_rays)
+        .def_readwrite("final_gather", &IntegratorDesc::final_gather)
+        .def_readwrite("photon_count", &IntegratorDesc::photon_count)
+        .def_readwrite("initial_radius", &IntegratorDesc::initial_radius)
+        .def_readwrite("alpha", &IntegratorDesc::alpha);
 
     py::class_<Scene>(m, "Scene")
         .def(py::init<>())
@@ -453,6 +464,20 @@ PYBIND11_MODULE(_core, m) {
             st["paths"] = out.stats.paths;
             st["nan_samples"] = out.stats.nan_samples;
             st["inf_samples"] = out.stats.inf_samples;
+            st["photons"] = out.stats.photons;
+            // Photon maps built (photon mapping estimators): which, how big, how long.
+            py::dict maps;
+            for (const PhotonMapStats& pm : out.photon_maps) {
+                py::dict d;
+                d["photons"] = pm.photons;
+                d["paths"] = pm.paths;
+                d["bytes_per_photon"] = pm.bytes_per_photon;
+                d["trace_seconds"] = pm.trace_seconds;
+                d["build_seconds"] = pm.build_seconds;
+                d["target_reached"] = pm.target_reached;
+                maps[py::str(pm.name)] = d;
+            }
+            st["photon_maps"] = maps;
             r["stats"] = st;
             py::list cps;
             for (auto& c : out.checkpoints)

@@ -73,6 +73,10 @@ void render_tile(PassJob& job, int tile, ThreadStats& stats) {
 
 }  // namespace
 
+RenderOutput Integrator::drive(const Scene&, const RenderOptions&, const PollFn&) const {
+    throw std::logic_error("Integrator::drive called on an estimator that does not own its driver");
+}
+
 int next_pass_end(const RenderOptions& opts, const std::vector<int>& checkpoints, int spp_done, double elapsed,
                   double sec_per_spp) {
     // Under an spp budget the passes are fixed by the budget and checkpoints
@@ -102,6 +106,7 @@ RenderOutput render(const Scene& scene, const Integrator& integrator, const Rend
     if (opts.spp < 0) throw std::invalid_argument("render: spp must be >= 0");
     if (!(opts.seconds >= 0)) throw std::invalid_argument("render: seconds must be >= 0");
     if (opts.spp == 0 && opts.seconds <= 0) throw std::invalid_argument("render: give spp or seconds");
+    if (integrator.owns_driver()) return integrator.drive(scene, opts, poll);
     if (integrator.is_light_tracer()) return render_light_paths(scene, integrator, opts, poll);
     const Sensor& sensor = *scene.sensor;
     const SensorDesc& sd = scene.sensor_desc;
