@@ -224,8 +224,10 @@ def _region_means(img, regions):
 # card.md regions of glass_sphere_caustic at 64 x 64, (x0, y0, x1, y1).
 GLASS_REGIONS = {"caustic focus": (32, 33, 42, 40), "shadow": (20, 29, 58, 47), "sphere": (16, 14, 41, 39),
                  "open floor": (0, 48, 64, 64)}
-CORNELL_REGIONS = {"left wall": (0, 8, 12, 56), "right wall": (52, 8, 64, 56), "back wall": (16, 12, 48, 40),
-                   "floor": (8, 52, 56, 64), "ceiling": (8, 0, 56, 6)}
+# The Cornell box (Mitsuba's cornell_box() view) at 64 x 64: walls, floor, the
+# ceiling (lit only indirectly) and the tall box's front.
+CORNELL_REGIONS = {"red wall": (0, 12, 8, 52), "green wall": (56, 12, 64, 52), "back wall": (16, 12, 48, 28),
+                   "floor": (4, 56, 32, 64), "ceiling": (4, 0, 60, 3), "tall box": (32, 28, 44, 44)}
 
 
 @pytest.mark.parametrize("name,max_depth,photon_count", [("cornell_box", 8, 10000), ("glass_sphere_caustic", 12, 20000)])

@@ -339,7 +339,10 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     if (o.seconds > 0) o.seconds = std::max(opts.seconds - since(t0), 1e-3);
     PhotonMapperPass pass(*this, maps);
     pass.mask = mask;
+    double photon_seconds = since(t0);
     RenderOutput out = render(scene, pass, o, poll);
+    // Error-vs-time curves must count the photon passes.
+    for (Checkpoint& cp : out.checkpoints) cp.seconds += photon_seconds;
     out.stats.merge(pstats);
     out.photon_maps = info;
     out.seconds = since(t0);
