@@ -146,7 +146,8 @@ def test_same_seed_same_bytes_whatever_the_threads(integrator, path):
     ({"type": "photonmapper", "global_photons": -1}, "global_photons"),
     ({"type": "photonmapper", "caustic_lookup_radius": 0.0}, "caustic_lookup_radius"),
     ({"type": "photonmapper", "final_gather": 1}, "final_gather"),
-    ({"type": "photonmapper", "lookupSize": 10}, "lookupSize"),
+    ({"type": "photonmapper", "lookup_size": 10, "lookupSize": 10}, "lookupSize"),
+    ({"type": "photonmapper", "lookupsize": 10}, "lookupsize"),
     ({"type": "photonmapper", "max_depth": 0}, "max_depth"),
     ({"type": "sppm", "alpha": 1.0}, "alpha"),
     ({"type": "sppm", "alpha": 0.0}, "alpha"),
@@ -157,6 +158,19 @@ def test_bad_parameters_name_themselves(integrator, param):
     scene = rm.load_file(CORNELL, res=8)
     with pytest.raises(rm.SceneError, match=param):
         rm.render(scene, integrator=integrator, spp=1)
+
+
+def test_mitsuba06_names_are_aliases():
+    """Mitsuba 0.6's camelCase parameter names (its XML) mean ours."""
+    scene = rm.load_file(CORNELL, res=8)
+    a = rm.render(scene, integrator={"type": "photonmapper", "globalPhotons": 3000, "lookupSize": 10,
+                                     "directSamples": 1, "maxDepth": 4}, spp=1, seed=1)
+    b = rm.render(scene, integrator={"type": "photonmapper", "global_photons": 3000, "lookup_size": 10,
+                                     "direct_samples": 1, "max_depth": 4}, spp=1, seed=1)
+    assert a.image.tobytes() == b.image.tobytes()
+    assert a.integrator == b.integrator
+    c = rm.render(scene, integrator={"type": "sppm", "photonCount": 500, "initialRadius": 0.1}, spp=2, seed=1)
+    assert c.integrator["photon_count"] == 500 and c.integrator["initial_radius"] == 0.1
 
 
 def test_core_rejects_bad_parameters_without_python_checks():

@@ -24,7 +24,8 @@ INTEGRATOR_PARAMS = {
                "shading_samples": (int, None)},
     # Photon mapping (Jensen), Mitsuba 0.6's parameters in snake_case (directSamples -> direct_samples,
     # globalPhotons, causticPhotons, globalLookupRadius, causticLookupRadius, lookupSize, maxDepth,
-    # rrDepth, hideEmitters; granularity accepted and ignored); gather_rays and final_gather are ours.
+    # rrDepth, hideEmitters; the camelCase names are aliases, MITSUBA06_ALIASES; granularity accepted
+    # and ignored); gather_rays and final_gather are ours. Not yet: volumePhotons (media, issue 6).
     # Radii are relative to the scene's bounding-sphere radius. See renderer/integrators/photonmapper.cpp.
     "photonmapper": dict(_COMMON, direct_samples=(int, 16), global_photons=(int, 250000),
                          caustic_photons=(int, 250000), global_lookup_radius=(float, 0.05),
@@ -35,6 +36,16 @@ INTEGRATOR_PARAMS = {
     # One pass per spp. See renderer/integrators/sppm.cpp.
     "sppm": dict(_COMMON, photon_count=(int, 250000), initial_radius=(float, 0.0), alpha=(float, 0.7),
                  granularity=(int, None)),
+}
+# Mitsuba 0.6's camelCase names of the photon estimators' parameters (its XML
+# files use them), accepted as aliases of ours.
+MITSUBA06_ALIASES = {
+    "photonmapper": {"directSamples": "direct_samples", "globalPhotons": "global_photons",
+                     "causticPhotons": "caustic_photons", "globalLookupRadius": "global_lookup_radius",
+                     "causticLookupRadius": "caustic_lookup_radius", "lookupSize": "lookup_size",
+                     "maxDepth": "max_depth", "rrDepth": "rr_depth", "hideEmitters": "hide_emitters"},
+    "sppm": {"photonCount": "photon_count", "initialRadius": "initial_radius", "maxDepth": "max_depth",
+             "rrDepth": "rr_depth", "hideEmitters": "hide_emitters"},
 }
 # Known to the scene format, arriving in later issues.
 PLANNED_INTEGRATORS = ("vcm", "pssmlt", "vpl", "irrcache", "radiosity")
@@ -87,6 +98,12 @@ def _integrator_desc(spec, scene_integrator: IntegratorDesc):
             raise SceneError(f"{where}: estimator '{itype}' is not implemented yet")
         raise SceneError(f"{where}: unknown estimator '{itype}' (known: {', '.join(sorted(INTEGRATOR_PARAMS))})")
     schema = INTEGRATOR_PARAMS[itype]
+    aliases = MITSUBA06_ALIASES.get(itype, {})
+    for old, new in aliases.items():
+        if old in params:
+            if new in params:
+                raise SceneError(f"{where}['{old}']: given together with its alias '{new}'; give one")
+            params[new] = params.pop(old)
     resolved = {}
     for k, v in params.items():
         if k not in schema:
