@@ -49,8 +49,11 @@
 // lists the maps built.
 //
 // Bias: the estimate blurs the photon density over the disc of radius r (and
-// counts photons of nearby surfaces); it vanishes as the photon count grows
-// with n / N -> 0 (Jensen 2001, sec. 7.2). sppm is its consistent form.
+// counts photons of nearby surfaces: corners read brighter), and n / (pi r_n^2)
+// itself overestimates a Poisson density by n / (n - 1) (the n-th photon
+// sits on the disc's rim); it vanishes as the photon count grows with
+// n -> inf, n / N -> 0 (Jensen 2001, sec. 7.2). Measured per scene and effect
+// in benchmarks/photon_bias.py; sppm is the consistent form.
 #include <chrono>
 #include <limits>
 #include <stdexcept>
