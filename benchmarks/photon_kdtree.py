@@ -10,7 +10,8 @@ global map), float32, fixed seed. Queries: points drawn from the same
 distribution. For each size: build time, k-nearest time per query for
 k = 50 and 120 (Mitsuba's default lookupSize) within a radius of 0.05, and
 range-query time (queries in the diffuse part only) at the radius that
-holds about 120 photons there on average. Medians of `--repeats` runs. Writes a table to stdout and
+would hold 120 photons on one face (edges, corners and the disc's
+neighbourhood hold more: the mean count found is reported). Medians of `--repeats` runs. Writes a table to stdout and
 benchmarks/results/photon_kdtree.json.
 """
 from __future__ import annotations
