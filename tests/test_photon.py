@@ -276,16 +276,18 @@ def test_sppm_error_and_bias_fall_along_the_curve(name, max_depth, photon_count)
 
 @pytest.mark.skipif(not os.environ.get("RADIOMETER_SLOW"), reason="minutes of CPU; set RADIOMETER_SLOW=1 "
                     "(figures: benchmarks/photon_sppm.py and its results JSON)")
-@pytest.mark.parametrize("name,max_depth,regions", [("cornell_box", 8, CORNELL_REGIONS),
-                                                    ("glass_sphere_caustic", 12, GLASS_REGIONS)])
-def test_sppm_mean_within_one_percent_per_region(name, max_depth, regions):
-    """The largest budget run: 4 seeds x 1024 passes of 20000 photon paths
-    at 64 x 64; the mean over seeds lies within 1 % of Mitsuba's
-    reference in every effect region of the scene's card."""
+@pytest.mark.parametrize("name,max_depth,regions,passes", [("cornell_box", 8, CORNELL_REGIONS, 4096),
+                                                           ("glass_sphere_caustic", 12, GLASS_REGIONS, 1024)])
+def test_sppm_mean_within_one_percent_per_region(name, max_depth, regions, passes):
+    """The largest budget run: 4 seeds x `passes` passes of 20000 photon
+    paths at 64 x 64; the mean over seeds lies within 1 % of Mitsuba's
+    reference in every effect region of the scene's card. (At 1024 passes
+    the Cornell box's ceiling, lit only by photons, was still -1.09 %, se
+    0.76 %: benchmarks/results/photon_sppm.json.)"""
     scene = rm.load_file(ROOT / name / "scene.xml", res=64)
     ref = rm.read_exr(ROOT / name / "reference.exr").image
     imgs = [rm.render(scene, integrator={"type": "sppm", "max_depth": max_depth, "photon_count": 20000},
-                      spp=1024, seed=s).image for s in range(4)]
+                      spp=passes, seed=s).image for s in range(4)]
     got, want = _region_means(np.mean(imgs, 0), regions), _region_means(ref, regions)
     bad = {k: got[k] / want[k] - 1 for k in regions if abs(got[k] / want[k] - 1) > 0.01}
     assert not bad, f"{name}: regions off by more than 1 %: {bad}"
