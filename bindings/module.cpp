@@ -1,5 +1,7 @@
 // pybind11 module `radiometer._core`: converts, releases the GIL, maps errors.
 // No rendering logic lives here.
+#include <thread>
+
 #include <pybind11/functional.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -7,6 +9,7 @@
 
 #include "film/film.h"
 #include "integrators/render.h"
+#include "photon/photon_map.h"
 #include "scene/phase.h"
 #include "scene/scene.h"
 
@@ -144,7 +147,18 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("bsdf_samples", &IntegratorDesc::bsdf_samples)
         .def_readwrite("mis", &IntegratorDesc::mis)
         .def_readwrite("beta", &IntegratorDesc::beta)
-        .def_readwrite("strategy_images", &IntegratorDesc::strategy_images);
+        .def_readwrite("strategy_images", &IntegratorDesc::strategy_images)
+        .def_readwrite("direct_samples", &IntegratorDesc::direct_samples)
+        .def_readwrite("global_photons", &IntegratorDesc::global_photons)
+        .def_readwrite("caustic_photons", &IntegratorDesc::caustic_photons)
+        .def_readwrite("global_lookup_radius", &IntegratorDesc::global_lookup_radius)
+        .def_readwrite("caustic_lookup_radius", &IntegratorDesc::caustic_lookup_radius)
+        .def_readwrite("lookup_size", &IntegratorDesc::lookup_size)
+        .def_readwrite("gather_rays", &IntegratorDesc::gather_rays)
+        .def_readwrite("final_gather", &IntegratorDesc::final_gather)
+        .def_readwrite("photon_count", &IntegratorDesc::photon_count)
+        .def_readwrite("initial_radius", &IntegratorDesc::initial_radius)
+        .def_readwrite("alpha", &IntegratorDesc::alpha);
 
     py::class_<Scene>(m, "Scene")
         .def(py::init<>())
@@ -407,6 +421,102 @@ PYBIND11_MODULE(_core, m) {
         return py::tuple(l);
     }();
 
+    // The photon map's kd-tree on bare points, for the brute-force query
+    // tests and benchmarks/photon_kdtree.py. Indices returned are the input
+    // rows; knn pads with -1 / inf where fewer than k lie within r_max.
+    py::class_<PhotonMap>(m, "PhotonMap")
+        .def(py::init([](py::object points, int threads) {
+                 std::vector<float> xyz = flat<float>(points, 3, "points");
+                 size_t n = xyz.size() / 3;
+                 std::vector<Photon> ph(n);
+                 for (size_t i = 0; i < n; ++i) ph[i].p = Vec3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
+                 auto map = std::make_unique<PhotonMap>();
+                 {
+                     py::gil_scoped_release nogil;
+                     map->build(std::move(ph), std::max(1, threads), true);
+                 }
+                 return map;
+             }),
+             py::arg("points"), py::arg("threads") = 1, "builds the balanced kd-tree over (N, 3) points")
+        .def_property_readonly("size", &PhotonMap::size)
+        .def_property_readonly_static("bytes_per_photon", [](py::object) { return PhotonMap::bytes_per_photon(); })
+        .def(
+            "knn",
+            [](const PhotonMap& map, py::object queries, int k, float r_max, int threads) {
+                std::vector<float> q = flat<float>(queries, 3, "queries");
+                if (k < 1) throw py::value_error("knn: k must be >= 1");
+                if (!(r_max >= 0.f)) throw py::value_error("knn: r_max must be >= 0");
+                size_t nq = q.size() / 3;
+                std::vector<int64_t> idx(nq * size_t(k), -1);
+                std::vector<float> d2(nq * size_t(k), kInf);
+                float r2 = std::isinf(r_max) ? kInf : r_max * r_max;
+                {
+                    py::gil_scoped_release nogil;
+                    int nt = std::max(1, threads);
+                    std::vector<std::thread> pool;
+                    for (int t = 0; t < nt; ++t)
+                        pool.emplace_back([&, t] {
+                            std::vector<Neighbour> nb;
+                            for (size_t i = size_t(t); i < nq; i += size_t(nt)) {
+                                map.knn(Vec3(q[3 * i], q[3 * i + 1], q[3 * i + 2]), k, r2, nb);
+                                for (size_t j = 0; j < nb.size(); ++j) {
+                                    idx[i * k + j] = map.ids()[nb[j].idx];
+                                    d2[i * k + j] = nb[j].d2;
+                                }
+                            }
+                        });
+                    for (auto& th : pool) th.join();
+                }
+                py::array_t<int64_t> ia({py::ssize_t(nq), py::ssize_t(k)});
+                std::copy(idx.begin(), idx.end(), ia.mutable_data());
+                return py::make_tuple(ia, to_numpy(std::move(d2), {py::ssize_t(nq), py::ssize_t(k)}));
+            },
+            py::arg("queries"), py::arg("k"), py::arg("r_max") = INFINITY, py::arg("threads") = 1,
+            "the k nearest points (within r_max) of each query row, nearest first: (indices, squared distances)")
+        .def(
+            "range",
+            [](const PhotonMap& map, py::object query, float r) {
+                auto q = query.cast<std::vector<float>>();
+                if (q.size() != 3) throw py::value_error("range: query must be 3 numbers");
+                if (!(r >= 0.f)) throw py::value_error("range: r must be >= 0");
+                std::vector<Neighbour> nb;
+                map.range(Vec3(q[0], q[1], q[2]), r * r, nb);
+                py::array_t<int64_t> ia(static_cast<py::ssize_t>(nb.size()));
+                std::vector<float> d2(nb.size());
+                for (size_t j = 0; j < nb.size(); ++j) {
+                    ia.mutable_data()[j] = map.ids()[nb[j].idx];
+                    d2[j] = nb[j].d2;
+                }
+                return py::make_tuple(ia, to_numpy(std::move(d2), {py::ssize_t(nb.size())}));
+            },
+            py::arg("query"), py::arg("r"), "every point within distance r of query: (indices, squared distances)")
+        .def(
+            "range_count",
+            [](const PhotonMap& map, py::object queries, float r, int threads) {
+                std::vector<float> q = flat<float>(queries, 3, "queries");
+                size_t nq = q.size() / 3;
+                std::vector<int64_t> cnt(nq, 0);
+                {
+                    py::gil_scoped_release nogil;
+                    int nt = std::max(1, threads);
+                    std::vector<std::thread> pool;
+                    for (int t = 0; t < nt; ++t)
+                        pool.emplace_back([&, t] {
+                            std::vector<Neighbour> nb;
+                            for (size_t i = size_t(t); i < nq; i += size_t(nt)) {
+                                map.range(Vec3(q[3 * i], q[3 * i + 1], q[3 * i + 2]), r * r, nb);
+                                cnt[i] = int64_t(nb.size());
+                            }
+                        });
+                    for (auto& th : pool) th.join();
+                }
+                py::array_t<int64_t> ca(static_cast<py::ssize_t>(nq));
+                std::copy(cnt.begin(), cnt.end(), ca.mutable_data());
+                return ca;
+            },
+            py::arg("queries"), py::arg("r"), py::arg("threads") = 1,
+            "number of points within r of each query row (batched range queries, for benchmarks)");
+
     m.def(
         "bdpt_mis_check",
         [](const Scene& scene, const IntegratorDesc& idesc, uint64_t seed, int n) {
@@ -493,6 +603,20 @@ PYBIND11_MODULE(_core, m) {
             st["paths"] = out.stats.paths;
             st["nan_samples"] = out.stats.nan_samples;
             st["inf_samples"] = out.stats.inf_samples;
+            st["photons"] = out.stats.photons;
+            // Photon maps built (photon mapping estimators): which, how big, how long.
+            py::dict maps;
+            for (const PhotonMapStats& pm : out.photon_maps) {
+                py::dict d;
+                d["photons"] = pm.photons;
+                d["paths"] = pm.paths;
+                d["bytes_per_photon"] = pm.bytes_per_photon;
+                d["trace_seconds"] = pm.trace_seconds;
+                d["build_seconds"] = pm.build_seconds;
+                d["target_reached"] = pm.target_reached;
+                maps[py::str(pm.name)] = d;
+            }
+            st["photon_maps"] = maps;
             r["stats"] = st;
             py::list cps;
             for (auto& c : out.checkpoints)

@@ -30,7 +30,14 @@ from radiometer.analysis.stats import z_test
 from radiometer.render import INTEGRATOR_PARAMS
 
 # Every estimator: each must survive every scene.
-ESTIMATORS = ["path", "direct", "ptracer", "bdpt"]
+ESTIMATORS = ["path", "direct", "ptracer", "bdpt", "photonmapper", "sppm"]
+# Per-estimator settings for the sweep's budget (defaults elsewhere): the
+# photon estimators' defaults (250 000 photons, 16 shadow and 32 gather rays)
+# cost minutes over the sweep; stability does not depend on them.
+SWEEP_PARAMS = {
+    "photonmapper": {"global_photons": 20000, "caustic_photons": 20000, "direct_samples": 1, "gather_rays": 4},
+    "sppm": {"photon_count": 10000},
+}
 # Estimators that refuse emitters at infinity (constant, directional), with
 # a clear error naming the emitter; on such scenes the test asserts that
 # refusal instead of an image. None at present (bdpt supports them).
@@ -124,7 +131,7 @@ def test_scene_list_matches_folder():
 def spec(estimator, max_depth=None, rr_depth=None):
     """An integrator dict for `estimator`, with max_depth / rr_depth where it
     takes them (an estimator not in INTEGRATOR_PARAMS yet is assumed to)."""
-    d = {"type": estimator}
+    d = {"type": estimator, **SWEEP_PARAMS.get(estimator, {})}
     known = INTEGRATOR_PARAMS.get(estimator, {"max_depth": None, "rr_depth": None})
     for k, v in (("max_depth", max_depth), ("rr_depth", rr_depth)):
         if v is not None and k in known:

@@ -24,9 +24,33 @@ INTEGRATOR_PARAMS = {
     "bdpt": dict(_COMMON, mis=(str, "power"), beta=(float, 2.0), strategy_images=(int, 0)),
     "direct": {"emitter_samples": (int, 1), "bsdf_samples": (int, 1), "hide_emitters": (bool, False),
                "shading_samples": (int, None)},
+    # Photon mapping (Jensen), Mitsuba 0.6's parameters in snake_case (directSamples -> direct_samples,
+    # globalPhotons, causticPhotons, globalLookupRadius, causticLookupRadius, lookupSize, maxDepth,
+    # rrDepth, hideEmitters; the camelCase names are aliases, MITSUBA06_ALIASES; granularity accepted
+    # and ignored); gather_rays and final_gather are ours. Not yet: volumePhotons (media, issue 6).
+    # Radii are relative to the scene's bounding-sphere radius. See renderer/integrators/photonmapper.cpp.
+    "photonmapper": dict(_COMMON, direct_samples=(int, 16), global_photons=(int, 250000),
+                         caustic_photons=(int, 250000), global_lookup_radius=(float, 0.05),
+                         caustic_lookup_radius=(float, 0.0125), lookup_size=(int, 120), gather_rays=(int, 32),
+                         final_gather=(bool, True), granularity=(int, None)),
+    # Stochastic progressive photon mapping (Hachisuka & Jensen 2009): Mitsuba 0.6's photonCount,
+    # initialRadius (0 = automatic), alpha, maxDepth, rrDepth; granularity accepted and ignored.
+    # One pass per spp. See renderer/integrators/sppm.cpp.
+    "sppm": dict(_COMMON, photon_count=(int, 250000), initial_radius=(float, 0.0), alpha=(float, 0.7),
+                 granularity=(int, None)),
+}
+# Mitsuba 0.6's camelCase names of the photon estimators' parameters (its XML
+# files use them), accepted as aliases of ours.
+MITSUBA06_ALIASES = {
+    "photonmapper": {"directSamples": "direct_samples", "globalPhotons": "global_photons",
+                     "causticPhotons": "caustic_photons", "globalLookupRadius": "global_lookup_radius",
+                     "causticLookupRadius": "caustic_lookup_radius", "lookupSize": "lookup_size",
+                     "maxDepth": "max_depth", "rrDepth": "rr_depth", "hideEmitters": "hide_emitters"},
+    "sppm": {"photonCount": "photon_count", "initialRadius": "initial_radius", "maxDepth": "max_depth",
+             "rrDepth": "rr_depth", "hideEmitters": "hide_emitters"},
 }
 # Known to the scene format, arriving in later issues.
-PLANNED_INTEGRATORS = ("photonmapper", "sppm", "vcm", "pssmlt", "vpl", "irrcache", "radiosity")
+PLANNED_INTEGRATORS = ("vcm", "pssmlt", "vpl", "irrcache", "radiosity")
 
 
 class RenderCancelled(KeyboardInterrupt):
@@ -81,6 +105,12 @@ def _integrator_desc(spec, scene_integrator: IntegratorDesc):
             raise SceneError(f"{where}: estimator '{itype}' is not implemented yet")
         raise SceneError(f"{where}: unknown estimator '{itype}' (known: {', '.join(sorted(INTEGRATOR_PARAMS))})")
     schema = INTEGRATOR_PARAMS[itype]
+    aliases = MITSUBA06_ALIASES.get(itype, {})
+    for old, new in aliases.items():
+        if old in params:
+            if new in params:
+                raise SceneError(f"{where}['{old}']: given together with its alias '{new}'; give one")
+            params[new] = params.pop(old)
     resolved = {}
     for k, v in params.items():
         if k not in schema:
@@ -108,7 +138,8 @@ def _integrator_desc(spec, scene_integrator: IntegratorDesc):
         if val is not None:
             out[k] = val
     out.pop("samples_per_pass", None)
-    if itype in ("path", "volpath", "ptracer", "bdpt"):
+    out.pop("granularity", None)
+    if itype in ("path", "volpath", "ptracer", "bdpt", "photonmapper", "sppm"):
         if out["max_depth"] == 0 or out["max_depth"] < -1:
             raise SceneError(f"{where}['max_depth']: must be -1 (unbounded) or >= 1, got {out['max_depth']}")
         if out["rr_depth"] < 1:
@@ -121,6 +152,23 @@ def _integrator_desc(spec, scene_integrator: IntegratorDesc):
     if itype in ("bdpt", "ptracer") and not 0 <= out["strategy_images"] <= 16:
         raise SceneError(f"{where}['strategy_images']: must be a path depth in 0..16 (0: none), "
                          f"got {out['strategy_images']}")
+    if itype == "photonmapper":
+        for k in ("direct_samples", "global_photons", "caustic_photons"):
+            if out[k] < 0:
+                raise SceneError(f"{where}['{k}']: must be >= 0, got {out[k]}")
+        for k in ("lookup_size", "gather_rays"):
+            if out[k] < 1:
+                raise SceneError(f"{where}['{k}']: must be >= 1, got {out[k]}")
+        for k in ("global_lookup_radius", "caustic_lookup_radius"):
+            if not out[k] > 0:
+                raise SceneError(f"{where}['{k}']: must be > 0 (relative to the scene's radius), got {out[k]}")
+    if itype == "sppm":
+        if out["photon_count"] < 1:
+            raise SceneError(f"{where}['photon_count']: must be >= 1, got {out['photon_count']}")
+        if not out["initial_radius"] >= 0:
+            raise SceneError(f"{where}['initial_radius']: must be >= 0 (0 = automatic), got {out['initial_radius']}")
+        if not 0 < out["alpha"] < 1:
+            raise SceneError(f"{where}['alpha']: must lie in (0, 1), got {out['alpha']}")
     if itype == "direct":
         if "shading_samples" in out:  # Mitsuba: sets both counts
             out["emitter_samples"] = out["bsdf_samples"] = out.pop("shading_samples")
@@ -135,7 +183,9 @@ def _core_integrator(spec: dict):
     c = _core.IntegratorDesc()
     c.type = spec["type"]
     for k in ("max_depth", "rr_depth", "hide_emitters", "emitter_samples", "bsdf_samples", "mis", "beta",
-              "strategy_images"):
+              "strategy_images", "direct_samples", "global_photons", "caustic_photons", "global_lookup_radius",
+              "caustic_lookup_radius", "lookup_size", "gather_rays", "final_gather", "photon_count",
+              "initial_radius", "alpha"):
         if k in spec:
             setattr(c, k, spec[k])
     return c

@@ -82,6 +82,8 @@ private:
 std::unique_ptr<Integrator> make_path_integrator(const IntegratorDesc& d);
 std::unique_ptr<Integrator> make_ptracer_integrator(const IntegratorDesc& d);
 std::unique_ptr<Integrator> make_bdpt_integrator(const IntegratorDesc& d);
+std::unique_ptr<Integrator> make_photonmapper_integrator(const IntegratorDesc& d);
+std::unique_ptr<Integrator> make_sppm_integrator(const IntegratorDesc& d);
 
 std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& d, const EffectMask& mask) {
     std::unique_ptr<Integrator> r;
@@ -94,6 +96,10 @@ std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& d, const Effec
         r = make_ptracer_integrator(d);
     } else if (d.type == "bdpt") {
         r = make_bdpt_integrator(d);
+    } else if (d.type == "photonmapper") {
+        r = make_photonmapper_integrator(d);
+    } else if (d.type == "sppm") {
+        r = make_sppm_integrator(d);
     } else if (d.type == "direct") {
         if (d.emitter_samples < 0 || d.bsdf_samples < 0 || d.emitter_samples + d.bsdf_samples == 0)
             throw std::invalid_argument("integrator 'direct': emitter_samples and bsdf_samples must be >= 0, not both 0");

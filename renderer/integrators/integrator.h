@@ -2,6 +2,7 @@
 // section 3 (Heckbert's path notation).
 #pragma once
 #include <array>
+#include <functional>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -16,11 +17,16 @@ namespace rm {
 
 struct ThreadStats {
     uint64_t rays = 0, shadow_rays = 0, paths = 0, nan_samples = 0, inf_samples = 0;
+    uint64_t photons = 0;  // photons stored (photon mapping estimators)
     void merge(const ThreadStats& o) {
         rays += o.rays; shadow_rays += o.shadow_rays; paths += o.paths;
         nan_samples += o.nan_samples; inf_samples += o.inf_samples;
+        photons += o.photons;
     }
 };
+
+struct RenderOptions;
+struct RenderOutput;
 
 using EffectMask = std::array<bool, kNumEffects>;
 inline EffectMask all_effects() { EffectMask m; m.fill(true); return m; }
@@ -115,6 +121,12 @@ public:
     // `pixel` is the pixel whose Sampler(seed, pixel, sample) drives the path
     // (bdpt also traces one camera path through that pixel).
     virtual void trace_light_path(const Scene&, Sampler&, int pixel, std::vector<Splat>& out, ThreadStats&) const {}
+    // Estimators with passes of their own (photon mapping: photon passes
+    // before or between camera passes) run the render themselves:
+    // render() hands them the whole job (render.h's PollFn for `poll`).
+    virtual bool owns_driver() const { return false; }
+    virtual RenderOutput drive(const Scene& scene, const RenderOptions& opts,
+                               const std::function<bool(uint64_t, uint64_t)>& poll) const;
     // Throws std::invalid_argument when this estimator cannot render `scene`.
     virtual void check_scene(const Scene&) const {}
     // Depth up to which the light-path driver keeps per-strategy images (0: none).

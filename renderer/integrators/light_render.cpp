@@ -40,6 +40,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "integrators/parallel.h"
 #include "integrators/render.h"
 
 namespace rm {
@@ -207,59 +208,6 @@ private:
     std::vector<double> batches_;  // [pixel][batch][channel] sums
     std::vector<double> norm_x_, norm_y_;
 };
-
-// Runs fn(i, thread) for i in [0, n) on `threads` threads while the calling
-// thread polls; returns false when the poll asked to cancel (the items then
-// may be unfinished). Worker exceptions are rethrown here.
-template <class Fn>
-bool run_parallel(int threads, size_t n, Fn fn, const std::function<bool()>& poll_once, std::atomic<bool>& cancel) {
-    std::atomic<size_t> next{0};
-    std::atomic<int> running{threads};
-    std::mutex mu;
-    std::condition_variable cv;
-    std::exception_ptr error;
-    std::mutex error_mu;
-    auto worker = [&](int t) {
-        try {
-            for (;;) {
-                size_t i = next.fetch_add(1);
-                if (i >= n || cancel.load()) break;
-                fn(i, t);
-            }
-        } catch (...) {
-            std::lock_guard<std::mutex> lk(error_mu);
-            if (!error) error = std::current_exception();
-            cancel = true;
-        }
-        if (running.fetch_sub(1) == 1) {
-            std::lock_guard<std::mutex> lk(mu);
-            cv.notify_all();
-        }
-    };
-    std::vector<std::thread> pool;
-    for (int t = 0; t < threads; ++t) pool.emplace_back(worker, t);
-    {
-        std::unique_lock<std::mutex> lk(mu);
-        while (running.load() > 0) {
-            cv.wait_for(lk, std::chrono::milliseconds(50));
-            if (running.load() == 0) break;
-            lk.unlock();
-            bool go_on = true;
-            try {
-                go_on = poll_once();
-            } catch (...) {
-                std::lock_guard<std::mutex> elk(error_mu);
-                if (!error) error = std::current_exception();
-                go_on = false;
-            }
-            if (!go_on) cancel = true;
-            lk.lock();
-        }
-    }
-    for (auto& th : pool) th.join();
-    if (error) std::rethrow_exception(error);
-    return !cancel.load();
-}
 
 }  // namespace
 

@@ -73,6 +73,10 @@ void render_tile(PassJob& job, int tile, ThreadStats& stats) {
 
 }  // namespace
 
+RenderOutput Integrator::drive(const Scene&, const RenderOptions&, const PollFn&) const {
+    throw std::logic_error("Integrator::drive called on an estimator that does not own its driver");
+}
+
 int next_pass_end(const RenderOptions& opts, const std::vector<int>& checkpoints, int spp_done, double elapsed,
                   double sec_per_spp) {
     // Under an spp budget the passes are fixed by the budget and checkpoints
@@ -107,6 +111,7 @@ RenderOutput render(const Scene& scene, const Integrator& requested, const Rende
         throw std::invalid_argument("integrator '" + integrator.type +
                                     "' does not support participating media yet, and this scene has media; "
                                     "use integrator 'volpath' (or 'path', the same estimator)");
+    if (integrator.owns_driver()) return integrator.drive(scene, opts, poll);
     if (integrator.is_light_tracer()) return render_light_paths(scene, integrator, opts, poll);
     const Sensor& sensor = *scene.sensor;
     const SensorDesc& sd = scene.sensor_desc;

@@ -26,6 +26,16 @@ struct Checkpoint {
     std::vector<float> image, variance;
 };
 
+// A photon map a render built (photon mapping estimators), for res.stats.
+struct PhotonMapStats {
+    std::string name;             // "caustic", "global", "sppm"
+    uint64_t photons = 0;         // photons stored
+    uint64_t paths = 0;           // light paths traced to store them (the power normaliser)
+    double bytes_per_photon = 0;  // memory of the map per photon
+    double trace_seconds = 0, build_seconds = 0;
+    bool target_reached = true;   // false: tracing gave up before storing the requested count
+};
+
 struct RenderOutput {
     int width = 0, height = 0, spp = 0;
     double seconds = 0;
@@ -38,6 +48,7 @@ struct RenderOutput {
     std::vector<std::vector<float>> strategies, strategies_unweighted;
     std::vector<Checkpoint> checkpoints;
     ThreadStats stats;
+    std::vector<PhotonMapStats> photon_maps;
     int threads = 0;
     double setup_seconds = 0;
 };
@@ -54,6 +65,10 @@ RenderOutput render(const Scene& scene, const Integrator& integrator, const Rend
 // their pass plans (and hence their bytes for a seed) follow one rule.
 int next_pass_end(const RenderOptions& opts, const std::vector<int>& checkpoints, int spp_done, double elapsed,
                   double sec_per_spp);
+
+// An output with no samples (zero image, NaN variance, cancelled): what a
+// render cancelled before its first camera pass returns.
+RenderOutput empty_render_output(const Scene& scene, int threads, double seconds);
 
 // The driver of light-tracing estimators (integrator.is_light_tracer()),
 // called by render(): light paths splatted onto the film (light_render.cpp).

@@ -90,6 +90,20 @@ struct IntegratorDesc {
     float beta = 2.f;
     // bdpt, ptracer: keep one image per strategy (s, t) of path depth s + t - 1 <= this (0: none)
     int strategy_images = 0;
+    // photonmapper (Mitsuba 0.6's names in camelCase; radii relative to the
+    // radius of the scene's bounding sphere, as Mitsuba's are to the scene size)
+    int direct_samples = 16;         // directSamples
+    int global_photons = 250000;     // globalPhotons
+    int caustic_photons = 250000;    // causticPhotons
+    float global_lookup_radius = 0.05f;     // globalLookupRadius
+    float caustic_lookup_radius = 0.0125f;  // causticLookupRadius
+    int lookup_size = 120;           // lookupSize
+    int gather_rays = 32;            // final-gathering rays per camera sample
+    bool final_gather = true;        // false: the global map seen directly (shows its bias)
+    // sppm (Mitsuba 0.6: photonCount, initialRadius, alpha)
+    int photon_count = 250000;       // photons emitted per pass
+    float initial_radius = 0.f;      // world units; 0 = automatic
+    float alpha = 0.7f;
 };
 
 }  // namespace rm

@@ -1,0 +1,59 @@
+// Photon tracing, the first pass of photon mapping (Jensen 2001, ch. 5):
+// light paths leave the emitters with their flux, scatter by the adjoint
+// BSDFs with Russian roulette, and leave a photon (position, incoming
+// direction, power) at every vertex with a non-specular lobe.
+//
+// Determinism: light path g draws on Sampler(mix64(seed + stream), g, pass)
+// alone, and the photons of a pass are concatenated in path order, so the
+// stored photons (and hence the maps and the image) do not depend on the
+// thread count.
+#pragma once
+#include <atomic>
+#include <functional>
+#include <vector>
+
+#include "integrators/integrator.h"
+#include "photon/photon_map.h"
+
+namespace rm {
+
+// Segments from the emitter to the photon's vertex, in Photon::flags.
+constexpr int kPhotonDepthShift = 8;
+inline int photon_depth(const Photon& p) { return int((p.flags >> kPhotonDepthShift) & 0xffu); }
+
+struct PhotonTraceSpec {
+    int max_depth = -1;        // light-path segments to the last stored photon; -1 = unbounded
+    int rr_depth = 5;          // segments from which Russian roulette may stop the path
+    bool caustic_only = false; // keep only L S+ D photons; a path stops at its first non-specular vertex
+    bool store_direct = true;  // keep photons at the first vertex (L D: direct light)
+    bool indirect_only = false;// keep only photons whose path had a non-specular vertex before
+    uint64_t stream = 0;       // decorrelates the random streams of different maps
+};
+
+// Traces light path `path` of pass `pass` and appends its photons, their
+// power not yet divided by the number of paths traced.
+void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path,
+                       uint64_t pass, std::vector<Photon>& out, ThreadStats& stats);
+
+struct PhotonPass {
+    std::vector<Photon> photons;  // power already divided by `paths`
+    uint64_t paths = 0;           // light paths traced (the estimate's normaliser)
+    bool target_reached = true;
+    bool cancelled = false;
+    double seconds = 0;
+};
+
+// Traces light paths 0, 1, 2, ... until `target` photons are stored
+// (Jensen's "photons in the map", Mitsuba's globalPhotons/causticPhotons);
+// the paths after the one that stored the target-th photon are dropped, so
+// the count of paths traced is a function of the seed. Gives up, as pbrt
+// v1's photon mapper does (Pharr & Humphreys 2004, sec. 16.5), once over
+// 500 000 paths stored nothing or fewer than one photon per 1024 paths.
+PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t target,
+                               int threads, const std::function<bool()>& poll, ThreadStats& stats);
+
+// Traces exactly `paths` light paths of pass `pass` (SPPM's per-pass photons).
+PhotonPass trace_photon_paths(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass,
+                              uint64_t paths, int threads, const std::function<bool()>& poll, ThreadStats& stats);
+
+}  // namespace rm
