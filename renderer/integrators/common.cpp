@@ -24,6 +24,19 @@ Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsd
     return f * ds.radiance * (w / light_pdf);
 }
 
+bool trace_counting_emission(const Scene& scene, const Ray& ray, Interaction& it, const Color& beta, int cls,
+                             bool count, EffectRadiance& out, ThreadStats& stats) {
+    ++stats.rays;
+    if (!scene.intersect(ray, it)) {
+        if (count)
+            for (const Emitter* e : scene.environment) out.add(cls, beta * e->eval_environment(ray.d));
+        return false;
+    }
+    const Shape& shape = *scene.shapes[it.shape];
+    if (shape.emitter >= 0 && count) out.add(cls, beta * scene.emitters[shape.emitter]->eval(it, it.wi));
+    return true;
+}
+
 float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
                        float bsdf_pdf_w, float light_frac, float bsdf_frac) {
     float light_pdf = it ? e.pdf_direct(prev_p, it->p, it->n) : e.pdf_direct(prev_p, Vec3(0.f), Vec3(0.f));

@@ -20,6 +20,14 @@ Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsd
 float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
                        float bsdf_pdf_w, float light_frac = 1.f, float bsdf_frac = 1.f);
 
+// One step of a camera path for estimators that take emission found along
+// it without an MIS weight (photonmapper, sppm: their only other route to
+// the emitters is light sampling at non-specular vertices): intersects
+// `ray`, and when `count` adds what the emitters it reaches show, times
+// `beta`, under class `cls`. Returns false when the ray left the scene.
+bool trace_counting_emission(const Scene& scene, const Ray& ray, Interaction& it, const Color& beta, int cls,
+                             bool count, EffectRadiance& out, ThreadStats& stats);
+
 // Adjoint BSDF with shading normals (Veach 1997, eq. 5.16; pbrt-v3's
 // CorrectShadingNormal): in importance transport a vertex that scatters
 // from wi (towards the light) to wo weights f |wo.ns| (what eval/sample

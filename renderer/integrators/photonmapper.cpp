@@ -121,17 +121,10 @@ public:
             // 1. The next vertex, and emission it shows (reached from the camera
             //    directly or through specular vertices only).
             Interaction it;
-            ++stats.rays;
-            bool hit = scene.intersect(ray, it);
             int cls = pc.classify();
-            bool count_emission = !(depth == 0 && hide_) && mask[cls];
-            if (!hit) {
-                if (count_emission)
-                    for (const Emitter* e : scene.environment) out.add(cls, beta * e->eval_environment(ray.d));
+            if (!trace_counting_emission(scene, ray, it, beta, cls, !(depth == 0 && hide_) && mask[cls], out, stats))
                 break;
-            }
             const Shape& shape = *scene.shapes[it.shape];
-            if (shape.emitter >= 0 && count_emission) out.add(cls, beta * scene.emitters[shape.emitter]->eval(it, it.wi));
             if (max_depth_ >= 0 && depth + 1 >= max_depth_) break;
             const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
             Vec3 wi = it.to_local(it.wi);

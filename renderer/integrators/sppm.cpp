@@ -105,17 +105,10 @@ private:
         BsdfContext ctx;
         for (int depth = 0;; ++depth) {
             Interaction it;
-            ++stats.rays;
-            bool hit = scene.intersect(ray, it);
             int cls = pc.classify();
-            bool count_emission = !(depth == 0 && hide_) && mask[cls];
-            if (!hit) {
-                if (count_emission)
-                    for (const Emitter* e : scene.environment) out.add(cls, beta * e->eval_environment(ray.d));
+            if (!trace_counting_emission(scene, ray, it, beta, cls, !(depth == 0 && hide_) && mask[cls], out, stats))
                 return;
-            }
             const Shape& shape = *scene.shapes[it.shape];
-            if (shape.emitter >= 0 && count_emission) out.add(cls, beta * scene.emitters[shape.emitter]->eval(it, it.wi));
             if (max_depth_ >= 0 && depth + 1 >= max_depth_) return;
             const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
             Vec3 wi = it.to_local(it.wi);
