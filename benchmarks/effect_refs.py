@@ -75,8 +75,8 @@ def ensure(root, jobs, spp_override=None, threads: int = 0, log=print) -> dict:
     notes = {}
     needed = {}
     for j in jobs:
-        spec = _scenes.get(j.scene)
-        if spec.kind == "mitsuba":
+        spec = _scenes.SCENES.get(j.scene)  # an unknown scene fails in its job, not here
+        if spec is not None and spec.kind == "mitsuba":
             needed.setdefault((j.scene, json.dumps(j.scene_params, sort_keys=True)), []).append(j)
     for (scene, pkey), js in needed.items():
         params = json.loads(pkey)

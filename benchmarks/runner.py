@@ -196,10 +196,13 @@ class _DaskPool:
         return self.client.submit(fn, *args, pure=False)
 
     def wait_any(self, futures):
-        from distributed import wait
-
-        done, _ = wait(list(futures), return_when="FIRST_COMPLETED")
-        return set(done)
+        # distributed.wait needs a default client; this one is not (the
+        # caller's own Dask set-up stays untouched), so poll the futures.
+        while True:
+            done = {f for f in futures if f.done()}
+            if done:
+                return done
+            time.sleep(0.02)
 
     def shutdown(self):
         self.client.close()
@@ -212,12 +215,12 @@ def _crash_record(job: dict, commit, machine, err: str) -> dict:
 
 def run(matrix_arg: Optional[str] = None, root=DEFAULT_ROOT, scheduler: Optional[str] = None,
         workers: Optional[int] = None, resume=None, progress: bool = True, log=None) -> str:
-    """Runs a matrix (a file or a name in benchmarks/), storing each job as
+    """Runs a matrix (a file, a name in benchmarks/ or a parsed Matrix), storing each job as
     it finishes in <root>/bench.sqlite. `resume`: None (a new run), "latest"
     (the latest run of this matrix in the store) or a run id; its recorded
     jobs are skipped. Returns the run id."""
     log = log or (lambda *a: print(*a, file=sys.stderr, flush=True))
-    mat = _matrix.load(matrix_arg)
+    mat = matrix_arg if isinstance(matrix_arg, _matrix.Matrix) else _matrix.load(matrix_arg)
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     store = Store(root / STORE_NAME)
