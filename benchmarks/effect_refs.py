@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -90,7 +91,16 @@ def ensure(root, jobs, spp_override=None, threads: int = 0, log=print) -> dict:
                 notes[scene] = f"no per-effect reference: the scene does not load ({e})"
                 continue
             log(f"per-effect reference for {scene}: path, {spp} spp (made once, cached in {out.parent})")
-            meta = make(scene, params, spp, out, threads=threads)
+            from tqdm import tqdm
+
+            with tqdm(total=spp, desc=f"effect reference {scene}", unit="spp", file=sys.stderr, disable=None,
+                      leave=False) as bar:
+                def progress(done, total):
+                    # (done, total) counts samples over the image; the bar counts spp.
+                    bar.n = int(done * spp / total) if total else 0
+                    bar.refresh()
+
+                meta = make(scene, params, spp, out, threads=threads, progress=progress)
             log(f"  {meta['effects_kind']} ({meta['make_seconds']:.0f} s)")
         m = rm.read_exr(out).metadata
         if int(m.get("accepted", 0)):

@@ -316,3 +316,33 @@ def test_chromium_check_catches_a_broken_page(tmp_path):
     console, dom = chromium_check(page)
     assert any("undefined_function" in ln for ln in console), console
     assert 'data-images-ok="0" data-images-total="1"' in dom, dom
+
+
+# -- per-effect references ----------------------------------------------------------
+
+
+def test_effect_reference_is_used_only_when_its_total_passes(tmp_path, smoke):
+    """A per-effect reference of a Mitsuba-referenced scene is our path
+    tracer's run; it is used only if its total passes the z-test against
+    Mitsuba. 512 spp of the glass sphere (seeded, so the same image every
+    time) passes; the smoke matrix's 16 spp Cornell box does not (its
+    heavy-tailed pixels at 16 spp are off by more than their own variance
+    says), so the smoke run's Cornell jobs have no per-effect metrics."""
+    import numpy as np
+
+    import radiometer as rm
+    from radiometer.benchmarks import effect_refs, scenes
+
+    spec = scenes.get("glass_sphere_caustic")
+    out = tmp_path / "glass.exr"
+    meta = effect_refs.make("glass_sphere_caustic", dict(spec.fixed_params), 512, out, threads=1)
+    assert meta["accepted"] == 1, meta["ztest"]
+    e = rm.read_exr(out)
+    assert e.effects["caustic"].max() > 0
+    np.testing.assert_allclose(sum(e.effects.values()), e.image, rtol=1e-4, atol=1e-6)
+    root, run_id, recs = smoke
+    for r in recs:
+        if r["scene"] == "cornell_box":
+            assert r["effect_metrics"] == {} and r["reference"]["effects"] == "no per-effect reference"
+    refs = list((root / "refs").glob("cornell_box-*.exr"))
+    assert len(refs) == 1 and int(rm.read_exr(refs[0]).metadata["accepted"]) == 0
