@@ -34,10 +34,11 @@ from . import tables as T
 esc = html.escape
 
 CSS = """
-body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1200px; color: #222; }
+body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1400px; color: #222; }
 h1 { font-size: 1.5em; } h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
 table { border-collapse: collapse; font-size: 0.85em; margin: 0.5em 0; }
-th, td { border: 1px solid #ddd; padding: 2px 6px; text-align: right; }
+th, td { border: 1px solid #ddd; padding: 2px 6px; text-align: right; white-space: nowrap; }
+td.why { white-space: normal; text-align: left; }
 th { background: #f3f3f3; } td:nth-child(-n+3) { text-align: left; }
 .status { font-weight: bold; } .failed { color: #b00; } .unsupported { color: #886; }
 .why { color: #666; font-size: 0.9em; text-align: left; }
@@ -228,6 +229,10 @@ def scene_view(desc, out: Path, size=(420, 320)):
                 faces = np.hstack([np.full((len(s.indices), 1), 3), np.asarray(s.indices, np.int64)]).ravel()
                 mesh = pv.PolyData(np.asarray(s.positions, np.float64), faces)
             elif s.type == "sphere":
+                inside = np.linalg.norm(np.asarray(desc.sensor.to_world, np.float64)[:3, 3] -
+                                        np.asarray(s.center, np.float64)) < float(s.radius)
+                if inside:  # the camera is inside (a furnace): see through it
+                    op = min(op, 0.35)
                 mesh = pv.Sphere(radius=float(s.radius), center=tuple(float(c) for c in s.center),
                                  theta_resolution=32, phi_resolution=32)
             elif s.type == "disk":
@@ -235,7 +240,9 @@ def scene_view(desc, out: Path, size=(420, 320)):
                 mesh = mesh.transform(np.asarray(s.to_world, np.float64), inplace=False)
             else:
                 continue
-            p.add_mesh(mesh, color=col, opacity=op, smooth_shading=s.type == "sphere")
+            # Back faces culled: walls seen from outside vanish, so a closed room
+            # shows its inside (a cut-away) and the camera in it.
+            p.add_mesh(mesh, color=col, opacity=op, smooth_shading=s.type == "sphere", culling="back")
             n += 1
         if n == 0:
             p.close()
@@ -255,9 +262,14 @@ def scene_view(desc, out: Path, size=(420, 320)):
             for a_, b_ in zip(quad[:-1], quad[1:]):
                 p.add_mesh(pv.Line(a_, b_), color="red", line_width=2)
         p.add_mesh(pv.Sphere(radius=0.02 * max(d, 1e-6) / 0.15, center=o), color="red")
-        p.camera_position = "iso"
-        p.camera.azimuth = 30
-        p.reset_camera()
+        # View over the scene camera's shoulder: behind it, above and to the
+        # side, looking at the middle of the scene, the scene camera's up up.
+        centre = bounds.mean(axis=1)
+        radius = 0.5 * float(np.linalg.norm(bounds[:, 1] - bounds[:, 0]))
+        view = -fwd + 0.7 * up + 0.6 * left
+        view /= np.linalg.norm(view)
+        p.camera_position = [tuple(centre + 2.4 * radius * view), tuple(centre), tuple(up)]
+        p.reset_camera_clipping_range()
         p.screenshot(str(out))
         p.close()
         return None
@@ -300,7 +312,7 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
              "<p class='note'>relMSE (eps 1e-2) of each effect class against its per-effect reference, mean over "
              "seeds; total: the whole image against the scene's reference (analytic, or Mitsuba 3's). Per-effect "
              "references: exact for analytic scenes; for the others a long run of our unbiased path tracer whose "
-             "total passed the z-test against Mitsuba (last column). Bold: the lowest total error of the scene.</p>",
+             "total passed the z-test against Mitsuba (listed below the table). Bold: the lowest total error of the scene.</p>",
              T.effect_table_html(rows),
              "<h2>All metrics (total image)</h2>", _metrics_table(rows)]
     scenes = sorted({r["scene"] for r in recs})

@@ -61,6 +61,35 @@ def aggregate(records, metric: str = "relmse") -> list:
     return rows
 
 
+def short_reason(error: str, width: int = 0) -> str:
+    """The last line of an error, with file paths cut to their names (the
+    row names the scene), shortened from the left to `width`."""
+    import re
+
+    lines = (error or "").strip().splitlines()
+    why = re.sub(r"[^\s:]*/([^/\s:]+)", r"\1", lines[-1] if lines else "")
+    if width and len(why) > width:
+        why = "..." + why[-(width - 3):]
+    return why
+
+
+def collapse_unsupported(rows) -> list:
+    """Rows of a scene whose every estimator was refused for the same reason
+    become one row (estimator "all"), so a scene the loader refuses does not
+    fill the table."""
+    out, by_scene = [], {}
+    for r in rows:
+        by_scene.setdefault(r["scene"], []).append(r)
+    for scene, rs in by_scene.items():
+        reasons = {short_reason(r["error"]) for r in rs}
+        if len(rs) > 1 and all(r["status"] == "unsupported" for r in rs) and len(reasons) == 1:
+            budgets = sorted({r["budget"] for r in rs})
+            out.append(dict(rs[0], estimator="all", budget=", ".join(budgets), n=sum(r["n"] for r in rs)))
+        else:
+            out.extend(rs)
+    return out
+
+
 def effect_columns(rows) -> list:
     present = {e for r in rows for e in r["effects"]}
     return [e for e in EFFECT_ORDER if e in present] + sorted(present - set(EFFECT_ORDER))
@@ -76,15 +105,14 @@ def fmt(v, digits=3) -> str:
 
 def effect_table_text(rows, metric: str = "relmse") -> str:
     """A plain-text table for the terminal."""
+    rows = collapse_unsupported(rows)
     effs = effect_columns(rows)
     head = ["scene", "estimator", "budget", "spp", f"total {metric}"] + effs + ["slope"]
     body = []
     for r in rows:
         if r["status"] != "ok":
-            msg = (r["error"] or "").strip().splitlines()
-            why = msg[-1] if msg else ""
             body.append([r["scene"], r["estimator"], r["budget"], "", r["status"]] +
-                        [""] * len(effs) + [why if len(why) <= 60 else "..." + why[-57:]])
+                        [""] * len(effs) + [short_reason(r["error"], 70)])
             continue
         body.append([r["scene"], r["estimator"], r["budget"], f"{r['spp']:.0f}", fmt(r["total"])] +
                     [fmt(r["effects"].get(e)) for e in effs] + [fmt(r["slope"], 2)])
@@ -99,12 +127,13 @@ def effect_table_text(rows, metric: str = "relmse") -> str:
 
 def effect_table_html(rows, metric: str = "relmse") -> str:
     """An HTML table; within each scene the best total is bold."""
+    rows = collapse_unsupported(rows)
     effs = effect_columns(rows)
     esc = html.escape
     out = ['<table class="errors"><thead><tr><th>scene</th><th>estimator</th><th>budget</th><th>spp</th>',
            f"<th>total {esc(metric)}</th>"]
     out += [f"<th>{esc(e)}</th>" for e in effs]
-    out.append("<th>log-log slope</th><th>efficiency</th><th>per-effect reference</th></tr></thead><tbody>")
+    out.append("<th>log-log slope</th><th>efficiency</th></tr></thead><tbody>")
     best = {}
     for r in rows:
         if r["total"] is not None:
@@ -112,16 +141,28 @@ def effect_table_html(rows, metric: str = "relmse") -> str:
     for r in rows:
         cells = [esc(r["scene"]), esc(r["estimator"]), esc(r["budget"])]
         if r["status"] != "ok":
-            msg = (r["error"] or "").strip().splitlines()
             cells += ["", f'<span class="status {esc(r["status"])}">{esc(r["status"])}</span>']
-            cells += [""] * len(effs)
-            cells += [f'<span class="why">{esc(msg[-1] if msg else "")}</span>', "", ""]
+            cells += [f'<span class="why">{esc(short_reason(r["error"]))}</span>' if effs else ""]
+            cells += [""] * (len(effs) + 1 - (1 if effs else 0))
         else:
             tot = fmt(r["total"])
             if r["total"] is not None and r["total"] == best.get(r["scene"]):
                 tot = f"<b>{tot}</b>"
             cells += [f"{r['spp']:.0f}", tot] + [fmt(r["effects"].get(e)) for e in effs]
-            cells += [fmt(r["slope"], 2), fmt(r["efficiency"]), esc(r["effects_kind"] or "none")]
-        out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+            cells += [fmt(r["slope"], 2), fmt(r["efficiency"])]
+        if r["status"] != "ok" and effs:
+            # The reason spans the effect columns.
+            row = "".join(f"<td>{c}</td>" for c in cells[:5])
+            row += f"<td colspan='{len(effs)}' class='why'>{cells[5]}</td><td></td><td></td>"
+            out.append("<tr>" + row + "</tr>")
+        else:
+            out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     out.append("</tbody></table>")
+    # Where each scene's per-effect reference came from.
+    kinds = {}
+    for r in rows:
+        if r["status"] == "ok":
+            kinds.setdefault(r["scene"], r["effects_kind"] or "none")
+    out.append("<p class='note'>Per-effect references: " + "; ".join(
+        f"{esc(k)}: {esc(v)}" for k, v in sorted(kinds.items())) + ".</p>")
     return "\n".join(out)

@@ -110,4 +110,7 @@ def ensure(root, jobs, spp_override=None, threads: int = 0, log=print) -> dict:
         else:
             notes[scene] = (f"per-effect reference rejected (its total failed the z-test against Mitsuba; "
                             f"{out}): {m.get('ztest', '')}")
+            for j in js:
+                j.effect_note = (f"none: ours ({m.get('effects_kind', '').split(',')[1].strip()}) failed the "
+                                 f"z-test against Mitsuba")
     return notes

@@ -57,6 +57,7 @@ class Job:
     checkpoints: bool = True
     target_relmse: Optional[float] = None
     effect_ref: Optional[str] = None  # set by the runner for Mitsuba-referenced scenes
+    effect_note: Optional[str] = None  # why there is none (set by the runner)
 
     @property
     def key(self) -> str:

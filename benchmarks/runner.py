@@ -108,7 +108,7 @@ def _run_job(job, rec, root: Path, run_id: str):
     rec["spp"], rec["seconds"] = int(res.spp), float(res.seconds)
     rec["stats"] = {k: v for k, v in res.stats.items() if isinstance(v, (int, float, str, bool))}
     ref = _scenes.reference(job["scene"], job["scene_params"], job.get("effect_ref"))
-    rec["reference"] = {"kind": ref.kind, "effects": ref.effects_kind, "spp": ref.spp}
+    rec["reference"] = {"kind": ref.kind, "effects": job.get("effect_note") or ref.effects_kind, "spp": ref.spp}
     if ref.image.shape != res.image.shape:
         raise ValueError(f"reference shape {ref.image.shape} differs from the render's {res.image.shape}")
     m = {}
@@ -243,8 +243,11 @@ def run(matrix_arg: Optional[str] = None, root=DEFAULT_ROOT, scheduler: Optional
     if todo:
         notes = _effect_refs.ensure(root, todo, mat.effect_ref_spp, threads=0, log=log)
         for scene, note in notes.items():
-            if "rejected" in note or "does not load" in note:
+            if "rejected" in note:
                 log(f"  {scene}: {note.splitlines()[0]}")
+        unloadable = sorted(s for s, n in notes.items() if "does not load" in n)
+        if unloadable:
+            log(f"  scenes our loader refuses (their jobs are recorded as unsupported): {', '.join(unloadable)}")
     pool = _DaskPool(scheduler) if scheduler else _LocalPool(workers or max(1, (os.cpu_count() or 1) // max(1, mat.threads or (os.cpu_count() or 1))))
     if scheduler:
         log(f"Dask scheduler {scheduler}: {pool.workers} worker threads")
