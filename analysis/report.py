@@ -314,7 +314,17 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
              "references: exact for analytic scenes; for the others a long run of our unbiased path tracer whose "
              "total passed the z-test against Mitsuba (listed below the table). Bold: the lowest total error of the scene.</p>",
              T.effect_table_html(rows),
-             "<h2>All metrics (total image)</h2>", _metrics_table(rows)]
+             "<h2>All metrics (total image)</h2>", _metrics_table(rows),
+             "<h2>Bias and variance over seeds</h2>",
+             "<p class='note'>From the renders of each configuration with independent seeds (analysis/stats.py "
+             "bias_variance): the bias of the image mean relative to the reference's mean, its z (the bias over its "
+             "standard error, with the reference's variance; |z| &gt; 3 is a bias the seeds resolve), and the "
+             "relative variance of one render, mean(var / (ref<sup>2</sup> + 0.01)), which is what relMSE would be "
+             "without bias. Read z with care: with a few seeds at a small budget a heavy-tailed estimator misses its rare "
+             "paths in every seed and underestimates its variance there (tests/test_canonical_mitsuba.py measures "
+             "this), so a moderate |z| is a hint; a large one with a large bias is a finding (direct lighting's "
+             "truncation, light tracing's missing L...S E paths). A zero-variance render's z measures float32 "
+             "rounding.</p>", _bias_table(recs, root)]
     scenes = sorted({r["scene"] for r in recs})
     views_note = None
     for scene in scenes:
@@ -382,6 +392,46 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
     index = out / "index.html"
     index.write_text("\n".join(parts))
     return index
+
+
+def _bias_table(recs, root: Path) -> str:
+    from radiometer.benchmarks import scenes as S
+
+    from .metrics import RELMSE_EPS
+    from .stats import bias_variance
+
+    groups = {}
+    for r in recs:
+        if r["status"] == "ok":
+            groups.setdefault((r["scene"], r["estimator"], T.budget_label(r["budget"])), []).append(r)
+    head = ["scene", "estimator", "budget", "seeds", "relative bias", "bias z", "relative variance", "relMSE"]
+    out = ["<table><thead><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr></thead><tbody>"]
+    n = 0
+    for (scene, est, bl), rs in sorted(groups.items()):
+        imgs = [im.image for im in (_load_exr(root, r) for r in rs) if im is not None]
+        if len(imgs) < 2:
+            continue
+        try:
+            ref = S.reference(scene, rs[0]["scene_params"], rs[0].get("effect_ref"))
+            bv = bias_variance(imgs, ref.image, ref.variance)
+        except Exception:
+            continue
+        k = len(imgs)
+        se = math.sqrt(float(np.sum(bv["bias_se"] ** 2))) / bv["bias"].size
+        z = bv["mean_bias"] / se if se > 0 else (0.0 if bv["mean_bias"] == 0 else math.inf)
+        relvar = float(np.mean(bv["variance"] / (ref.image ** 2 + RELMSE_EPS)))
+        relmse = float(np.mean([r["metrics"]["relmse"] for r in rs]))
+        zs = T.fmt(z, 2)
+        if math.isfinite(z) and abs(z) > 3:
+            zs = f"<b>{zs}</b>"
+        out.append("<tr>" + "".join(f"<td>{c}</td>" for c in (
+            esc(scene), esc(est), esc(bl), k, f"{100 * bv['rel_bias']:+.3g} %", zs, T.fmt(relvar),
+            T.fmt(relmse))) + "</tr>")
+        n += 1
+    out.append("</tbody></table>")
+    if n == 0:
+        return "<p class='note'>no configuration has two finished seeds with their images here</p>"
+    return "\n".join(out)
 
 
 def _metrics_table(rows) -> str:
