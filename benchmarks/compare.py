@@ -12,6 +12,14 @@ intervals and changes too small to matter are both ignored. With fewer
 than 2 seeds on a side there is no interval and nothing is flagged (the
 table says "n<2"). A configuration that ran in A and fails in B is a
 regression too. Exit status: 1 if anything regressed, else 0.
+
+The intervals hold the noise between seeds of one run, not the state of the
+machine: a run made while the machine was busy is slower per sample, and
+under a seconds budget its error is higher too (measured here: two default
+runs, the second beside a test suite on the same 2 cores, flagged 13 time
+and error "regressions" of 1.25-3.3x). Compare runs made on the same idle
+machine, and compare error under spp budgets when only the estimator's
+accuracy is in question.
 """
 from __future__ import annotations
 
