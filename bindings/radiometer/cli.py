@@ -201,7 +201,12 @@ def cmd_bench(a) -> int:
     """Runs a benchmark matrix, prints the per-effect error table and writes the report."""
     from .benchmarks import runner
 
-    run_id = runner.run(a.matrix, root=a.results, scheduler=a.scheduler, workers=a.workers, resume=a.resume)
+    try:
+        run_id = runner.run(a.matrix, root=a.results, scheduler=a.scheduler, workers=a.workers, resume=a.resume)
+    except KeyboardInterrupt:
+        print("bench: interrupted; every finished job is in the store: continue with "
+              "'radiometer bench [MATRIX] --resume'", file=sys.stderr)
+        return 130
     store = _store_path(a)
     _print_effect_table(store, run_id)
     if not a.no_report:
