@@ -164,14 +164,14 @@ def _effect_refs(a) -> int:
         out = effect_refs.ref_path(a.results, n, params, spp)
         if out.exists() and not a.force:
             m = read_exr(out).metadata
-        elif a.list:
-            print(f"{n}: {spp} spp -- missing ({out})")
-            continue
         else:
             try:
                 load_file(spec.xml, **params)
             except SceneError as e:
-                print(f"{n}: skipped, the scene does not load ({e})")
+                print(f"{n}: none, the scene does not load here ({e})")
+                continue
+            if a.list:
+                print(f"{n}: {spp} spp -- missing ({out})")
                 continue
             print(f"{n}: path, {spp} spp -> {out}", file=sys.stderr)
             bar = _Progress(f"effect reference {n}")
