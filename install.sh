@@ -17,8 +17,9 @@ done
 
 # 1. Debian packages: Embree 3 for the renderer, LLVM 19 for Mitsuba 3's llvm
 #    variants (older LLVMs crash or are refused), EGL/GL for pyvista off-screen,
-#    a C++ toolchain and Python's venv.
-APT_PACKAGES=(libembree-dev libllvm19 libegl1 libgl1 libgl1-mesa-dri libosmesa6 libxrender1
+#    Chromium (the test that opens the benchmark report headless), a C++
+#    toolchain and Python's venv.
+APT_PACKAGES=(libembree-dev libllvm19 libegl1 libgl1 libgl1-mesa-dri libosmesa6 libxrender1 chromium
               g++ make python3-dev python3-venv)
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
@@ -52,9 +53,11 @@ echo "==> building radiometer (C++ core through scikit-build-core)"
 "$VPY" -m pip install -q --no-build-isolation -e ".[reference,test]"
 "$VPY" -c "import radiometer, radiometer._core; print('radiometer', radiometer.__version__, 'ready')"
 
-# 4. The main job.
+# 4. The main job: the default benchmark matrix (benchmarks/default.toml),
+#    every canonical scene with every estimator that supports it; prints the
+#    per-effect error table and the HTML report's path. Results accumulate in
+#    out/results/bench.sqlite.
 if [ "$RUN_MAIN" = "1" ]; then
-  mkdir -p out
-  echo "==> main job: render the Cornell box"
-  .venv/bin/radiometer render cornell-box -o out/cornell_box.exr
+  echo "==> main job: radiometer bench (default matrix, about 10 minutes on 2 cores)"
+  .venv/bin/radiometer bench
 fi

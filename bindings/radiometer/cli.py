@@ -1,7 +1,8 @@
 """The `radiometer` command line.
 
   radiometer render SCENE [-i NAME] [--spp N | --seconds S] [-o out.exr]
-  radiometer bench [MATRIX] | compare A B | report RUN | refs
+  radiometer bench [MATRIX] [--scheduler ADDRESS] [--resume [RUN]]
+  radiometer compare A B | report [RUN] | merge STORE... | runs | refs [--effects]
 
 SCENE is a Mitsuba 3 XML file or the name of a canonical scene
 (`radiometer render cornell-box`).
@@ -117,6 +118,8 @@ def cmd_render(a) -> int:
 
 def cmd_refs(a) -> int:
     """Regenerates the Mitsuba 3 references of the canonical scenes."""
+    if a.effects:
+        return _effect_refs(a)
     from .reference_scenes.make_reference import HERE, SCENES, make_mitsuba_reference
 
     names = a.scenes or sorted(SCENES)
@@ -150,12 +153,139 @@ def cmd_refs(a) -> int:
     return 0
 
 
-def _not_yet(what, issue):
-    def run(a) -> int:
-        print(f"radiometer {what}: not implemented yet (tracked in issue {issue})", file=sys.stderr)
-        return 2
+def _effect_refs(a) -> int:
+    """Makes (or lists) the per-effect references of the benchmark's
+    Mitsuba-referenced scenes: long runs of our path tracer, kept only when
+    their total passes the z-test against Mitsuba."""
+    from . import read_exr
+    from .benchmarks import effect_refs, scenes
 
-    return run
+    names = a.scenes or [n for n, s in sorted(scenes.SCENES.items()) if s.kind == "mitsuba"]
+    for n in names:
+        spec = scenes.get(n)
+        if spec.kind != "mitsuba":
+            print(f"{n}: analytic; its per-effect reference is exact")
+            continue
+        params = dict(spec.fixed_params)
+        spp = a.spp or spec.effect_ref_spp
+        out = effect_refs.ref_path(a.results, n, params, spp)
+        if out.exists() and not a.force:
+            m = read_exr(out).metadata
+        else:
+            try:
+                load_file(spec.xml, **params)
+            except SceneError as e:
+                print(f"{n}: none, the scene does not load here ({e})")
+                continue
+            if a.list:
+                print(f"{n}: {spp} spp -- missing ({out})")
+                continue
+            print(f"{n}: path, {spp} spp -> {out}", file=sys.stderr)
+            bar = _Progress(f"effect reference {n}")
+            m = effect_refs.make(n, params, spp, out, threads=a.threads, progress=bar)
+            bar.close()
+        print(f"{n}: {m.get('effects_kind')} ({out})")
+    return 0
+
+
+def _store_path(a) -> Path:
+    from .benchmarks.runner import STORE_NAME
+
+    return Path(a.results) / STORE_NAME
+
+
+def _print_effect_table(store_path: Path, run_id: str):
+    from .analysis.tables import aggregate, effect_table_text
+    from .benchmarks.store import Store
+
+    with Store(store_path) as st:
+        recs = st.jobs(run_id)
+    print(f"\nper-effect error (relMSE, mean over seeds; total against the scene's reference) -- run {run_id}")
+    print(effect_table_text(aggregate(recs)))
+
+
+def cmd_bench(a) -> int:
+    """Runs a benchmark matrix, prints the per-effect error table and writes the report."""
+    from .benchmarks import runner
+
+    try:
+        run_id = runner.run(a.matrix, root=a.results, scheduler=a.scheduler, workers=a.workers, resume=a.resume)
+    except KeyboardInterrupt:
+        print("bench: interrupted; every finished job is in the store: continue with "
+              "'radiometer bench [MATRIX] --resume'", file=sys.stderr)
+        return 130
+    store = _store_path(a)
+    _print_effect_table(store, run_id)
+    if not a.no_report:
+        from .analysis import report
+
+        index = report.write(store, run_id, log=lambda m: print(m, file=sys.stderr))
+        print(f"\nreport: {index.resolve()}")
+    print(f"results store: {store.resolve()} (run {run_id})")
+    return 0
+
+
+def cmd_compare(a) -> int:
+    from .benchmarks import compare
+
+    la, ra = compare.open_run(a.a, _store_path(a))
+    lb, rb = compare.open_run(a.b, _store_path(a))
+    changes = compare.compare_records(ra, rb, metric=a.metric, factor=a.factor)
+    print(f"A = {la}\nB = {lb}")
+    print(f"changes are flagged when the 95 % intervals over seeds do not overlap and B/A is beyond "
+          f"{1 / a.factor:.3g}..{a.factor:.3g}")
+    print(compare.table(changes, only_changed=a.only_changed))
+    bad = [c for c in changes if c.verdict == "regression"]
+    if bad:
+        print(f"\n{len(bad)} regression(s)", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_report(a) -> int:
+    from .analysis import report
+
+    store, run = _store_path(a), a.run
+    p = Path(a.run) if a.run else None
+    if p is not None and p.is_file():
+        store, run = p, None
+    elif a.run and ":" in a.run and Path(a.run.rsplit(":", 1)[0]).is_file():
+        store, run = Path(a.run.rsplit(":", 1)[0]), a.run.rsplit(":", 1)[1]
+    if not store.is_file():
+        raise FileNotFoundError(f"report: no results store at {store} (run 'radiometer bench' first, or pass a store)")
+    index = report.write(store, run, out_dir=a.output, log=lambda m: print(m, file=sys.stderr))
+    print(index.resolve())
+    return 0
+
+
+def cmd_merge(a) -> int:
+    from .benchmarks.store import Store
+
+    dest = Path(a.into) if a.into else _store_path(a)
+    with Store(dest) as st:
+        for src in a.stores:
+            runs, jobs = st.merge(src)
+            print(f"{src}: {runs} runs and {jobs} jobs added to {dest}")
+    return 0
+
+
+def cmd_runs(a) -> int:
+    from .benchmarks.store import Store
+
+    store = _store_path(a)
+    if not store.is_file():
+        raise FileNotFoundError(f"no results store at {store}")
+    with Store(store) as st:
+        for r in st.runs():
+            print(f"{r['run_id']}  {r['matrix']}  {r['n_jobs']} jobs  commit {r['commit_id']}  "
+                  f"{r['started']} .. {r['finished'] or '(unfinished)'}")
+    return 0
+
+
+def _add_results_arg(p):
+    p.add_argument("--results", default="out/results",
+                   help="results folder: the store bench.sqlite, renders, per-effect references, reports "
+                        "(default: out/results)")
 
 
 def main(argv=None) -> int:
@@ -180,15 +310,50 @@ def main(argv=None) -> int:
     f.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (falls back to scalar_rgb)")
     f.add_argument("--out-dir", help="write under this folder instead of reference_scenes/")
     f.add_argument("--list", action="store_true", help="list the references and how they were made")
+    f.add_argument("--effects", action="store_true",
+                   help="per-effect references for the benchmark instead (long runs of our path tracer, accepted "
+                        "when their total passes the z-test against Mitsuba; cached under RESULTS/refs)")
+    f.add_argument("--force", action="store_true", help="with --effects: remake existing ones")
+    f.add_argument("--threads", type=int, default=0, help="with --effects: render threads (0 = all cores)")
+    _add_results_arg(f)
     f.set_defaults(func=cmd_refs)
-    for name, issue in (("bench", 7), ("compare", 7), ("report", 7)):
-        s = sub.add_parser(name, help=f"(issue {issue}, not yet)")
-        s.add_argument("args", nargs="*")
-        s.set_defaults(func=_not_yet(name, issue))
+    b = sub.add_parser("bench", help="run a benchmark matrix (default: benchmarks/default.toml)")
+    b.add_argument("matrix", nargs="?", help="a TOML file, or a matrix name in benchmarks/ (default, smoke)")
+    b.add_argument("--scheduler", help="address of a Dask distributed scheduler (default: a local process pool)")
+    b.add_argument("--workers", type=int, help="local pool size (default: cores / the matrix's threads per job)")
+    b.add_argument("--resume", nargs="?", const="latest",
+                   help="continue a run, skipping its recorded jobs (default: the latest run of this matrix)")
+    b.add_argument("--no-report", action="store_true", help="skip the HTML report")
+    _add_results_arg(b)
+    b.set_defaults(func=cmd_bench)
+    c = sub.add_parser("compare", help="compare two runs; exit 1 on a regression beyond run-to-run noise")
+    c.add_argument("a", help="baseline: a store file (its latest run), STORE:RUN, or a run id in the results store")
+    c.add_argument("b", help="candidate, the same forms")
+    c.add_argument("--metric", default="relmse", help="error metric (relmse, mse, smape, flip, ciede2000)")
+    c.add_argument("--factor", type=float, default=1.1, help="smallest ratio that counts as a change (default 1.1)")
+    c.add_argument("--only-changed", action="store_true", help="list only changed configurations")
+    _add_results_arg(c)
+    c.set_defaults(func=cmd_compare)
+    rp = sub.add_parser("report", help="write the static HTML report of a run")
+    rp.add_argument("run", nargs="?", help="a run id (or prefix) in the results store, a store file, or STORE:RUN "
+                                           "(default: the latest run)")
+    rp.add_argument("-o", "--output", help="folder for index.html (default: RESULTS/reports/RUN)")
+    _add_results_arg(rp)
+    rp.set_defaults(func=cmd_report)
+    mg = sub.add_parser("merge", help="merge results stores (e.g. from several machines) into one")
+    mg.add_argument("stores", nargs="+", help="store files to merge in")
+    mg.add_argument("--into", help="the store to merge into (default: RESULTS/bench.sqlite)")
+    _add_results_arg(mg)
+    mg.set_defaults(func=cmd_merge)
+    ru = sub.add_parser("runs", help="list the runs in the results store")
+    _add_results_arg(ru)
+    ru.set_defaults(func=cmd_runs)
     a = p.parse_args(argv)
     try:
         return a.func(a)
-    except (SceneError, ValueError, FileNotFoundError) as e:
+    except (SceneError, ValueError, FileNotFoundError, KeyError) as e:
+        if isinstance(e, KeyError):
+            e = e.args[0] if e.args else e
         print(f"radiometer {a.cmd}: error: {e}", file=sys.stderr)
         return 2
 
