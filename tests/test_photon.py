@@ -291,3 +291,21 @@ def test_sppm_mean_within_one_percent_per_region(name, max_depth, regions, passe
     got, want = _region_means(np.mean(imgs, 0), regions), _region_means(ref, regions)
     bad = {k: got[k] / want[k] - 1 for k in regions if abs(got[k] / want[k] - 1) > 0.01}
     assert not bad, f"{name}: regions off by more than 1 %: {bad}"
+
+
+def test_caustics_through_plastic_coat():
+    """A BSDF with a delta and a smooth lobe (plastic) passes caustics on
+    through its delta coat: the caustic map must hold them (it once stopped
+    every caustic photon path at the plastic and built an empty map, so the
+    class was 0 against bdpt's). Level: the caustic class within 15 % of
+    bdpt's (the photon estimate's bias and both noises are a few %)."""
+    from test_bdpt import AREA, small_scene
+
+    plastic = {"ball": {"type": "sphere", "center": [0.3, -0.2, 0.5], "radius": 0.45, "bsdf": {"type": "plastic"}}}
+    scene = small_scene(AREA, extra=plastic)
+    b = rm.render(scene, integrator={"type": "bdpt", "max_depth": 4}, spp=128, seed=1)
+    p = rm.render(scene, integrator={"type": "photonmapper", "max_depth": 4, "caustic_photons": 30000,
+                                     "global_photons": 30000, "direct_samples": 4, "gather_rays": 8}, spp=8, seed=1)
+    assert p.stats["photon_maps"]["caustic"]["photons"] > 0
+    ratio = p.effects["caustic"].mean() / b.effects["caustic"].mean()
+    assert 0.85 < ratio < 1.15, f"photonmapper / bdpt on the caustic class: {ratio:.3f}"

@@ -101,8 +101,10 @@ void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t
                     ++stats.photons;
                 }
             }
-            // A caustic path ends at its first non-specular vertex.
-            if (spec.caustic_only) break;
+            // A caustic path ends once it scatters through a non-specular
+            // lobe (below, after sampling), not at the first vertex that has
+            // one: a BSDF with a delta and a smooth lobe (plastic's coat)
+            // passes caustics on through the delta lobe.
         }
         if (spec.max_depth >= 0 && depth >= spec.max_depth) break;
 
