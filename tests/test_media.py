@@ -435,3 +435,38 @@ def test_constant_grid_equals_homogeneous(tmp_path):
     ok, msg = blocked_z(a.image, a.variance, b.image, b.variance)
     assert ok, msg
     assert a.stats["nan_samples"] == 0 and a.image.min() >= 0
+
+
+def test_grid_medium_is_vacuum_outside_its_box(tmp_path):
+    """A grid medium fills its grid's box only (Mitsuba 3's heterogeneous
+    medium, Medium::intersect_aabb): a radiance meter at the centre of a
+    2 x 2 x 2 box of sigma_t 1 (albedo 0) looking out at a constant
+    environment of radiance 1 sees exp(-1), along camera rays and along
+    shadow rays to a sun. It once read the border values out to infinity:
+    0 after 2^20 null collisions, found in review."""
+    write_vol(tmp_path / "one.vol", np.ones((2, 2, 2), np.float32))
+    m = np.diag([2.0, 2.0, 2.0, 1.0])
+    m[:3, 3] = -1.0
+    absorber = {"type": "heterogeneous", "albedo": 0.0,
+                "sigma_t": {"type": "gridvolume", "filename": str(tmp_path / "one.vol"), "to_world": m}}
+    d = {"type": "scene",
+         "sensor": {"type": "radiancemeter", "origin": [0, 0, 0], "direction": [1, 0, 0], "medium": absorber,
+                    "film": {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"}}},
+         "sky": {"type": "constant", "radiance": _rgb(1.0)}}
+    res = rm.render(rm.load_dict(d), integrator="volpath", spp=4096, seed=1)
+    v, se = float(res.image[0, 0, 0]), float(np.sqrt(res.variance[0, 0, 0]))
+    assert 2 * norm.sf(abs(v - np.exp(-1.0)) / max(se, 1e-9)) >= ALPHA, f"{v} +- {se} vs exp(-1) {np.exp(-1.0):.6f}"
+    # Shadow rays: a white diffuse plane inside the box, lit by a sun overhead
+    # through 0.5 of the medium, seen from 0.5 above it: exp(-1) x E / pi.
+    d2 = {"type": "scene",
+          "sensor": {"type": "radiancemeter", "origin": [0, 0, 0.0], "direction": [0, 0, -1], "medium": absorber,
+                     "film": {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"}}},
+          "plane": {"type": "rectangle", "to_world": np.array([[0.4, 0, 0, 0], [0, 0.4, 0, 0], [0, 0, 1, -0.5],
+                                                               [0, 0, 0, 1.0]]),
+                    "bsdf": {"type": "diffuse", "reflectance": _rgb(1.0)}, "exterior": absorber},
+          "sun": {"type": "directional", "direction": [0, 0, -1], "irradiance": _rgb(1.0)}}
+    res = rm.render(rm.load_dict(d2), integrator={"type": "volpath", "max_depth": 2}, spp=16384, seed=2)
+    want = np.exp(-0.5) * np.exp(-1.5) / np.pi  # 0.5 down to the plane from the meter, 1.5 up to the box top
+    v, se = float(res.image[0, 0, 0]), float(np.sqrt(res.variance[0, 0, 0]))
+    assert 2 * norm.sf(abs(v - want) / max(se, 1e-9)) >= ALPHA, f"{v} +- {se} vs {want:.6f}"
+    assert 2 * norm.sf(abs(v - 1.1 * want) / max(se, 1e-9)) < ALPHA, f"a 10 % error went undetected (se {se})"

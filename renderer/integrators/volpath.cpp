@@ -126,12 +126,15 @@ FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, S
     int h = th.hero;
     const Color& maj = med.majorant;
     float m = maj[h];
-    t = 0.f;
+    // Tracking runs over the ray's part inside the grid's box; outside it
+    // the medium is vacuum (Medium::extent), so the flight passes there.
+    float t_end;
+    if (!med.extent(r.o, r.d, t_hit, t, t_end)) return kPassed;
     for (int i = 0; i < (1 << 20); ++i) {
         float u_t = sampler.next_1d(), u_e = sampler.next_1d();
         float dt = m > 0.f ? -std::log1p(-u_t) / m : kInf;
-        if (!(t + dt < t_hit)) {
-            Color tm = Medium::exp_neg(maj, t_hit - t);
+        if (!(t + dt < t_end)) {
+            Color tm = Medium::exp_neg(maj, t_end - t);
             return tm[h] > 0.f && th.rescale(tm / tm[h]) ? kPassed : kAbsorbed;
         }
         t += dt;

@@ -32,9 +32,33 @@ Color Grid::voxel(int x, int y, int z) const {
     return ch_ == 1 ? Color(data_[i]) : Color(data_[i], data_[i + 1], data_[i + 2]);
 }
 
+bool Grid::ray_interval(const Vec3& o, const Vec3& d, float t_max, float& t0, float& t1) const {
+    // Slab test in the grid's local space (an affine map keeps the ray parameter).
+    Vec3 lo = xf_.inv_point(o), ld = xf_.inv_vector(d);
+    double a = 0.0, b = double(t_max);
+    const double oo[3] = {lo.x, lo.y, lo.z}, dd[3] = {ld.x, ld.y, ld.z};
+    for (int k = 0; k < 3; ++k) {
+        if (dd[k] == 0.0) {
+            if (oo[k] < 0.0 || oo[k] > 1.0) return false;
+            continue;
+        }
+        double ta = (0.0 - oo[k]) / dd[k], tb = (1.0 - oo[k]) / dd[k];
+        if (ta > tb) std::swap(ta, tb);
+        a = std::max(a, ta);
+        b = std::min(b, tb);
+    }
+    if (!(a < b)) return false;
+    t0 = float(a);
+    t1 = float(b);
+    return true;
+}
+
 Color Grid::eval(const Vec3& p_world) const {
     Vec3 u = xf_.inv_point(p_world);
-    float fx = u.x * nx_ - 0.5f, fy = u.y * ny_ - 0.5f, fz = u.z * nz_ - 0.5f;
+    // Clamped before the integer conversion (far outside the grid the
+    // border value holds, and int() of a huge float is undefined).
+    float fx = std::min(std::max(u.x * nx_ - 0.5f, -1.f), float(nx_)), fy = std::min(std::max(u.y * ny_ - 0.5f, -1.f), float(ny_)),
+          fz = std::min(std::max(u.z * nz_ - 0.5f, -1.f), float(nz_));
     float x0 = std::floor(fx), y0 = std::floor(fy), z0 = std::floor(fz);
     float tx = fx - x0, ty = fy - y0, tz = fz - z0;
     int ix = int(x0), iy = int(y0), iz = int(z0);
@@ -102,10 +126,11 @@ Color Medium::segment_transmittance(const Vec3& o, const Vec3& d, float t1, Samp
     float mu = max_component(majorant);
     Color tr(1.f);
     if (!(mu > 0.f)) return tr;
-    float t = 0.f;
+    float t, t_end;  // the segment's part inside the grid's box: vacuum elsewhere
+    if (!extent(o, d, t1, t, t_end)) return tr;
     for (int i = 0; i < (1 << 20); ++i) {
         t += -std::log1p(-sampler.next_1d()) / mu;
-        if (!(t < t1)) return tr;
+        if (!(t < t_end)) return tr;
         Color st, ss;
         coefficients(o + d * t, st, ss);
         tr *= Color(1.f) - st / mu;

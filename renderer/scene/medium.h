@@ -29,6 +29,9 @@ public:
     Grid(const GridDesc& d, const std::string& who);
     Color eval(const Vec3& p_world) const;
     Color max_value() const { return max_; }
+    // The part [t0, t1] of the ray o + d t, t in [0, t_max], inside the
+    // grid's box (its local unit cube); false when the ray misses it.
+    bool ray_interval(const Vec3& o, const Vec3& d, float t_max, float& t0, float& t1) const;
 
 private:
     Color voxel(int x, int y, int z) const;
@@ -56,6 +59,18 @@ public:
     static Color exp_neg(const Color& sigma, float t) { return {tr1(sigma.x, t), tr1(sigma.y, t), tr1(sigma.z, t)}; }
     // Heterogeneous: the coefficients at a point.
     void coefficients(const Vec3& p, Color& sig_t, Color& sig_s) const;
+    // The part [t0, t1] of the ray o + d t, t in [0, t_max], where the medium
+    // is: a grid medium fills its grid's box and is vacuum outside (as
+    // Mitsuba 3's heterogeneous medium, Medium::intersect_aabb); homogeneous
+    // media and constant volumes fill everything. False when it is empty.
+    bool extent(const Vec3& o, const Vec3& d, float t_max, float& t0, float& t1) const {
+        if (homogeneous || !sigma_t_grid_) {
+            t0 = 0.f;
+            t1 = t_max;
+            return true;
+        }
+        return sigma_t_grid_->ray_interval(o, d, t_max, t0, t1);
+    }
     // Transmittance of the segment o + d t, t in [0, t1): exact for a
     // homogeneous medium, an unbiased ratio-tracking estimate in [0, 1] for a
     // heterogeneous one (consumes random numbers of `sampler`).
