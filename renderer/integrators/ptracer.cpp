@@ -12,10 +12,29 @@
 // A render of `spp` traces spp * width * height light paths (as Mitsuba), and
 // the driver (light_render.cpp) splats, filters and averages their splats.
 //
+// Participating media (issue 6; pbrt-v4's volumetric light paths, PBR4
+// sec. 14.2, with the null-scattering formulation of Miller et al. 2019):
+// a light subpath starts in its emitter's medium (media_common.h's
+// emitter_medium), samples free flights there as volpath does (hero
+// channel, spectral MIS: its throughput is f / mean_c p_c; delta tracking
+// in grids, Novak et al. 2018), scatters by the phase function (a medium
+// vertex counts towards max_depth like a surface vertex; index-matched
+// boundaries do not), and tracks the medium across boundaries by Mitsuba 3's
+// rule. Every medium vertex is joined to the sensor through its phase
+// function; every connection (and the emitter seen directly) is weighted by
+// the transmittance up to where camera rays start (the near clip), through
+// media and null boundaries, ratio tracking in grids (Scene::transmittance).
+// A camera inside a medium makes light tracing heavy-tailed: a medium
+// vertex at distance r from a pinhole splats ~1 / r^2, so the second moment
+// grows as 1 / near_clip.
+//
 // Limits, inherent to light tracing (Mitsuba's ptracer shares them): paths
 // whose vertex next to the camera is specular (the `specular` effect class:
 // mirrors and glass seen by the camera) are never produced; emitters with a
-// delta position (point, spot) are invisible to the camera, as in `path`.
+// delta position (point, spot) are invisible to the camera, as in `path`;
+// a medium behind a smooth dielectric (a translucent object's inside) is
+// seen through that delta boundary only, so only the light it sends onto
+// other surfaces reaches the film.
 #include <stdexcept>
 
 #include <climits>
