@@ -31,6 +31,9 @@ struct PathVertex {
     const Bsdf* bsdf = nullptr;
     const Emitter* emitter = nullptr;  // the light of a Light vertex, or the area emitter a surface carries
     const PhaseFunction* phase = nullptr;  // a Medium vertex's phase function
+    // Through media (ptracer): pdf_fwd / pdf_rev above are the geometric
+    // densities only (no free-flight or transmittance factor), which light
+    // tracing never reads; bdpt's MIS with medium vertices must add them.
     int medium = -1;        // the medium the vertex was reached through (a Medium vertex's own)
     bool enclosed = false;  // a Medium vertex behind a non-null boundary: B, not V (MediumTracker)
     bool connectible() const { return type != VType::Surface || bsdf->has_smooth(); }
