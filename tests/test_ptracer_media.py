@@ -81,9 +81,10 @@ def _airlight(u, sigma_t, sigma_s, g):
     return quad(f, x0, 60.0, limit=200, points=[float(np.dot(SS_LIGHT, u))])[0]
 
 
-def _single_scatter_image(g, n=3):
+def _single_scatter_image(g, n=5):
     """The exact pixel means: the airlight integral averaged over n x n
-    directions per pixel (midpoint rule; the integrand is smooth over a pixel)."""
+    directions per pixel (midpoint rule: n = 5 is within 0.05 % of n = 9 on
+    average, 0.2 % per pixel)."""
     tan_x = math.tan(math.radians(SS_FOV / 2))
     m = lookat((0, 0, 0), (1, 0, 0))[:3, :3]
     out = np.zeros((SS_RES, SS_RES, 3))
