@@ -139,8 +139,8 @@ def _slab_scene(bsdf):
 # last vertex connects through the glossy refraction lobe): that case
 # compares the subsurface class alone and has no power check (at 16384 spp
 # a 5 % error gave mean z -2.6 to -2.8, not reliably rejected). Measured
-# instead (alpha 0.6, subsurface class, 8 seeds x 2048 spp each): ptracer /
-# volpath = 0.996 / 0.992 / 0.992 (R / G / B), +- 1.6 %. Subsurface paths
+# instead (this scene, subsurface class, 8 seeds x 4096 spp each): ptracer /
+# volpath = 1.0005 / 1.0011 / 1.0008 (R / G / B), +- 0.7 %. Subsurface paths
 # with power checks: translucent_object's floor against Mitsuba below.
 @pytest.mark.parametrize("bsdf,effect,passes,spp,power", [
     ({"type": "null"}, "volume", (None, ["volume"]), (2048, 1024), 1.02),

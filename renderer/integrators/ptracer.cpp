@@ -155,13 +155,18 @@ private:
                 if (!scene.occluded(r)) out.push_back(emission_splat(is.film, le * (inv_pick * is.weight / es.pdf_w)));
                 return;
             }
-            // Through media: the camera ray's transmittance from its near
-            // clip to infinity, starting in the sensor's medium.
+            // Through media: the camera ray's transmittance over its clip
+            // range (volpath's camera ray escapes at the far clip),
+            // starting in the sensor's medium.
             Interaction from;
             from.kind = VertexKind::Medium;
             from.p = r.o + r.d * r.tmin;
             DirectSample ds;
             ds.d = r.d;
+            if (std::isfinite(r.tmax)) {
+                ds.p = r.o + r.d * r.tmax;
+                ds.dist = r.tmax - r.tmin;
+            }
             Color tr = scene.transmittance(from, ds, scene.sensor_desc.medium, stats.rays, sampler);
             if (!is_black(tr)) out.push_back(emission_splat(is.film, tr * le * (inv_pick * is.weight / es.pdf_w)));
             return;
