@@ -79,6 +79,11 @@ public:
             throw std::invalid_argument("integrator 'bdpt': sensor '" + scene.sensor_desc.type +
                                         "' cannot be reached by light subpaths (bdpt connects to cameras with a "
                                         "film); use integrator 'path' or a perspective or orthographic camera");
+        // Medium vertices in bdpt's MIS are issue 6's next step; the shared
+        // walk (subpath.cpp) moves through media only for ptracer so far.
+        if (scene.features.has_media)
+            throw std::invalid_argument("integrator 'bdpt' does not support participating media yet, and this "
+                                        "scene has media; use integrator 'volpath' or 'ptracer'");
         const SensorDesc& sd = scene.sensor_desc;
         filter_ = std::make_unique<FilterSampler>(sd.rfilter, sd.filter_radius, sd.filter_stddev);
     }
@@ -375,7 +380,7 @@ private:
             // A light vertex connected to the camera (light tracing's splat).
             PathVertex& y = light[s - 1];
             ImportanceSample is;
-            L = connect_to_sensor(scene, y, is, stats);
+            L = connect_to_sensor(scene, y, is, stats, sampler);
             if (is_black(L)) return L;
             film = is.film;
             PathVertex z0;

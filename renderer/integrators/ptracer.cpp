@@ -12,10 +12,29 @@
 // A render of `spp` traces spp * width * height light paths (as Mitsuba), and
 // the driver (light_render.cpp) splats, filters and averages their splats.
 //
+// Participating media (issue 6; pbrt-v4's volumetric light paths, PBR4
+// sec. 14.2, with the null-scattering formulation of Miller et al. 2019):
+// a light subpath starts in its emitter's medium (media_common.h's
+// emitter_medium), samples free flights there as volpath does (hero
+// channel, spectral MIS: its throughput is f / mean_c p_c; delta tracking
+// in grids, Novak et al. 2018), scatters by the phase function (a medium
+// vertex counts towards max_depth like a surface vertex; index-matched
+// boundaries do not), and tracks the medium across boundaries by Mitsuba 3's
+// rule. Every medium vertex is joined to the sensor through its phase
+// function; every connection (and the emitter seen directly) is weighted by
+// the transmittance up to where camera rays start (the near clip), through
+// media and null boundaries, ratio tracking in grids (Scene::transmittance).
+// A camera inside a medium makes light tracing heavy-tailed: a medium
+// vertex at distance r from a pinhole splats ~1 / r^2, so the second moment
+// grows as 1 / near_clip.
+//
 // Limits, inherent to light tracing (Mitsuba's ptracer shares them): paths
 // whose vertex next to the camera is specular (the `specular` effect class:
 // mirrors and glass seen by the camera) are never produced; emitters with a
-// delta position (point, spot) are invisible to the camera, as in `path`.
+// delta position (point, spot) are invisible to the camera, as in `path`;
+// a medium behind a smooth dielectric (a translucent object's inside) is
+// seen through that delta boundary only, so only the light it sends onto
+// other surfaces reaches the film.
 #include <stdexcept>
 
 #include <climits>
@@ -33,6 +52,7 @@ public:
     int strategy_depth() const override { return strategy_depth_; }
 
     bool is_light_tracer() const override { return true; }
+    bool supports_media() const override { return true; }
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator 'ptracer' traces light paths, not camera rays");
     }
@@ -60,14 +80,15 @@ public:
         std::vector<PathVertex>& light = tl_light();
         EmissionSample es;
         const int max_vertices = max_depth_ < 0 ? INT_MAX : max_depth_;
-        WalkStop stop = [this](const std::vector<PathVertex>& p) { return !reachable(p); };
+        WalkStop stop = [this, &scene](const std::vector<PathVertex>& p) { return !reachable(scene, p); };
         if (!scene.emitters.empty()) ++stats.paths;
         if (!light_subpath(scene, sampler, max_vertices, rr_depth_, light, es, stats, &stop)) return;
         const float inv_pick = 1.f / emitter_pick_prob(scene);
 
         // 2. The emitter seen directly: its sampled origin (or, at infinity,
         //    its sampled direction) connected to the sensor, s = 1, t = 1.
-        if (!hide_ && mask[kEmission]) connect_emitter(scene, *light[0].emitter, es, inv_pick, out, stats);
+        if (!hide_ && mask[kEmission])
+            connect_emitter(scene, *light[0].emitter, es, light[0].medium, inv_pick, out, stats, sampler);
 
         // 3. Every later vertex joined to the sensor (t = 1; smooth lobes
         //    only), filed under the class of E y_s .. y1 L (DESIGN sec. 3).
@@ -76,7 +97,7 @@ public:
             int cls = classify_strategy(no_camera, light, s, 1);
             if (!mask[cls]) continue;
             ImportanceSample is;
-            Color L = connect_to_sensor(scene, light[s - 1], is, stats);
+            Color L = connect_to_sensor(scene, light[s - 1], is, stats, sampler);
             if (is_black(L)) continue;
             Splat sp{is.film, cls, L};
             if (s <= strategy_depth_) sp.strategy = strategy_index(s, 1);
@@ -87,7 +108,19 @@ public:
 private:
     // Whether a class in `mask` can still come from a vertex after the last
     // one of `p`, whichever lobe that vertex samples (a null vertex changes nothing).
-    bool reachable(const std::vector<PathVertex>& p) const {
+    bool reachable(const Scene& scene, const std::vector<PathVertex>& p) const {
+        if (scene.features.has_media) {
+            // Through media a later vertex may be V or B (PathClass::can_reach).
+            PathClass pc;
+            for (size_t i = 1; i < p.size(); ++i)
+                if (p[i].type == VType::Medium) pc.push_medium(p[i].enclosed);
+                else if (!p[i].null_surface()) pc.push(p[i].delta);
+            return pc.volume || pc.subsurface ? pc.can_reach(mask, true)
+                                              : mask[kVolume] || mask[kSubsurface] || reachable_surface(p);
+        }
+        return reachable_surface(p);
+    }
+    bool reachable_surface(const std::vector<PathVertex>& p) const {
         int k = 0;  // scattering vertices among y1 .. y_{n-2}
         bool all_specular = true;
         for (size_t i = 1; i + 1 < p.size(); ++i)
@@ -105,8 +138,9 @@ private:
         return v;
     }
 
-    void connect_emitter(const Scene& scene, const Emitter& e, const EmissionSample& es, float inv_pick,
-                         std::vector<Splat>& out, ThreadStats& stats) const {
+    // `medium`: the medium the emission sample's ray leaves into (media only).
+    void connect_emitter(const Scene& scene, const Emitter& e, const EmissionSample& es, int medium, float inv_pick,
+                         std::vector<Splat>& out, ThreadStats& stats, Sampler& sampler) const {
         const Sensor& sensor = *scene.sensor;
         if (e.is_environment()) {
             // The camera looks along w = -d and sees L(w): weight L / pdf_w(w).
@@ -117,7 +151,24 @@ private:
             Color le = e.eval_environment(w);
             if (is_black(le)) return;
             ++stats.shadow_rays;
-            if (!scene.occluded(r)) out.push_back(emission_splat(is.film, le * (inv_pick * is.weight / es.pdf_w)));
+            if (!scene.features.has_media) {
+                if (!scene.occluded(r)) out.push_back(emission_splat(is.film, le * (inv_pick * is.weight / es.pdf_w)));
+                return;
+            }
+            // Through media: the camera ray's transmittance over its clip
+            // range (volpath's camera ray escapes at the far clip),
+            // starting in the sensor's medium.
+            Interaction from;
+            from.kind = VertexKind::Medium;
+            from.p = r.o + r.d * r.tmin;
+            DirectSample ds;
+            ds.d = r.d;
+            if (std::isfinite(r.tmax)) {
+                ds.p = r.o + r.d * r.tmax;
+                ds.dist = r.tmax - r.tmin;
+            }
+            Color tr = scene.transmittance(from, ds, scene.sensor_desc.medium, stats.rays, sampler);
+            if (!is_black(tr)) out.push_back(emission_splat(is.film, tr * le * (inv_pick * is.weight / es.pdf_w)));
             return;
         }
         // A delta position is never hit by a camera ray (Mitsuba's point and
@@ -131,12 +182,10 @@ private:
         from.p = es.p;
         from.n = es.n;
         from.eps = es.eps;
-        DirectSample ds;
-        ds.p = is.p;
-        ds.d = is.d;
-        ds.dist = is.dist;
-        ++stats.shadow_rays;
-        if (scene.visible(from, ds)) out.push_back(emission_splat(is.film, le * (inv_pick * is.weight)));
+        // Area lights emit on their normal's side only (one-sided, as
+        // Mitsuba's), the side the emission ray left into: its medium.
+        Color tr = transmittance_to_sensor(scene, from, medium, is, stats, sampler);
+        if (!is_black(tr)) out.push_back(emission_splat(is.film, tr * le * (inv_pick * is.weight)));
     }
 
     // The emitter seen directly: strategy (1, 1).

@@ -54,6 +54,7 @@ float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, co
     if (!prev) return 0.f;
     BsdfContext ctx;
     Vec3 wi = normalize(prev->it.p - v.it.p);
+    if (v.type == VType::Medium) return to_area(v.phase->pdf_w(wi, d), v.it.p, next);
     return to_area(v.bsdf->pdf_w(ctx, v.it.to_local(wi), v.it.to_local(d)), v.it.p, next);
 }
 
@@ -97,46 +98,19 @@ Vec3 far_point(const Scene& scene, const Ray& ray) {
 // leaves an offset origin, and for vertices 1e-2 apart in a corner that
 // moved densities by 1 %, measured by bdpt_mis_check).
 void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode, int max_vertices,
-                 int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const WalkStop* stop) {
+                 int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const WalkStop* stop,
+                 const MediumTracker* media) {
     BsdfContext ctx{mode};
     Color thr(1.f);         // throughput since the start (Russian roulette)
     float eta_scale = 1.f;  // undoes radiance scaling by eta^2 (Russian roulette)
-    for (int depth = 1;; ++depth) {  // depth: segments from the start to the new vertex
-        if (int(path.size()) >= max_vertices) break;
-        Interaction it;
-        ++stats.rays;
-        if (!scene.intersect(ray, it)) {
-            // A camera path leaving the scene ends on the environment: a
-            // Light vertex at infinity, for the s = 0 strategy (pbrt-v4).
-            if (mode == TransportMode::Radiance && !scene.environment.empty()) {
-                PathVertex v;
-                v.type = VType::Light;
-                v.infinite = true;
-                v.emitter = scene.environment[0];
-                v.it.p = far_point(scene, ray);
-                v.it.wi = -ray.d;
-                v.beta = beta;
-                const size_t n = path.size();
-                const PathVertex& prev = path[n - 1];
-                if (n == 1) {
-                    v.pdf_fwd = camera_pdf_a(scene, v);
-                } else if (prev.delta) {
-                    v.pdf_fwd = 0.f;
-                    path[n - 2].pdf_rev = 0.f;
-                } else {
-                    v.pdf_fwd = pdf_to(scene, prev, &path[n - 2], v);
-                    path[n - 2].pdf_rev = pdf_to(scene, prev, &v, path[n - 2]);
-                }
-                path.push_back(v);
-            }
-            break;
-        }
-        const Shape& shape = *scene.shapes[it.shape];
-        PathVertex v;
-        v.it = it;
-        v.beta = beta;
-        v.bsdf = scene.bsdfs[shape.bsdf].get();
-        v.emitter = shape.emitter >= 0 ? scene.emitters[shape.emitter].get() : nullptr;
+    // Through media: the hero channel of spectral MIS (media_common.h),
+    // drawn once per walk, and the medium the walk is in.
+    MediumTracker mt = media ? *media : MediumTracker{};
+    SpectralThroughput th(media ? std::min(int(sampler.next_1d() * 3.f), 2) : 0, beta);
+    const float beta0 = max_component(beta);
+    // Each new vertex gets pdf_fwd and its predecessor's predecessor
+    // pdf_rev (see above).
+    auto push_vertex = [&](PathVertex& v) {
         const size_t n = path.size();  // index of v
         const PathVertex& prev = path[n - 1];
         if (n == 1) {
@@ -149,6 +123,100 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
             path[n - 2].pdf_rev = pdf_to(scene, prev, &v, path[n - 2]);
         }
         path.push_back(v);
+    };
+    // Russian roulette (Mitsuba: q = min(max(throughput) eta^2, 0.95)). In
+    // media, volpath's rule (volpath.cpp explains it): only once the
+    // throughput has fallen below its start, the 0.95 cap only beyond
+    // kLongWalk events, so that long walks in bright media carry no
+    // 1 / 0.95^n tail.
+    constexpr int kLongWalk = 1024;
+    auto roulette = [&](int depth, float rr_u) {
+        if (depth < rr_depth) return true;
+        if (!media) {
+            float q = std::min(max_component(thr) * eta_scale, 0.95f);
+            if (!(rr_u < q)) return false;
+            th.beta /= q;
+            thr /= q;
+            return true;
+        }
+        float q = beta0 > 0.f ? max_component(th.beta) / beta0 * eta_scale : 0.f;
+        if (depth >= kLongWalk) q = std::min(q, 0.95f);
+        if (q >= 1.f) return true;
+        if (!(rr_u < q)) return false;
+        th.beta /= q;
+        return true;
+    };
+    // depth: scattering vertices from the start to the new vertex (every
+    // surface vertex without media; null boundaries excluded with them).
+    for (int depth = 1, guard = 0; guard < (1 << 20); ++guard) {
+        if (int(path.size()) >= max_vertices) break;
+        Interaction it;
+        ++stats.rays;
+        bool hit = scene.intersect(ray, it);
+
+        // Free flight through the current medium (media_common.h); a
+        // scattering event is a Medium vertex, whose next direction the
+        // phase function samples (weight eval / pdf = 1 for ours).
+        if (media && mt.medium >= 0) {
+            const Medium& med = *scene.media[mt.medium];
+            float t = 0.f;
+            FlightEvent event = free_flight(med, ray, hit ? it.t : ray.tmax, sampler, th, t);
+            if (event == kAbsorbed) break;
+            if (event == kScattered) {
+                PathVertex v;
+                v.type = VType::Medium;
+                v.it.kind = VertexKind::Medium;
+                v.it.valid = true;
+                v.it.p = ray.o + ray.d * t;
+                v.it.wi = -ray.d;
+                v.it.t = t;
+                v.beta = th.beta;
+                v.phase = med.phase.get();
+                v.medium = mt.medium;
+                v.enclosed = mt.enclosed;
+                push_vertex(v);
+                if (int(path.size()) >= max_vertices) break;
+                if (stop && (*stop)(path)) break;
+                PhaseSample ps = v.phase->sample(v.it.wi, sampler.next_2d());
+                if (!(ps.pdf_w > 0.f)) break;
+                th.beta *= ps.weight;
+                ray = Ray{v.it.p, ps.wo, 0.f, kInf};
+                if (!roulette(depth++, sampler.next_1d())) break;
+                continue;
+            }
+        }
+
+        if (!hit) {
+            // A camera path leaving the scene ends on the environment: a
+            // Light vertex at infinity, for the s = 0 strategy (pbrt-v4).
+            if (mode == TransportMode::Radiance && !scene.environment.empty()) {
+                PathVertex v;
+                v.type = VType::Light;
+                v.infinite = true;
+                v.emitter = scene.environment[0];
+                v.it.p = far_point(scene, ray);
+                v.it.wi = -ray.d;
+                v.beta = th.beta;
+                v.medium = mt.medium;
+                push_vertex(v);
+            }
+            break;
+        }
+        const Shape& shape = *scene.shapes[it.shape];
+        const Bsdf* bsdf = scene.bsdfs[shape.bsdf].get();
+        // Through media, an index-matched boundary is no vertex: cross it.
+        if (media && bsdf->flags() == kNull) {
+            mt.cross(it, ray.d, true);
+            ray = it.spawn(ray.d);
+            continue;
+        }
+        PathVertex v;
+        v.it = it;
+        v.beta = th.beta;
+        v.bsdf = bsdf;
+        v.emitter = shape.emitter >= 0 ? scene.emitters[shape.emitter].get() : nullptr;
+        v.medium = mt.medium;
+        push_vertex(v);
         if (int(path.size()) >= max_vertices) break;
         if (stop && (*stop)(path)) break;
 
@@ -162,20 +230,22 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
         Color f = bs.weight;
         if (mode == TransportMode::Importance) f *= shading_correction(it, it.wi, wo);
         else eta_scale *= sqr(bs.eta);
-        beta *= f;
+        th.beta *= f;
         thr *= f;
         cur.delta = bs.is_delta;
+        if (media) mt.cross(it, wo, false);
         ray = it.spawn(wo);
-
-        // Russian roulette (Mitsuba: q = min(max(throughput) eta^2, 0.95)).
-        float rr_u = sampler.next_1d();
-        if (depth >= rr_depth) {
-            float q = std::min(max_component(thr) * eta_scale, 0.95f);
-            if (!(rr_u < q)) break;
-            beta /= q;
-            thr /= q;
-        }
+        if (!roulette(depth++, sampler.next_1d())) break;
     }
+}
+
+// The shape an area emitter lies on (-1 for the others).
+static int emitter_shape(const Scene& scene, const Emitter& e) {
+    for (size_t i = 0; i < scene.shapes.size(); ++i) {
+        int k = scene.shapes[i]->emitter;
+        if (k >= 0 && scene.emitters[k].get() == &e) return int(i);
+    }
+    return -1;
 }
 
 bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
@@ -206,39 +276,65 @@ bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int r
     // sampling (pbrt-v4's GenerateLightSubpath); y1's comes from the origin
     // disk through emitter_pdf_to.
     if (y0.infinite) y0.pdf_fwd = light_origin_pdf(scene, y0, y0);
-    light.push_back(y0);
-    if (stop && (*stop)(light)) return true;
     Ray ray;
     ray.o = es.p + es.n * es.eps;
     ray.d = es.d;
+    MediumTracker mt;
+    if (scene.features.has_media) mt.medium = y0.medium = emitter_medium(scene, ray, es.n, emitter_shape(scene, e));
+    light.push_back(y0);
+    if (stop && (*stop)(light)) return true;
     random_walk(scene, sampler, ray, es.weight / pick, TransportMode::Importance, max_vertices, rr_depth, light, stats,
-                stop);
+                stop, scene.features.has_media ? &mt : nullptr);
     return true;
 }
 
-Color connect_to_sensor(const Scene& scene, const PathVertex& y, ImportanceSample& is, ThreadStats& stats) {
-    if (y.type != VType::Surface || !y.connectible()) return Color(0.f);
-    is = scene.sensor->sample_direction(y.it.p);
-    if (!is.valid) return Color(0.f);
-    BsdfContext ctx{TransportMode::Importance};
-    Color f = y.bsdf->eval(ctx, y.it.to_local(y.it.wi), y.it.to_local(is.d)) * shading_correction(y.it, y.it.wi, is.d);
-    if (is_black(f)) return Color(0.f);
+Color transmittance_to_sensor(const Scene& scene, const Interaction& from, int medium, const ImportanceSample& is,
+                              ThreadStats& stats, Sampler& sampler) {
     DirectSample ds;
     ds.p = is.p;
     ds.d = is.d;
     ds.dist = is.dist;
     ++stats.shadow_rays;
-    if (!scene.visible(y.it, ds)) return Color(0.f);
-    return y.beta * f * is.weight;
+    if (!scene.features.has_media) return scene.visible(from, ds) ? Color(1.f) : Color(0.f);
+    // Camera rays start at the near clip (as Mitsuba's): the medium is
+    // crossed up to there, as volpath's camera rays cross it from there.
+    ds.p = is.p - is.d * is.clip;
+    ds.dist = is.dist - is.clip;
+    return scene.transmittance(from, ds, medium, stats.rays, sampler);
+}
+
+Color connect_to_sensor(const Scene& scene, const PathVertex& y, ImportanceSample& is, ThreadStats& stats,
+                        Sampler& sampler) {
+    if ((y.type != VType::Surface && y.type != VType::Medium) || !y.connectible()) return Color(0.f);
+    is = scene.sensor->sample_direction(y.it.p);
+    if (!is.valid) return Color(0.f);
+    Color f;
+    int medium = y.medium;
+    if (y.type == VType::Medium) {
+        // The phase function in place of the BSDF and cosine (Veach 1997
+        // sec. 10.2 with the volume path measure; pbrt-v4's
+        // LightPathIntegrator connects medium vertices through p).
+        f = Color(y.phase->eval(y.it.wi, is.d));
+    } else {
+        BsdfContext ctx{TransportMode::Importance};
+        f = y.bsdf->eval(ctx, y.it.to_local(y.it.wi), y.it.to_local(is.d)) * shading_correction(y.it, y.it.wi, is.d);
+        medium = Scene::medium_after(y.it, is.d, y.medium);
+    }
+    if (is_black(f)) return Color(0.f);
+    Color tr = transmittance_to_sensor(scene, y.it, medium, is, stats, sampler);
+    if (is_black(tr)) return Color(0.f);
+    return y.beta * f * tr * is.weight;
 }
 
 int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<PathVertex>& light, int s, int t) {
     PathClass pc;
     int last_cam = s == 0 ? t - 2 : t - 1;
-    for (int i = 1; i <= last_cam; ++i)
-        if (!cam[i].null_surface()) pc.push(i == t - 1 ? false : cam[i].delta);
-    for (int i = s - 1; i >= 1; --i)
-        if (!light[i].null_surface()) pc.push(i == s - 1 ? false : light[i].delta);
+    auto push = [&pc](const PathVertex& v, bool end) {
+        if (v.type == VType::Medium) pc.push_medium(v.enclosed);
+        else if (!v.null_surface()) pc.push(end ? false : v.delta);
+    };
+    for (int i = 1; i <= last_cam; ++i) push(cam[i], i == t - 1);
+    for (int i = s - 1; i >= 1; --i) push(light[i], i == s - 1);
     return pc.classify();
 }
 

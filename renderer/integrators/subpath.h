@@ -10,10 +10,13 @@
 #include <vector>
 
 #include "integrators/common.h"
+#include "integrators/media_common.h"
 
 namespace rm {
 
-enum class VType : uint8_t { Camera, Light, Surface };
+// Medium: a scattering event inside a participating medium (ptracer's light
+// subpaths; bdpt does not walk through media yet).
+enum class VType : uint8_t { Camera, Light, Surface, Medium };
 
 // One vertex of either subpath. pdf_fwd is the area density with which the
 // vertex was sampled by its own subpath, pdf_rev the area density with which
@@ -27,6 +30,12 @@ struct PathVertex {
     bool infinite = false; // a Light vertex at infinity (directional, environment): it.p is a far point along its direction
     const Bsdf* bsdf = nullptr;
     const Emitter* emitter = nullptr;  // the light of a Light vertex, or the area emitter a surface carries
+    const PhaseFunction* phase = nullptr;  // a Medium vertex's phase function
+    // Through media (ptracer): pdf_fwd / pdf_rev above are the geometric
+    // densities only (no free-flight or transmittance factor), which light
+    // tracing never reads; bdpt's MIS with medium vertices must add them.
+    int medium = -1;        // the medium the vertex was reached through (a Medium vertex's own)
+    bool enclosed = false;  // a Medium vertex behind a non-null boundary: B, not V (MediumTracker)
     bool connectible() const { return type != VType::Surface || bsdf->has_smooth(); }
     bool null_surface() const { return type == VType::Surface && bsdf->flags() == kNull; }
 };
@@ -72,21 +81,39 @@ using WalkStop = std::function<bool(const std::vector<PathVertex>&)>;
 
 // Extends `path` (its start vertex, the camera or the light, already in it)
 // from `ray` with throughput `beta`, up to max_vertices vertices in all.
+// `media`: null for a walk that ignores media (bdpt, which refuses media
+// scenes); else the walk starts in that medium state and samples free
+// flights, medium vertices (VType::Medium) and phase-function directions,
+// with the spectral MIS throughput of media_common.h, and crosses
+// index-matched boundaries without making them vertices (they do not count
+// towards max_vertices, as in volpath).
 void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode, int max_vertices,
-                 int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const WalkStop* stop = nullptr);
+                 int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const WalkStop* stop = nullptr,
+                 const MediumTracker* media = nullptr);
 
 // A light subpath y0 y1 ..: an emitter picked uniformly (as next event
 // estimation), a ray of light leaving it (`es`), then the walk. Always
 // draws the same random numbers for its start. Returns false (and leaves
 // `light` empty) when the scene has no emitter or the sample failed.
+// In a scene with media the walk goes through them (random_walk's `media`),
+// starting in the emitter's medium (emitter_medium).
 bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
                    std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats,
                    const WalkStop* stop = nullptr);
 
 // The t = 1 strategy (light tracing): light vertex y connected to the
-// sensor through its adjoint BSDF. Returns y.beta f W (zero when y is not
-// connectible, faces away, or is occluded) and the sensor sample in `is`.
-Color connect_to_sensor(const Scene& scene, const PathVertex& y, ImportanceSample& is, ThreadStats& stats);
+// sensor through its adjoint BSDF, or a medium vertex through its phase
+// function. Returns y.beta f W Tr (zero when y is not connectible, faces
+// away, or is occluded) and the sensor sample in `is`; Tr is the
+// transmittance to where camera rays start (the near clip), through media
+// and index-matched boundaries, in a scene with media (else 1).
+Color connect_to_sensor(const Scene& scene, const PathVertex& y, ImportanceSample& is, ThreadStats& stats,
+                        Sampler& sampler);
+// The transmittance from `from` (a surface or medium point, in `medium`
+// as Scene::transmittance takes it) to the camera along sensor sample `is`,
+// ending where camera rays start; zero when occluded.
+Color transmittance_to_sensor(const Scene& scene, const Interaction& from, int medium, const ImportanceSample& is,
+                              ThreadStats& stats, Sampler& sampler);
 
 // Effect class (DESIGN sec. 3) of strategy (s, t)'s vertex string
 // E z1 .. z_{t-1} y_{s-1} .. y1 L: connection ends scatter through smooth

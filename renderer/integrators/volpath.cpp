@@ -37,6 +37,7 @@
 //    the exterior when d . n > 0, else the interior); the camera starts in
 //    the sensor's medium.
 #include "integrators/common.h"
+#include "integrators/media_common.h"
 #include "integrators/volpath.h"
 
 namespace rm {
@@ -69,90 +70,6 @@ Color direct_through_media(const Scene& scene, const Interaction& it, int medium
     return f * tr * ds.radiance * (w / light_pdf);
 }
 
-// Path throughput under spectral MIS (hero channel): one channel, drawn
-// uniformly per path, drives every free-flight distance and
-// scatter/absorb choice; r_u holds each channel's path density divided by the
-// hero's. The estimate is f / mean_c p_c = (f / p_hero) / mean(r_u); both
-// are rescaled after each update so that mean(r_u) = 1 and `beta` is the
-// estimate itself (no overflow however long the walk).
-struct SpectralThroughput {
-    explicit SpectralThroughput(int h) : hero(h) {}
-    int hero;
-    Color beta{1.f}, r_u{1.f};
-    // `ratio`: an event's contribution over the hero's density, which for
-    // every medium event here equals its per-channel density over the hero's.
-    bool rescale(const Color& ratio) {
-        r_u *= ratio;
-        beta *= ratio;
-        float m = average(r_u);
-        if (!(m > 0.f) || !std::isfinite(m)) return false;
-        r_u /= m;
-        beta /= m;
-        return true;
-    }
-};
-
-// Free flight through a medium up to the next surface at t_hit, with the
-// hero channel's extinction; `t` receives the scattering distance.
-enum FlightEvent { kPassed, kScattered, kAbsorbed };
-
-// Homogeneous: free-flight distance of density sigma_t exp(-sigma_t t)
-// (mean 1 / sigma_t); at a collision, scatter with probability
-// sigma_s / sigma_t of the hero, else absorb (the seed). Density of
-// collide-and-scatter per channel: sigma_s Tr(t); of passing: Tr(t_hit).
-FlightEvent free_flight_homogeneous(const Medium& med, float t_hit, Sampler& sampler, SpectralThroughput& th,
-                                    float& t) {
-    int h = th.hero;
-    float u_t = sampler.next_1d(), u_scatter = sampler.next_1d();
-    float s = med.sigma_t[h];
-    t = s > 0.f ? -std::log1p(-u_t) / s : kInf;
-    if (t < t_hit) {
-        if (!(u_scatter * med.sigma_t[h] < med.sigma_s[h])) return kAbsorbed;
-        Color p = med.sigma_s * med.transmittance(t);
-        return th.rescale(p / p[h]) ? kScattered : kAbsorbed;
-    }
-    Color tr = med.transmittance(t_hit);
-    return tr[h] > 0.f && th.rescale(tr / tr[h]) ? kPassed : kAbsorbed;
-}
-
-// Heterogeneous: delta tracking with null collisions against the majorant
-// (Woodcock et al. 1965; the null-scattering path integral of Miller et al.
-// 2019, sec. 4): tentative collisions at rate majorant[hero]; absorb,
-// scatter or pass on (null) with probabilities sigma_a, sigma_s and
-// sigma_n = majorant - sigma_t over the majorant (the hero's). Per-channel
-// densities: sigma_s Tm, sigma_n Tm (Tm the majorant's transmittance).
-FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, Sampler& sampler,
-                                 SpectralThroughput& th, float& t) {
-    int h = th.hero;
-    const Color& maj = med.majorant;
-    float m = maj[h];
-    // Tracking runs over the ray's part inside the grid's box; outside it
-    // the medium is vacuum (Medium::extent), so the flight passes there.
-    float t_end;
-    if (!med.extent(r.o, r.d, t_hit, t, t_end)) return kPassed;
-    for (int i = 0; i < (1 << 20); ++i) {
-        float u_t = sampler.next_1d(), u_e = sampler.next_1d();
-        float dt = m > 0.f ? -std::log1p(-u_t) / m : kInf;
-        if (!(t + dt < t_end)) {
-            Color tm = Medium::exp_neg(maj, t_end - t);
-            return tm[h] > 0.f && th.rescale(tm / tm[h]) ? kPassed : kAbsorbed;
-        }
-        t += dt;
-        Color st, ss;
-        med.coefficients(r.o + r.d * t, st, ss);
-        Color tm = Medium::exp_neg(maj, dt);
-        float p_absorb = (st[h] - ss[h]) / m, p_scatter = ss[h] / m;
-        if (u_e < p_absorb) return kAbsorbed;
-        if (u_e < p_absorb + p_scatter) {
-            Color p = ss * tm;
-            return th.rescale(p / p[h]) ? kScattered : kAbsorbed;
-        }
-        Color p = (maj - st) * tm;
-        if (!(p[h] > 0.f) || !th.rescale(p / p[h])) return kAbsorbed;
-    }
-    return kAbsorbed;
-}
-
 }  // namespace
 
 void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
@@ -163,8 +80,8 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
     ray.o = ray.o + ray.d * ray.tmin;
     ray.tmax = std::isinf(ray.tmax) ? kInf : ray.tmax - ray.tmin;
     ray.tmin = 0.f;
-    int medium = scene.sensor_desc.medium;
-    bool enclosed = false;  // the current medium is a shape's interior behind a non-null boundary (B vertices)
+    MediumTracker mt{scene.sensor_desc.medium, false};  // B vertices: behind a non-null boundary
+    int& medium = mt.medium;
     float eta_scale = 1.f;
     PathClass pc;
     float prev_pdf_w = 0.f;
@@ -207,8 +124,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         if (medium >= 0) {
             const Medium& med = *scene.media[medium];
             float t = 0.f;
-            FlightEvent event = med.homogeneous ? free_flight_homogeneous(med, t_hit, sampler, th, t)
-                                                : free_flight_tracking(med, ray, t_hit, sampler, th, t);
+            FlightEvent event = free_flight(med, ray, t_hit, sampler, th, t);
             if (event == kAbsorbed) break;
             if (event == kScattered) {
                 ++depth;
@@ -221,7 +137,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                 mi.t = t;
                 const PhaseFunction& phase = *med.phase;
                 PathClass pn = pc;
-                pn.push_medium(enclosed);
+                pn.push_medium(mt.enclosed);
                 int ncls = pn.classify();
                 // 3. Next event estimation from the medium vertex.
                 if (!scene.emitters.empty()) {
@@ -273,9 +189,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
 
         // 6. An index-matched boundary: cross it, change medium, keep the path state.
         if (bsdf.flags() == kNull) {
-            int next = Scene::medium_after(it, ray.d, medium);
-            if (next != medium) enclosed = false;
-            medium = next;
+            mt.cross(it, ray.d, true);
             ray = it.spawn(ray.d);
             continue;
         }
@@ -311,9 +225,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         prev_pdf_w = bs.pdf_w;
         prev_delta = bs.is_delta;
         Vec3 wo = it.to_world(bs.wo);
-        int next = Scene::medium_after(it, wo, medium);
-        if (next != medium) enclosed = next >= 0 && next == it.medium_inside && dot(wo, it.n) < 0.f;
-        medium = next;
+        mt.cross(it, wo, false);
         ray = it.spawn(wo);
         prev_p = ray.o;
         if (!roulette(sampler.next_1d())) break;

@@ -69,6 +69,7 @@ public:
         is.d = v / dist;
         is.dist = dist;
         is.weight = importance_w(local.z) / (dist * dist);
+        is.clip = near_ / local.z;
         return is;
     }
     ImportanceSample eval_direction(const Vec3& w, Ray* ray) const override {
@@ -134,6 +135,7 @@ public:
         is.d = -dir_;
         is.dist = t;
         is.weight = 1.f / a_pix_;
+        is.clip = near_;
         return is;
     }
     SensorRay sample_ray(Vec2 f, float, Vec2, Vec2) const override {

@@ -35,6 +35,7 @@ struct ImportanceSample {
     Vec3 d;             // unit direction from the reference point towards p
     float dist = 0.f;   // distance from the reference point to p
     float weight = 0.f; // importance as described above; per steradian for eval_direction
+    float clip = 0.f;   // distance from p towards the reference point at which camera rays start (near clip)
 };
 
 class Sensor {

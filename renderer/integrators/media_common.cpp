@@ -1,0 +1,72 @@
+// Media transport shared by volpath.cpp and subpath.cpp (media_common.h).
+#include "integrators/media_common.h"
+
+namespace rm {
+
+FlightEvent free_flight_homogeneous(const Medium& med, float t_hit, Sampler& sampler, SpectralThroughput& th,
+                                    float& t) {
+    int h = th.hero;
+    float u_t = sampler.next_1d(), u_scatter = sampler.next_1d();
+    float s = med.sigma_t[h];
+    t = s > 0.f ? -std::log1p(-u_t) / s : kInf;
+    if (t < t_hit) {
+        if (!(u_scatter * med.sigma_t[h] < med.sigma_s[h])) return kAbsorbed;
+        Color p = med.sigma_s * med.transmittance(t);
+        return th.rescale(p / p[h]) ? kScattered : kAbsorbed;
+    }
+    Color tr = med.transmittance(t_hit);
+    return tr[h] > 0.f && th.rescale(tr / tr[h]) ? kPassed : kAbsorbed;
+}
+
+FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, Sampler& sampler,
+                                 SpectralThroughput& th, float& t) {
+    int h = th.hero;
+    const Color& maj = med.majorant;
+    float m = maj[h];
+    // Tracking runs over the ray's part inside the grid's box; outside it
+    // the medium is vacuum (Medium::extent), so the flight passes there.
+    float t_end;
+    if (!med.extent(r.o, r.d, t_hit, t, t_end)) return kPassed;
+    for (int i = 0; i < (1 << 20); ++i) {
+        float u_t = sampler.next_1d(), u_e = sampler.next_1d();
+        float dt = m > 0.f ? -std::log1p(-u_t) / m : kInf;
+        if (!(t + dt < t_end)) {
+            Color tm = Medium::exp_neg(maj, t_end - t);
+            return tm[h] > 0.f && th.rescale(tm / tm[h]) ? kPassed : kAbsorbed;
+        }
+        t += dt;
+        Color st, ss;
+        med.coefficients(r.o + r.d * t, st, ss);
+        Color tm = Medium::exp_neg(maj, dt);
+        float p_absorb = (st[h] - ss[h]) / m, p_scatter = ss[h] / m;
+        if (u_e < p_absorb) return kAbsorbed;
+        if (u_e < p_absorb + p_scatter) {
+            Color p = ss * tm;
+            return th.rescale(p / p[h]) ? kScattered : kAbsorbed;
+        }
+        Color p = (maj - st) * tm;
+        if (!(p[h] > 0.f) || !th.rescale(p / p[h])) return kAbsorbed;
+    }
+    return kAbsorbed;
+}
+
+int emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, int it_shape) {
+    if (it_shape >= 0) {
+        const Shape& s = *scene.shapes[it_shape];
+        if (s.medium_interior >= 0 || s.medium_exterior >= 0)
+            return dot(ray.d, n) > 0.f ? s.medium_exterior : s.medium_interior;
+    }
+    Ray r = ray;
+    // Each step passes one surface that declares no medium (a bound keeps a
+    // ray caught between coincident surfaces from looping).
+    for (int step = 0; step < 1024; ++step) {
+        Interaction it;
+        if (!scene.intersect(r, it)) break;
+        if (it.medium_inside >= 0 || it.medium_outside >= 0)
+            return Scene::medium_after(it, -r.d, -1);
+        r = it.spawn(r.d);
+    }
+    return scene.sensor_desc.medium;
+}
+
+}  // namespace rm

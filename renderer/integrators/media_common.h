@@ -1,0 +1,92 @@
+// Pieces of media transport shared by the camera-path loop (volpath.cpp)
+// and the light subpaths of ptracer (subpath.cpp): the spectral-MIS path
+// throughput, the two free-flight samplers, medium tracking across
+// boundaries and the medium an emitter's light starts in.
+#pragma once
+#include "integrators/integrator.h"
+
+namespace rm {
+
+// Path throughput under spectral MIS (hero channel): one channel, drawn
+// uniformly per path, drives every free-flight distance and
+// scatter/absorb choice; r_u holds each channel's path density divided by the
+// hero's. The estimate is f / mean_c p_c = (f / p_hero) / mean(r_u), the
+// one-sample balance heuristic over the three channels' samplers (Miller,
+// Georgiev and Jarosz 2019, sec. 5.2; PBR4 sec. 14.2.2); both are rescaled
+// after each update so that mean(r_u) = 1 and `beta` is the estimate itself
+// (no overflow however long the walk). The medium events are symmetric in
+// the direction of transport, so a light subpath (importance transport)
+// uses the same bookkeeping: its beta becomes f / mean_c p_c of its prefix.
+struct SpectralThroughput {
+    explicit SpectralThroughput(int h, const Color& b = Color(1.f)) : hero(h), beta(b) {}
+    int hero;
+    Color beta{1.f}, r_u{1.f};
+    // `ratio`: an event's contribution over the hero's density, which for
+    // every medium event here equals its per-channel density over the hero's.
+    bool rescale(const Color& ratio) {
+        r_u *= ratio;
+        beta *= ratio;
+        float m = average(r_u);
+        if (!(m > 0.f) || !std::isfinite(m)) return false;
+        r_u /= m;
+        beta /= m;
+        return true;
+    }
+};
+
+// Free flight through a medium up to the next surface at t_hit, with the
+// hero channel's extinction; `t` receives the scattering distance.
+enum FlightEvent { kPassed, kScattered, kAbsorbed };
+
+// Homogeneous: free-flight distance of density sigma_t exp(-sigma_t t)
+// (mean 1 / sigma_t); at a collision, scatter with probability
+// sigma_s / sigma_t of the hero, else absorb (the seed). Density of
+// collide-and-scatter per channel: sigma_s Tr(t); of passing: Tr(t_hit).
+FlightEvent free_flight_homogeneous(const Medium& med, float t_hit, Sampler& sampler, SpectralThroughput& th,
+                                    float& t);
+
+// Heterogeneous: delta tracking with null collisions against the majorant
+// (Woodcock et al. 1965; the null-scattering path integral of Miller et al.
+// 2019, sec. 4; Novak et al. 2018, sec. 4): tentative collisions at rate
+// majorant[hero]; absorb, scatter or pass on (null) with probabilities
+// sigma_a, sigma_s and sigma_n = majorant - sigma_t over the majorant (the
+// hero's). Per-channel densities: sigma_s Tm, sigma_n Tm (Tm the majorant's
+// transmittance).
+FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, Sampler& sampler,
+                                 SpectralThroughput& th, float& t);
+
+// Either of the two above, for the medium's kind.
+inline FlightEvent free_flight(const Medium& med, const Ray& r, float t_hit, Sampler& sampler, SpectralThroughput& th,
+                               float& t) {
+    return med.homogeneous ? free_flight_homogeneous(med, t_hit, sampler, th, t)
+                           : free_flight_tracking(med, r, t_hit, sampler, th, t);
+}
+
+// The current medium of a path and whether it is a shape's interior entered
+// through a non-null (dielectric) boundary, i.e. whether a scattering event
+// there is a subsurface vertex B rather than a volume vertex V (PathClass).
+// Mitsuba 3's rule: the medium changes only at shapes that declare an
+// interior or exterior medium (Scene::medium_after).
+struct MediumTracker {
+    int medium = -1;
+    bool enclosed = false;
+    // The path leaves surface `it` in direction wo; `null_bsdf`: an
+    // index-matched boundary, crossing which never encloses.
+    void cross(const Interaction& it, const Vec3& wo, bool null_bsdf) {
+        int next = Scene::medium_after(it, wo, medium);
+        if (next != medium) enclosed = !null_bsdf && next >= 0 && next == it.medium_inside && dot(wo, it.n) < 0.f;
+        medium = next;
+    }
+};
+
+// The medium a light ray leaving an emitter at `ray.o` travels in: for an
+// area emitter on a shape that declares media (`it_shape`, its shape index;
+// -1 otherwise) the side the ray leaves to; else the medium on the near
+// side of the first medium boundary along the ray (the medium only changes
+// at such boundaries), and the sensor's medium when there is none (the
+// region connected to infinity is taken to be the camera's, the one
+// assumption of this rule; a camera enclosed by a medium boundary with a
+// light outside it would break it).
+int emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, int it_shape);
+
+}  // namespace rm
