@@ -191,6 +191,23 @@ def _core_integrator(spec: dict):
     return c
 
 
+def _mixed_bsdfs(desc) -> list:
+    """Names of the scene's BSDFs that have both a delta and a smooth lobe."""
+    found = []
+
+    def visit(b):
+        if b is None:
+            return
+        if b.type == "plastic":
+            found.append(b.id or "plastic")
+        for n in getattr(b, "nested", []) or []:
+            visit(n)
+
+    for s in desc.shapes:
+        visit(s.bsdf)
+    return sorted(set(found))
+
+
 def _effects_mask(effects):
     if effects is None:
         return [True] * len(EFFECTS)
@@ -261,6 +278,20 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
                           seconds=r["seconds"], stats=stats, checkpoints=list(r["checkpoints"]), integrator=spec,
                           seed=int(seed), strategies=dict(r["strategies"]),
                           strategies_unweighted=dict(r["strategies_unweighted"]))
+    if spec["type"] == "sppm":
+        mixed = _mixed_bsdfs(scene.desc)
+        if mixed:
+            # A known limit (renderer/integrators/sppm.cpp): the visible point is
+            # the first vertex with a smooth lobe, so a BSDF that also has a
+            # delta lobe (plastic's coat) never passes the camera path on: its
+            # reflections (the `specular` class there) are missing at any budget.
+            msg = (f"sppm: BSDF(s) {', '.join(mixed)} have a delta and a smooth lobe; sppm stops camera paths at "
+                   "them, so what their delta lobe reflects is missing (not consistent there); use photonmapper, "
+                   "bdpt or path for these")
+            stats.setdefault("warnings", []).append(msg)
+            import warnings
+
+            warnings.warn(msg, stacklevel=2)
     if spec["type"] == "ptracer":  # light tracing makes only the t = 1 strategies
         for d in (result.strategies, result.strategies_unweighted):
             for k in [k for k in d if k[1] != 1]:
