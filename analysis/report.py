@@ -207,10 +207,36 @@ def _bsdf_colour(b):
     return c, 1.0
 
 
-def scene_view(desc, out: Path, size=(420, 320)):
+def scene_photons(scene, max_points: int = 20000, seed: int = 1):
+    """Photons to draw into a scene's 3D view, where they explain something:
+    the caustic photons (light paths L S+ D) of a scene with specular
+    surfaces, else the photons of the first bounces (where direct and
+    indirect light land). Returns (label, (N, 3) positions) or None (scenes
+    with media: photon tracing does not follow media yet)."""
+    feats = scene.core().features
+    if feats.get("has_media") or not (feats.get("has_area_emitters") or feats.get("has_delta_emitters")
+                                       or feats.get("has_environment")):
+        return None
+    core = scene.core()
+    caustic = bool(feats.get("has_delta_bsdf"))
+    r = core.trace_photons(200000 if caustic else 20000, caustic_only=caustic, seed=seed, max_depth=4)
+    p = np.asarray(r["p"])
+    if len(p) == 0:
+        return None
+    keep = max_points if caustic else max_points // 8  # a sprinkle: where first-bounce light lands
+    if len(p) > keep:
+        p = p[np.random.default_rng(seed).choice(len(p), keep, replace=False)]
+    label = (f"{len(p)} caustic photons (L S+ D) in orange" if caustic
+             else f"{len(p)} photons of the first bounces in orange")
+    return label, p
+
+
+def scene_view(desc, out: Path, size=(420, 320), photons=None):
     """Renders the scene's geometry off screen with pyvista: shapes coloured
     by their BSDF (emitters yellow, glass translucent blue, metal grey), the
-    camera as a frustum. Returns None, or the reason there is no view."""
+    camera as a frustum, and `photons` ((N, 3) positions, from
+    scene_photons) as orange points. Returns None, or the reason there is no
+    view."""
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     try:
         import pyvista as pv
@@ -247,6 +273,9 @@ def scene_view(desc, out: Path, size=(420, 320)):
         if n == 0:
             p.close()
             return "the scene has no surfaces to draw"
+        if photons is not None and len(photons):
+            p.add_mesh(pv.PolyData(np.asarray(photons, np.float64)), color=(1.0, 0.45, 0.0), point_size=3,
+                       render_points_as_spheres=True, opacity=0.8)
         # The camera: its position and a frustum (Mitsuba: +z forward, +y up).
         m = np.asarray(desc.sensor.to_world, np.float64)
         o, fwd, up, left = m[:3, 3], m[:3, 2], m[:3, 1], m[:3, 0]
@@ -364,13 +393,16 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
         try:
             import radiometer as rm
 
-            desc = rm.load_file(spec.xml, **params).desc
-            why = scene_view(desc, out / png)
+            loaded = rm.load_file(spec.xml, **params)
+            ph = scene_photons(loaded)
+            why = scene_view(loaded.desc, out / png, photons=None if ph is None else ph[1])
         except Exception as e:
+            ph = None
             why = f"the scene does not load here ({type(e).__name__}: {e})"
         if why is None:
+            extra = "" if ph is None else f"; {esc(ph[0])}"
             parts.append(f"<figure><img src='{png}' alt='{esc(scene)} 3D view'><figcaption>3D view (pyvista, off "
-                         f"screen): camera and frustum in red, emitters yellow</figcaption></figure>")
+                         f"screen): camera and frustum in red, emitters yellow{extra}</figcaption></figure>")
         else:
             if "pyvista" in why:
                 views_note = why

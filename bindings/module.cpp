@@ -10,6 +10,7 @@
 #include "film/film.h"
 #include "integrators/render.h"
 #include "photon/photon_map.h"
+#include "photon/photon_trace.h"
 #include "scene/phase.h"
 #include "scene/scene.h"
 
@@ -291,7 +292,47 @@ PYBIND11_MODULE(_core, m) {
             d["has_environment"] = s.features.has_environment;
             d["has_media"] = s.features.has_media;
             return d;
-        });
+        })
+        // Photons of `paths` light paths (photon_trace.h), for pictures of
+        // where light goes (the benchmark report's 3D views) and for tests:
+        // positions (N, 3), incoming directions (N, 3), power (N, 3, already
+        // divided by the paths traced) and the path depth of each.
+        .def("trace_photons",
+             [](const Scene& s, uint64_t paths, bool caustic_only, uint64_t seed, int max_depth, int threads) {
+                 if (paths < 1 || paths > (uint64_t(1) << 26))
+                     throw py::value_error("trace_photons: paths must be in 1..2^26");
+                 PhotonTraceSpec spec;
+                 spec.caustic_only = caustic_only;
+                 spec.max_depth = max_depth;
+                 int th = threads > 0 ? threads : int(std::max(1u, std::thread::hardware_concurrency()));
+                 ThreadStats stats;
+                 PhotonPass pass;
+                 {
+                     py::gil_scoped_release release;
+                     pass = trace_photon_paths(s, spec, seed, 0, paths, th, [] { return true; }, stats);
+                 }
+                 const size_t n = pass.photons.size();
+                 std::vector<float> p(3 * n), w(3 * n), pw(3 * n), depth(n);
+                 for (size_t i = 0; i < n; ++i) {
+                     const Photon& ph = pass.photons[i];
+                     for (int c = 0; c < 3; ++c) {
+                         p[3 * i + c] = ph.p[c];
+                         w[3 * i + c] = ph.wi[c];
+                         pw[3 * i + c] = ph.power[c];
+                     }
+                     depth[i] = float(photon_depth(ph));
+                 }
+                 py::ssize_t N = py::ssize_t(n);
+                 py::dict out;
+                 out["p"] = to_numpy(std::move(p), {N, 3});
+                 out["wi"] = to_numpy(std::move(w), {N, 3});
+                 out["power"] = to_numpy(std::move(pw), {N, 3});
+                 out["depth"] = to_numpy(std::move(depth), {N});
+                 out["paths"] = pass.paths;
+                 return out;
+             },
+             py::arg("paths"), py::arg("caustic_only") = false, py::arg("seed") = 0, py::arg("max_depth") = -1,
+             py::arg("threads") = 0);
 
 
     // ---- Components, vectorised for statistical tests (chi-square etc.).

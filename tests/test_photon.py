@@ -324,3 +324,20 @@ def test_sppm_warns_where_it_is_not_consistent():
     assert any("plastic" in w or "ball" in w for w in r.stats["warnings"])
     quiet = rm.render(small_scene(AREA, res=8), integrator={"type": "sppm", "photon_count": 2000}, spp=2, seed=1)
     assert "warnings" not in quiet.stats
+
+
+def test_trace_photons_binding():
+    """Scene.trace_photons (the report's 3D views draw them): the caustic
+    photons of the mirror caustic are all L S D (depth 2: light -> mirror ->
+    floor), the same seed gives the same photons, max_depth bounds the
+    depth, and a bad count is a clear error."""
+    scene = rm.load_file(mirror.XML, res=8)
+    a = scene.core().trace_photons(50000, caustic_only=True, seed=3)
+    b = scene.core().trace_photons(50000, caustic_only=True, seed=3)
+    assert len(a["p"]) > 100 and np.array_equal(a["p"], b["p"])
+    assert np.all(a["depth"] == 2), np.unique(a["depth"])
+    cornell = rm.load_file(ROOT / "cornell_box" / "scene.xml", res=8)
+    g = cornell.core().trace_photons(20000, seed=1, max_depth=1)
+    assert np.all(g["depth"] == 1) and g["paths"] == 20000
+    with pytest.raises(ValueError, match="paths"):
+        cornell.core().trace_photons(0)
