@@ -476,7 +476,9 @@ private:
     float beta_;
     int strategy_depth_;
     Mis mis_ = Mis::Power;
-    mutable std::unique_ptr<FilterSampler> filter_;  // built by check_scene, before any path
+    // Built by check_scene, before any path: safe because make_integrator
+    // builds a fresh integrator for every render (never shared by two).
+    mutable std::unique_ptr<FilterSampler> filter_;
 };
 
 std::unique_ptr<Integrator> make_bdpt_integrator(const IntegratorDesc& d) { return std::make_unique<BdptIntegrator>(d); }

@@ -275,7 +275,11 @@ bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int r
     // At infinity y0's own density is that of its direction under light
     // sampling (pbrt-v4's GenerateLightSubpath); y1's comes from the origin
     // disk through emitter_pdf_to.
-    if (y0.infinite) y0.pdf_fwd = light_origin_pdf(scene, y0, y0);
+    if (y0.infinite) {  // seen from a point downstream of y0, the light lies along -es.d
+        PathVertex downstream;
+        downstream.it.p = es.p + es.d;
+        y0.pdf_fwd = light_origin_pdf(scene, y0, downstream);
+    }
     Ray ray;
     ray.o = es.p + es.n * es.eps;
     ray.d = es.d;

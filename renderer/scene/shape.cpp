@@ -283,7 +283,10 @@ bool sphere_cone(const Sphere& s, const Vec3& ref, double& dc, double& sin2max, 
     sin2max = r2 / dc2;
     double cosmax = std::sqrt(std::max(0.0, 1.0 - sin2max));
     one_minus_cosmax = sin2max / (1.0 + cosmax);
-    return one_minus_cosmax > 0.0;
+    // A sphere too small to have a float density (r / d below ~1e-19) falls
+    // back on area sampling, in sample_direction and pdf_direction alike.
+    float pdf = float(1.0 / (2.0 * 3.14159265358979323846 * one_minus_cosmax));
+    return one_minus_cosmax > 0.0 && std::isfinite(pdf);
 }
 }  // namespace
 
