@@ -85,7 +85,12 @@ def blocked_z_test(a, var_a, b, var_b=None, *, b_splatted=False, a_correlated=Fa
     a's pixels (`reference_variance_floor`); a block's variance is the larger
     of a's own estimate and the floor's. `exclude`: pixel boxes (x0, y0, x1,
     y1); every block that touches one is left out. `block_mask`: (H/k, W/k)
-    booleans, the blocks to test. The Sidak level counts the blocks tested."""
+    booleans, the blocks to test. The Sidak level counts the blocks tested.
+    Images whose sides k does not divide (a 1 x 1 irradiance meter) use the
+    largest block side below k that divides both."""
+    h, w = np.shape(a)[:2]
+    while k > 1 and (h % k or w % k):
+        k -= 1
     ba = block_mean(a, k)
     va = block_var_bound(var_a, k) if a_correlated else block_var_independent(var_a, k)
     if var_a_floor is not None:

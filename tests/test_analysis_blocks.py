@@ -59,3 +59,14 @@ def test_variance_floor_only_widens():
     assert not blocked_z_test(a, va, ref, var_a_floor=va / 4)[0]
     assert blocked_z_test(a, va, ref, var_a_floor=va * 16)[0]
     assert np.allclose(reference_variance_floor(va, 1000, 10), va * 100)
+
+
+def test_small_or_odd_images_use_a_block_that_fits():
+    """A 1 x 1 meter image and a 6 x 9 one: the block side drops to what
+    divides both sides (1 and 3), instead of failing to reshape."""
+    one = np.ones((1, 1, 3))
+    passed, msg = blocked_z_test(one, np.full((1, 1, 3), 0.01), one * 1.001, np.full((1, 1, 3), 0.01))
+    assert passed and "1x1 blocks" in msg
+    odd, vodd = np.ones((6, 9, 3)), np.full((6, 9, 3), 1e-4)
+    assert "3x3 blocks" in blocked_z_test(odd, vodd, odd, vodd)[1]
+    assert not blocked_z_test(odd * 1.1, vodd, odd, vodd)[0]
