@@ -2,17 +2,21 @@
 
 namespace rm {
 
-Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsdf, const Vec3& wi_local,
-                      Sampler& sampler, ThreadStats& stats, float light_frac, float bsdf_frac) {
+bool sample_light(const Scene& scene, const Vec3& p, Sampler& sampler, DirectSample& ds) {
     size_t n = scene.emitters.size();
     float u_pick = sampler.next_1d();
     Vec2 u = sampler.next_2d();
     float u_extra = sampler.next_1d();
-    if (n == 0) return Color(0.f);
-    size_t idx = std::min(size_t(u_pick * float(n)), n - 1);
-    const Emitter& e = *scene.emitters[idx];
-    DirectSample ds = e.sample_direct(it.p, u, u_extra);
-    if (!(ds.pdf_w > 0.f) || is_black(ds.radiance)) return Color(0.f);
+    if (n == 0) return false;
+    const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n)), n - 1)];
+    ds = e.sample_direct(p, u, u_extra);
+    return ds.pdf_w > 0.f && !is_black(ds.radiance);
+}
+
+Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsdf, const Vec3& wi_local,
+                      Sampler& sampler, ThreadStats& stats, float light_frac, float bsdf_frac) {
+    DirectSample ds;
+    if (!sample_light(scene, it.p, sampler, ds)) return Color(0.f);
     BsdfContext ctx;
     Vec3 wo = it.to_local(ds.d);
     Color f = bsdf.eval(ctx, wi_local, wo);

@@ -8,6 +8,11 @@ namespace rm {
 // Uniform emitter selection, as Mitsuba 3's Scene::sample_emitter_direction.
 inline float emitter_pick_prob(const Scene& s) { return s.emitters.empty() ? 0.f : 1.f / float(s.emitters.size()); }
 
+// Light sampling from `p`: an emitter picked uniformly and a point on it
+// (or a direction to it); always draws the same 4 random numbers. False
+// when the scene has no emitter or the sample carries nothing.
+bool sample_light(const Scene& scene, const Vec3& p, Sampler& sampler, DirectSample& ds);
+
 // Next event estimation at `it` (Veach 1997, sec. 9.2: light sample weighted by
 // the power heuristic against BSDF sampling). Returns the contribution before
 // the path throughput; `light_frac`/`bsdf_frac` are the one-sample-model

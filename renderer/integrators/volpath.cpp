@@ -50,15 +50,8 @@ namespace {
 template <typename EvalF, typename PdfF>
 Color direct_through_media(const Scene& scene, const Interaction& it, int medium, Sampler& sampler,
                            ThreadStats& stats, EvalF f_of, PdfF pdf_of) {
-    size_t n = scene.emitters.size();
-    float u_pick = sampler.next_1d();
-    Vec2 u = sampler.next_2d();
-    float u_extra = sampler.next_1d();
-    if (n == 0) return Color(0.f);
-    size_t idx = std::min(size_t(u_pick * float(n)), n - 1);
-    const Emitter& e = *scene.emitters[idx];
-    DirectSample ds = e.sample_direct(it.p, u, u_extra);
-    if (!(ds.pdf_w > 0.f) || is_black(ds.radiance)) return Color(0.f);
+    DirectSample ds;
+    if (!sample_light(scene, it.p, sampler, ds)) return Color(0.f);
     Color f = f_of(ds.d);
     if (is_black(f)) return Color(0.f);
     ++stats.shadow_rays;
