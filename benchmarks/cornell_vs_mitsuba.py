@@ -54,14 +54,9 @@ def _now() -> str:
 
 
 def machine_info() -> dict:
-    cpu = platform.processor() or ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    from radiometer.benchmarks.runner import cpu_name
+
+    cpu = cpu_name()
     mem_gib = None
     try:
         for line in Path("/proc/meminfo").read_text().splitlines():

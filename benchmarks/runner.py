@@ -54,18 +54,21 @@ def commit_id() -> str:
         return "unknown"
 
 
-def machine_info() -> dict:
-    cpu = platform.processor() or ""
+def cpu_name() -> str:
+    """The CPU's model name (Linux /proc/cpuinfo; else platform's guess)."""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
+                return line.split(":", 1)[1].strip()
     except OSError:
         pass
+    return platform.processor() or ""
+
+
+def machine_info() -> dict:
     import radiometer
 
-    return {"host": socket.gethostname(), "cpu": cpu, "cores": os.cpu_count(), "system": platform.system(),
+    return {"host": socket.gethostname(), "cpu": cpu_name(), "cores": os.cpu_count(), "system": platform.system(),
             "release": platform.release(), "python": platform.python_version(), "radiometer": radiometer.__version__}
 
 

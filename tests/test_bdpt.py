@@ -21,7 +21,7 @@ import pytest
 
 import radiometer as rm
 from radiometer.reference_scenes.mirror_caustic import analytic as mirror
-from refcompare import _rgb, assert_clean, block_mean, blocked_z, lookat
+from refcompare import _rgb, assert_clean, block_mean, blocked_z, check_mirror_caustic, lookat
 
 from conftest import furnace_dict, furnace_exact
 
@@ -195,18 +195,7 @@ def test_spot_light_plastic_matches_path():
 
 def test_mirror_caustic_matches_analytic():
     """Orthographic camera (delta direction), mirror caustic L S D E and direct light, exact by the image method."""
-    res = 32
-    b = rm.render(rm.load_file(mirror.XML, res=res), integrator={"type": "bdpt", "max_depth": 3}, spp=256, seed=3)
-    assert_clean(b, "mirror caustic")
-    ref = mirror.effects(res=res)
-    for k in ("direct", "caustic"):
-        assert b.effects[k].sum() == pytest.approx(ref[k].sum(), rel=0.03), k
-    total = ref["direct"] + ref["caustic"]
-    passed, msg = blocked_z(b.image, b.variance, total)
-    assert passed, f"mirror caustic: bdpt / exact = {b.image.sum() / total.sum():.5f}\n{msg}"
-    assert not blocked_z(b.image, b.variance, total * 1.01)[0], "mirror caustic: a 1 % bias went undetected"
-    for k in ("emission", "indirect", "specular"):
-        assert not np.any(b.effects[k]), k
+    check_mirror_caustic("bdpt", 256)
 
 
 def test_hide_emitters():

@@ -22,8 +22,7 @@ import numpy as np
 import pytest
 
 import radiometer as rm
-from radiometer.reference_scenes.mirror_caustic import analytic as mirror
-from refcompare import _rgb, assert_clean, block_mean, blocked_z, lookat
+from refcompare import _rgb, assert_clean, blocked_z, check_mirror_caustic, lookat
 
 ALPHA = 0.01
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
@@ -111,21 +110,7 @@ def test_cornell_max_depth_2_matches_path():
 def test_mirror_caustic_matches_analytic():
     """Orthographic camera, mirror caustic (L S D E) and direct light against
     the method-of-images solution (zero variance)."""
-    res = 32
-    b = rm.render(rm.load_file(mirror.XML, res=res), integrator={"type": "ptracer", "max_depth": 3}, spp=512, seed=3)
-    assert_clean(b, "mirror caustic")
-    ref = mirror.effects(res=res)
-    for k in ("direct", "caustic"):
-        # The effect images' own variances are not reported; the total's
-        # variance bounds each (independent positive parts), so only the
-        # total is tested strictly, the parts to 3 %.
-        assert b.effects[k].sum() == pytest.approx(ref[k].sum(), rel=0.03), k
-    total = ref["direct"] + ref["caustic"]
-    passed, msg = blocked_z(b.image, b.variance, total)
-    assert passed, f"mirror caustic: ptracer / exact = {b.image.sum() / total.sum():.5f}\n{msg}"
-    assert not blocked_z(b.image, b.variance, total * 1.01)[0], "mirror caustic: a 1 % bias went undetected"
-    for k in ("emission", "indirect", "specular"):
-        assert not np.any(b.effects[k]), k
+    check_mirror_caustic("ptracer", 512)
 
 
 def test_point_light_matches_path():
