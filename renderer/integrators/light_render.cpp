@@ -226,16 +226,14 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
                                     " GiB of light-tracing buffers (limit 16 GiB); lower the resolution or strategy_images");
     SplatFilm film(W, H, filter, n_strat);
 
-    int threads = opts.threads > 0 ? opts.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+    int threads = render_threads(opts);
     RenderOutput out;
     out.width = W;
     out.height = H;
     out.threads = threads;
     std::atomic<bool> cancel{false};
     auto t0 = Clock::now();
-    std::vector<int> cps = opts.checkpoints;
-    std::sort(cps.begin(), cps.end());
-    cps.erase(std::unique(cps.begin(), cps.end()), cps.end());
+    std::vector<int> cps = checkpoint_plan(opts);
 
     const uint64_t pixels = uint64_t(W) * uint64_t(H);
     const uint64_t total = opts.seconds > 0 ? 0 : pixels * uint64_t(opts.spp);

@@ -273,7 +273,7 @@ RenderOutput empty_render_output(const Scene& scene, int threads, double seconds
 
 RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
     auto t0 = Clock::now();
-    int threads = opts.threads > 0 ? opts.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+    int threads = render_threads(opts);
     const SceneFeatures& f = scene.features;
     bool lights = !scene.emitters.empty();
     bool long_paths = max_depth_ < 0 || max_depth_ >= 3;  // L S D E and L D D E have 3 segments

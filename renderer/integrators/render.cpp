@@ -77,6 +77,17 @@ RenderOutput Integrator::drive(const Scene&, const RenderOptions&, const PollFn&
     throw std::logic_error("Integrator::drive called on an estimator that does not own its driver");
 }
 
+int render_threads(const RenderOptions& opts) {
+    return opts.threads > 0 ? opts.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+}
+
+std::vector<int> checkpoint_plan(const RenderOptions& opts) {
+    std::vector<int> cps = opts.checkpoints;
+    std::sort(cps.begin(), cps.end());
+    cps.erase(std::unique(cps.begin(), cps.end()), cps.end());
+    return cps;
+}
+
 int next_pass_end(const RenderOptions& opts, const std::vector<int>& checkpoints, int spp_done, double elapsed,
                   double sec_per_spp) {
     // Under an spp budget the passes are fixed by the budget and checkpoints
@@ -127,16 +138,14 @@ RenderOutput render(const Scene& scene, const Integrator& requested, const Rende
     Film film(W, H);       // finished passes
     Film pass_film(W, H);  // the pass in flight; merged only when complete
 
-    int threads = opts.threads > 0 ? opts.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+    int threads = render_threads(opts);
     RenderOutput out;
     out.width = W;
     out.height = H;
     out.threads = threads;
     std::atomic<bool> cancel{false};
     auto t0 = Clock::now();
-    std::vector<int> cps = opts.checkpoints;
-    std::sort(cps.begin(), cps.end());
-    cps.erase(std::unique(cps.begin(), cps.end()), cps.end());
+    std::vector<int> cps = checkpoint_plan(opts);
 
     int tiles_x = (W + kTile - 1) / kTile, tiles_y = (H + kTile - 1) / kTile;
     uint64_t pixels = uint64_t(W) * uint64_t(H);

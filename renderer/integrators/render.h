@@ -60,6 +60,11 @@ using PollFn = std::function<bool(uint64_t done, uint64_t total)>;
 
 RenderOutput render(const Scene& scene, const Integrator& integrator, const RenderOptions& opts, const PollFn& poll);
 
+// Threads a render uses: opts.threads, or all hardware threads when 0.
+int render_threads(const RenderOptions& opts);
+// The checkpoints a render keeps: opts.checkpoints sorted, without repeats.
+std::vector<int> checkpoint_plan(const RenderOptions& opts);
+
 // End (exclusive sample index) of the next pass of samples per pixel after
 // spp_done, or -1 when the budget is spent; shared by every render driver so
 // their pass plans (and hence their bytes for a seed) follow one rule.

@@ -152,7 +152,7 @@ RenderOutput Sppm::drive(const Scene& scene, const RenderOptions& opts, const Po
     const SensorDesc& sd = scene.sensor_desc;
     const int W = sensor.width, H = sensor.height;
     const size_t pixels = size_t(W) * size_t(H);
-    int threads = opts.threads > 0 ? opts.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+    int threads = render_threads(opts);
     FilterSampler filter(sd.rfilter, sd.filter_radius, sd.filter_stddev);
     Vec3 center;
     float radius;
@@ -186,9 +186,7 @@ RenderOutput Sppm::drive(const Scene& scene, const RenderOptions& opts, const Po
     ThreadStats pstats;
     int passes = 0;
     double sec_per_pass = 0;
-    std::vector<int> cps = opts.checkpoints;
-    std::sort(cps.begin(), cps.end());
-    cps.erase(std::unique(cps.begin(), cps.end()), cps.end());
+    std::vector<int> cps = checkpoint_plan(opts);
 
     // The estimate after `n` passes (H&J 2009, eq. 10 plus the ray-traced part).
     auto develop = [&](int n, std::vector<float>& image, std::vector<float>& variance,
