@@ -39,6 +39,21 @@ def check_mirror_caustic(estimator, spp, res=32, seed=3):
         assert not np.any(b.effects[k]), k
 
 
+def assert_same_bytes_whatever_threads(scene, integrator, spp):
+    """Same seed: identical image, variance and effect bytes on 1, 2 and 3
+    threads; another seed: a different image."""
+    import radiometer as rm
+
+    r = [rm.render(scene, integrator=integrator, spp=spp, seed=9, threads=t) for t in (1, 2, 3)]
+    for x in r[1:]:
+        assert x.image.tobytes() == r[0].image.tobytes()
+        assert x.variance.tobytes() == r[0].variance.tobytes()
+        for k in x.effects:
+            assert x.effects[k].tobytes() == r[0].effects[k].tobytes()
+    other = rm.render(scene, integrator=integrator, spp=spp, seed=10, threads=2)
+    assert other.image.tobytes() != r[0].image.tobytes()
+
+
 def assert_clean(res, where=""):
     for name, a in [("image", res.image), ("variance", res.variance)] + list(res.effects.items()):
         a = np.asarray(a)

@@ -21,7 +21,8 @@ import pytest
 
 import radiometer as rm
 from radiometer.reference_scenes.mirror_caustic import analytic as mirror
-from refcompare import _rgb, assert_clean, block_mean, blocked_z, check_mirror_caustic, lookat
+from refcompare import (_rgb, assert_clean, assert_same_bytes_whatever_threads, block_mean, blocked_z,
+                        check_mirror_caustic, lookat)
 
 from conftest import furnace_dict, furnace_exact
 
@@ -251,15 +252,7 @@ def test_mis_weights_match_brute_force(which, mis):
 # ------------------------------------------------------------------ determinism, errors, stress
 
 def test_same_seed_same_bytes_whatever_threads():
-    scene = rm.load_file(CORNELL, res=16)
-    r = [rm.render(scene, integrator="bdpt", spp=8, seed=9, threads=t) for t in (1, 2, 3)]
-    for x in r[1:]:
-        assert x.image.tobytes() == r[0].image.tobytes()
-        assert x.variance.tobytes() == r[0].variance.tobytes()
-        for k in x.effects:
-            assert x.effects[k].tobytes() == r[0].effects[k].tobytes()
-    other = rm.render(scene, integrator="bdpt", spp=8, seed=10, threads=2)
-    assert other.image.tobytes() != r[0].image.tobytes()
+    assert_same_bytes_whatever_threads(rm.load_file(CORNELL, res=16), "bdpt", 8)
 
 
 def test_bad_parameters():

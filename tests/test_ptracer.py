@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 
 import radiometer as rm
-from refcompare import _rgb, assert_clean, blocked_z, check_mirror_caustic, lookat
+from refcompare import (_rgb, assert_clean, assert_same_bytes_whatever_threads, blocked_z, check_mirror_caustic,
+                        lookat)
 
 ALPHA = 0.01
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
@@ -164,15 +165,7 @@ def test_effects_mask_simulates_only_those():
 
 
 def test_same_seed_same_bytes_whatever_threads():
-    scene = rm.load_file(CORNELL, res=16)
-    r = [rm.render(scene, integrator="ptracer", spp=24, seed=9, threads=t) for t in (1, 2, 3)]
-    for x in r[1:]:
-        assert x.image.tobytes() == r[0].image.tobytes()
-        assert x.variance.tobytes() == r[0].variance.tobytes()
-        for k in x.effects:
-            assert x.effects[k].tobytes() == r[0].effects[k].tobytes()
-    other = rm.render(scene, integrator="ptracer", spp=24, seed=10, threads=2)
-    assert other.image.tobytes() != r[0].image.tobytes()
+    assert_same_bytes_whatever_threads(rm.load_file(CORNELL, res=16), "ptracer", 24)
 
 
 def test_variance_predicts_spread_across_seeds():
