@@ -2,10 +2,11 @@
 
 Mitsuba's references hold the total image only. The per-effect reference of
 a scene is a long run of our own unbiased `path` (every effect class in its
-own layer), accepted only if its total passes the blocked z-test against
-Mitsuba's reference (analysis/blocks.py, alpha 0.01, the same test as
-tests/test_canonical_mitsuba.py, with the reference's per-sample variance as
-a floor for box-filtered scenes). A reference that fails is kept on disk
+own layer; `bdpt` where the scene's SceneSpec says so: ajar_door), accepted
+only if its total passes the blocked z-test against Mitsuba's reference
+(analysis/blocks.py, alpha 0.01, the same test as
+tests/test_canonical_mitsuba.py, with the reference's per-sample variance
+as a floor for box-filtered scenes). A reference that fails is kept on disk
 for inspection but not used: the scene's per-effect errors are then
 reported as unavailable, with the z-test's summary as the reason.
 
@@ -30,7 +31,7 @@ SEED = 987654321
 
 def ref_path(root, scene: str, params: dict, spp: int) -> Path:
     spec = _scenes.get(scene)
-    key = json.dumps({"scene": scene, "params": params, "estimator": "path",
+    key = json.dumps({"scene": scene, "params": params, "estimator": spec.effect_ref_estimator,
                       "max_depth": _scenes.max_depth(spec, params), "spp": spp, "seed": SEED}, sort_keys=True)
     return Path(root) / "refs" / f"{scene}-{hashlib.sha1(key.encode()).hexdigest()[:12]}.exr"
 
@@ -41,7 +42,7 @@ def _splatted(scene) -> bool:
 
 def make(scene: str, params: dict, spp: int, out: Path, threads: int = 0, progress=None) -> dict:
     """Renders the per-effect reference of `scene` with `spp` samples per
-    pixel of `path`, z-tests its total against Mitsuba's reference and
+    pixel of `path` (or the scene's effect_ref_estimator), z-tests its total against Mitsuba's reference and
     writes it to `out` (EXR, metadata `accepted` and `ztest`). Returns the
     metadata."""
     import radiometer as rm
@@ -51,7 +52,7 @@ def make(scene: str, params: dict, spp: int, out: Path, threads: int = 0, progre
     if spec.kind != "mitsuba":
         raise ValueError(f"{scene}: analytic scenes have exact per-effect references")
     s = rm.load_file(spec.xml, **params)
-    integ = {"type": "path", "max_depth": _scenes.max_depth(spec, params)}
+    integ = {"type": spec.effect_ref_estimator, "max_depth": _scenes.max_depth(spec, params)}
     t0 = time.monotonic()
     res = rm.render(s, integrator=integ, spp=spp, seed=SEED, threads=threads, progress=progress)
     ref = rm.read_exr(spec.xml.parent / "reference.exr")
@@ -60,7 +61,8 @@ def make(scene: str, params: dict, spp: int, out: Path, threads: int = 0, progre
     passed, msg = blocked_z_test(res.image, res.variance, ref.image, ref.variance, b_splatted=splatted,
                                  var_a_floor=floor)
     meta = {"accepted": int(passed), "ztest": msg, "reference_total_spp": int(ref.metadata["total_spp"]),
-            "effects_kind": f"ours: path, {res.spp} spp, z-test against Mitsuba {'passed' if passed else 'FAILED'}",
+            "effects_kind": (f"ours: {spec.effect_ref_estimator}, {res.spp} spp, z-test against Mitsuba "
+                             f"{'passed' if passed else 'FAILED'}"),
             "make_seconds": time.monotonic() - t0}
     out.parent.mkdir(parents=True, exist_ok=True)
     rm.write_exr(out, res, **meta)
@@ -90,7 +92,8 @@ def ensure(root, jobs, spp_override=None, threads: int = 0, log=print) -> dict:
             except (rm.SceneError, ValueError) as e:
                 notes[scene] = f"no per-effect reference: the scene does not load ({e})"
                 continue
-            log(f"per-effect reference for {scene}: path, {spp} spp (made once, cached in {out.parent})")
+            log(f"per-effect reference for {scene}: {spec.effect_ref_estimator}, {spp} spp "
+                f"(made once, cached in {out.parent})")
             from tqdm import tqdm
 
             with tqdm(total=spp, desc=f"effect reference {scene}", unit="spp", file=sys.stderr, disable=None,

@@ -44,14 +44,17 @@ class SceneSpec:
     kind: str  # "analytic" or "mitsuba"
     folder: str
     fixed_params: dict = field(default_factory=dict)  # mitsuba: the reference's XML parameters
-    # Budget of the per-effect reference (our `path`, all cores), mitsuba scenes.
+    # Budget and estimator of the per-effect reference (ours, unbiased, all
+    # cores), mitsuba scenes.
     effect_ref_spp: int = 0
+    effect_ref_estimator: str = "path"
 
 
-def _mitsuba(name, effect_ref_spp):
+def _mitsuba(name, effect_ref_spp, estimator="path"):
     from radiometer.reference_scenes.make_reference import SCENES
 
-    return SceneSpec(name, ROOT / name / "scene.xml", "mitsuba", name, dict(SCENES[name]["params"]), effect_ref_spp)
+    return SceneSpec(name, ROOT / name / "scene.xml", "mitsuba", name, dict(SCENES[name]["params"]), effect_ref_spp,
+                     estimator)
 
 
 def _registry():
@@ -65,11 +68,15 @@ def _registry():
                                     "mirror_caustic"),
     }
     # Per-effect reference budgets: about 15-60 s each with `path` on 2 cores
-    # (measured 2026-11: cornell ~250 spp/s, glass ~650, veach ~550, ajar
-    # ~230 at 64 x 64), 10-30 x what a 4 s benchmark job reaches.
-    for name, spp in (("cornell_box", 8192), ("glass_sphere_caustic", 16384), ("veach_mis", 16384),
-                      ("ajar_door", 8192)):
+    # (measured 2026-11: cornell ~250 spp/s, glass ~650, veach ~550 at
+    # 64 x 64), 10-30 x what a 4 s benchmark job reaches.
+    for name, spp in (("cornell_box", 8192), ("glass_sphere_caustic", 16384), ("veach_mis", 16384)):
         reg[name] = _mitsuba(name, spp)
+    # ajar_door's near room is lit by a strip `path` finds ~1 time in 100
+    # per bounce; `bdpt` (unbiased, every strategy filed under its effect
+    # class) reaches there in 1024 spp what path would in ~50 000
+    # (card.md), in about a minute.
+    reg["ajar_door"] = _mitsuba("ajar_door", 1024, "bdpt")
     for name in ("homogeneous_slab", "fog_room", "vandehulst_slab", "vandehulst_slab_reflectance",
                  "translucent_slab", "translucent_object", "volumetric_caustic"):
         # media: `path` (volpath) passes its z-tests against these references

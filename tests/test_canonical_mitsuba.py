@@ -58,14 +58,15 @@ ALPHA = 0.01
 # was made), and the power check. Regions are card.md's pixel boxes
 # (x0, y0, x1, y1), half-open, at 64 x 64.
 AJAR_DOORWAY = (28, 15, 40, 41)  # the view through the doorway into the lit room
-AJAR_BEAM = (47, 7, 64, 42)  # the beam through the gap on the near room's right wall
+AJAR_BEAM = (54, 18, 64, 40)  # the lamp's strip through the gap on the near room's right wall
 SURFACE = {
     "glass_sphere_caustic": {"spp": 1024, "max_depth": 12, "power": None},
     "veach_mis": {"spp": 512, "max_depth": 8, "power": None},
-    # At 512 spp a 1 % overall bias is about 1.4 sigma of the mean z here
-    # (measured: 0 of 10 renders rejected), so the check scales the region
+    # At 512 spp a 1 % overall bias is near the mean z's noise here
+    # (measured: rejected for 1 of seeds 1-3), so the check scales the region
     # the scene is about, the near room lit only through the gap (every
-    # pixel outside the doorway and the beam), by 5 %.
+    # pixel outside the doorway and the lamp's strip), by 5 % (rejected for
+    # 3 of 3; the unscaled reference passed 3 of 3).
     "ajar_door": {"spp": 512, "max_depth": 10, "power": ("near room, indirect only", 1.05)},
 }
 MEDIA = ["homogeneous_slab", "fog_room", "vandehulst_slab", "translucent_slab", "translucent_object",
@@ -347,8 +348,9 @@ def test_volpath_matches_vandehulst_reflectance():
 #   512 spp against 8192 spp), median equal to mean; and the plates' direct
 #   highlights (light -> plate -> camera, the same connection code) agree
 #   at alpha 0.005. Outside the two plates, 8 of 8 seeds passed at 512 spp.
-# ajar_door is tested whole (12 seeds x 512 spp: the image mean at 0.9979 +-
-# 0.0030 of the reference, 4 of 4 seeds passed at 1024 spp).
+# ajar_door is tested whole (seeds 2 and 3 at 1024 spp passed, the near
+# room's mean at 0.9975 and 0.9999 of the reference; every surface there is
+# diffuse, and Mitsuba's reference is itself a light tracer's, card.md).
 PTRACER_EXCLUDE = {
     "glass_sphere_caustic": [(16, 14, 41, 39)],
     "veach_mis": [(0, 28, 64, 34), (0, 34, 64, 39)],

@@ -148,7 +148,7 @@ def cmd_refs(a) -> int:
         out.parent.mkdir(parents=True, exist_ok=True)
         print(f"{n}: {runs} runs x {spp} spp with Mitsuba {a.variant} -> {out}", file=sys.stderr)
         _, var, meta = make_mitsuba_reference(HERE / n / "scene.xml", out, runs=runs, spp=spp, variant=a.variant,
-                                              **cfg["params"])
+                                              integrator=cfg.get("integrator"), **cfg["params"])
         print(f"  wrote {out} in {meta['seconds']:.0f} s ({meta['variant']}); mean variance {var.mean():.3g}")
     return 0
 
@@ -180,7 +180,7 @@ def _effect_refs(a) -> int:
             if a.list:
                 print(f"{n}: {spp} spp -- missing ({out})")
                 continue
-            print(f"{n}: path, {spp} spp -> {out}", file=sys.stderr)
+            print(f"{n}: {spec.effect_ref_estimator}, {spp} spp -> {out}", file=sys.stderr)
             bar = _Progress(f"effect reference {n}")
             m = effect_refs.make(n, params, spp, out, threads=a.threads, progress=bar)
             bar.close()
