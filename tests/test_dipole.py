@@ -235,7 +235,10 @@ def _with_sub(sub, **shape):
     ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "g": 1.0}, {}, "'g' must lie in"),
     ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "scale": -2.0}, {}, "'scale' must be > 0"),
     ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "int_ior": "unobtainium"}, {}, "unknown IOR name"),
-    ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0}, {"bsdf": {"type": "diffuse"}}, "no bsdf or a smooth 'dielectric'"),
+    ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0}, {"bsdf": {"type": "diffuse"}}, "no bsdf, a smooth 'dielectric'"),
+    ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "int_ior": 1.49},
+     {"bsdf": {"type": "plastic"}}, "'plastic' with a diffuse part"),
+    ({"type": "dipole", "material": "skin1"}, {}, "material presets are not supported"),
     ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "int_ior": 1.5},
      {"bsdf": {"type": "dielectric", "int_ior": 1.33}}, "differ from the dipole's"),
     ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0},
@@ -262,6 +265,10 @@ def test_loader_forms_and_xml(tmp_path):
     (tmp_path / "good.xml").write_text(good + "</scene>")
     sh = rm.load_file(tmp_path / "good.xml").desc.shapes[0]
     assert sh.subsurface.sigma_a == pytest.approx((0.1, 0.2, 0.3)) and sh.bsdf.int_ior == pytest.approx(1.4)
+    # Mitsuba 0.6's documented set-up: a plastic without its diffuse part as the boundary.
+    d = rm.load_dict(_with_sub({"type": "dipole", "sigmaA": 1.0, "sigmaS": 2.0, "intIOR": "water", "irrSamples": 64},
+                               bsdf={"type": "plastic", "int_ior": "water", "diffuse_reflectance": 0.0})).desc.shapes[0]
+    assert d.bsdf.type == "dielectric" and d.bsdf.int_ior == pytest.approx(1.333)
     (tmp_path / "s.xml").write_text(good + """  <shape type="sphere"><float name="radius" value="0.5"/>
     <subsurface type="dipole"><float name="sigma_a" value="1"/><float name="sigma_s" value="1"/><float name="bogus" value="1"/></subsurface></shape>
 </scene>""")
@@ -315,3 +322,28 @@ def test_subsurface_is_filed_as_subsurface_and_deterministic():
     # Only the subsurface class asked for: the specular part is not simulated.
     c = rm.render(scene, spp=8, seed=4, effects=["subsurface"])
     assert not c.effects["specular"].any() and c.image.mean() > 0.3
+
+
+def test_dipole_in_fog_through_volpath():
+    """A dipole sphere inside a fog box that also holds the camera (volpath's
+    loop, the shape's exterior medium): finite, non-negative; light is filed
+    under subsurface (B, the dipole) and volume (V: fog scattering, which
+    takes precedence); with a vanishing fog it is the fog-free image."""
+    def fog_scene(sigma_t):
+        d = sphere_scene([0.1, 0.2, 0.4], 10.0, res=8)
+        fog = {"type": "homogeneous", "sigma_t": sigma_t, "albedo": 0.8}
+        d["fog"] = fog
+        # The fog fills a cube of half-size 6 around sphere and camera
+        # (index-matched boundary); the environment lies outside it.
+        d["fogbox"] = {"type": "cube", "to_world": np.diag([6.0, 6.0, 6.0, 1.0]), "bsdf": {"type": "null"},
+                       "interior": {"type": "ref", "id": "fog"}}
+        d["sensor"]["medium"] = {"type": "ref", "id": "fog"}
+        d["ball"]["exterior"] = {"type": "ref", "id": "fog"}
+        return d
+    res = rm.render(rm.load_dict(fog_scene(0.1)), spp=64, seed=6)
+    _sane(res, "dipole in fog")
+    assert res.effects["subsurface"].mean() > 0.05 and res.effects["volume"].mean() > 0.005
+    thin = rm.render(rm.load_dict(fog_scene(1e-7)), spp=256, seed=7)
+    clear = rm.render(rm.load_dict(sphere_scene([0.1, 0.2, 0.4], 10.0, res=8)), spp=256, seed=8)
+    t = z_test(thin.image, thin.variance, clear.image, clear.variance, alpha=ALPHA)
+    assert t.passed, t.summary()

@@ -97,11 +97,16 @@ subsurface dipole (Mitsuba 0.6's plugin; nested in a shape, which it turns
                [0] in (-1, 1); scale [1] multiplies the coefficients;
                int_ior ['bk7'], ext_ior ['air'] (IORs as for dielectric).
                Mitsuba 0.6's camelCase names (sigmaA, sigmaS, sigmaT, intIOR,
-               extIOR) are accepted as aliases; irrSamples (its irradiance
-               cache) is not (this one samples exit points per path). The
-               shape may nest no bsdf (one is made) or a `dielectric` of
-               the same IORs, and no interior medium. Only the `path` and
-               `volpath` integrators render it; the others refuse the scene.
+               extIOR) are accepted as aliases, and irrSamples (its
+               irradiance cache's density) is accepted and ignored: exit
+               points are sampled per path here. Its material presets are
+               not supported. The shape may nest no bsdf (a smooth
+               dielectric of the dipole's IORs is made), a `dielectric` of
+               the same IORs, or, as Mitsuba 0.6's documentation sets it up,
+               a `plastic` of the same IORs with diffuse_reflectance 0 (only
+               its Fresnel reflection: the same boundary); no interior
+               medium. Only the `path` and `volpath` integrators render it;
+               the others refuse the scene.
 
 Decisions where Mitsuba leaves a choice (see also the functions' comments)
 -------------------------------------------------------------------------
@@ -1405,13 +1410,17 @@ class _Builder:
             if s.bsdf is None:
                 s.bsdf = BsdfDesc(type="dielectric", id=f"{sub.place}: dipole boundary",
                                   int_ior=d.int_ior, ext_ior=d.ext_ior)
-            elif s.bsdf.type != "dielectric":
-                raise p.error(f"a shape with a dipole subsurface takes no bsdf or a smooth 'dielectric' "
-                              f"(its boundary), got '{s.bsdf.type}'", bsdf.place)
+            elif s.bsdf.type not in ("dielectric", "plastic") or (
+                    s.bsdf.type == "plastic" and any(x != 0 for x in s.bsdf.diffuse_reflectance)):
+                raise p.error(f"a shape with a dipole subsurface takes no bsdf, a smooth 'dielectric' or a "
+                              f"'plastic' with diffuse_reflectance 0 (its boundary), got '{s.bsdf.type}'"
+                              + (" with a diffuse part" if s.bsdf.type == "plastic" else ""), bsdf.place)
             elif (abs(s.bsdf.int_ior - d.int_ior) > 1e-6 * d.int_ior
                   or abs(s.bsdf.ext_ior - d.ext_ior) > 1e-6 * d.ext_ior):
-                raise p.error(f"the dielectric's IORs ({s.bsdf.int_ior}, {s.bsdf.ext_ior}) differ from "
+                raise p.error(f"the {s.bsdf.type}'s IORs ({s.bsdf.int_ior}, {s.bsdf.ext_ior}) differ from "
                               f"the dipole's ({d.int_ior}, {d.ext_ior})", bsdf.place)
+            if s.bsdf.type == "plastic":  # the same boundary, as the renderer's dielectric
+                s.bsdf = BsdfDesc(type="dielectric", id=s.bsdf.id, int_ior=d.int_ior, ext_ior=d.ext_ior)
         p.done()
         return s
 
@@ -1422,6 +1431,10 @@ class _Builder:
 
     def _subsurface(self, node):
         p = _Params(node)
+        if p.has("material"):
+            raise p.error("material presets are not supported: give sigma_a + sigma_s (or sigma_t + albedo)",
+                          node.props["material"].place)
+        p.int("irrSamples", 16, lo=1)  # Mitsuba 0.6's irradiance cache density: nothing to set here
 
         def name_of(name, alias):
             """The parameter given under its name or Mitsuba 0.6's alias."""
