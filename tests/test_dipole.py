@@ -118,9 +118,13 @@ SIGMA_A = [0.05, 0.5, 2.0]
 SIGMA_S = [20.0, 20.0, 20.0]
 
 
-def plane_scene(integrator="path", medium_below=False, res=8):
+def plane_scene(integrator="path", medium_below=False, res=8, underlay=False):
     """A 400 x 400 dipole plane (z = 0, normal +z) under a constant
-    environment of radiance 1, seen straight down by an orthographic camera."""
+    environment of radiance 1, seen straight down by an orthographic camera.
+    `underlay`: a black diffuse plane just below it, facing down (into the
+    environment below), which every probe ray along the normal crosses:
+    probes must take exit points on the dipole's own shape only (an exit
+    lobe there sees the environment below: a bias that this test rejects)."""
     d = {"type": "scene", "integrator": {"type": integrator},
          "sensor": {"type": "orthographic",
                     "to_world": np.array([[0.5, 0, 0, 0], [0, 0.5, 0, 0], [0, 0, -1, 3], [0, 0, 0, 1]], float),
@@ -129,6 +133,10 @@ def plane_scene(integrator="path", medium_below=False, res=8):
                    "subsurface": {"type": "dipole", "sigma_a": _rgb(SIGMA_A), "sigma_s": _rgb(SIGMA_S),
                                   "int_ior": 1.5, "ext_ior": 1.0}},
          "env": {"type": "constant", "radiance": _rgb(1.0)}}
+    if underlay:
+        d["under"] = {"type": "rectangle", "to_world": np.diag([200.0, 200.0, 1.0, 1.0]) + np.array(
+            [[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, -0.05], [0, 0, 0, 0]]), "flip_normals": True,
+            "bsdf": {"type": "diffuse", "reflectance": 0.0}}
     if medium_below:  # a scene with media (volpath's loop), the medium out of every path's way
         d["fog"] = {"type": "cube", "to_world": np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -5], [0, 0, 0, 1]], float),
                     "bsdf": {"type": "null"}, "interior": {"type": "homogeneous", "sigma_t": 1.0, "albedo": 0.5}}
@@ -147,9 +155,10 @@ def plane_expectation():
     return fr0, (1 - fr0) * np.array(sub)
 
 
-@pytest.mark.parametrize("integrator,medium", [("path", False), ("volpath", True)])
-def test_flat_plane_gives_total_diffuse_reflectance(integrator, medium):
-    scene = rm.load_dict(plane_scene(integrator, medium, res=16))
+@pytest.mark.parametrize("integrator,medium,underlay", [("path", False, False), ("volpath", True, False),
+                                                        ("path", False, True)])
+def test_flat_plane_gives_total_diffuse_reflectance(integrator, medium, underlay):
+    scene = rm.load_dict(plane_scene(integrator, medium, res=16, underlay=underlay))
     assert scene.features["has_dipole"] and scene.features["has_media"] == medium
     res = rm.render(scene, spp=2048, seed=3)
     fr0, sub = plane_expectation()
