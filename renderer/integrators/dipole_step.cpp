@@ -1,5 +1,5 @@
 // Exit-point sampling for the dipole BSSRDF, after pbrt-v3's
-// SeparableBSSRDF::Sample_Sp / Pdf_Sp (PBR3 sec. 15.4.1), with J01's dipole
+// SeparableBSSRDF::Sample_Sp / Pdf_Sp (PBR3 sec. 15.4), with J01's dipole
 // profile sampled by exact inversion (Dipole::sample_r) instead of
 // pbrt's tabulated one:
 // 1. pick a colour channel (uniformly) and a probe axis of the entry
@@ -17,7 +17,7 @@
 //    projected on its plane, times |cos| between the point's normal and the
 //    axis (the area-to-projected-area Jacobian); divided by the number of
 //    hits on the chosen probe. The estimate Rd(|xi - xo|) / pdf is unbiased
-//    for the part of the surface within r_max of xo (PBR3 eq. 15.11 and the
+//    for the part of the surface within r_max of xo (PBR3 sec. 15.4 and the
 //    text around it).
 #include "integrators/dipole_step.h"
 

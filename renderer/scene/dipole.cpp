@@ -30,7 +30,7 @@ double pole_tail(double z, double sigma_tr, double r) {
     return (z / d) * std::exp(-sigma_tr * (d - z));
 }
 
-// The exit lobe cos(wo) Sw(wo) = Ft(eta, wo) cos(wo) / (c pi) (PBR3 eq. 11.8;
+// The exit lobe cos(wo) Sw(wo) = Ft(eta, wo) cos(wo) / (c pi) (PBR3 sec. 11.4.1;
 // J01 eq. 6's outgoing Fresnel factor), cosine-sampled.
 class DipoleExitLobe final : public Bsdf {
 public:

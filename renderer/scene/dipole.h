@@ -5,8 +5,8 @@
 // `dipole` subsurface plugin, nested in a shape; the loader documents the
 // parameters.
 //
-// The BSSRDF, in the separable, normalised form of pbrt-v3 (PBR3 sec. 11.4,
-// eqs. 11.6 and 11.8), with J01's dipole profile as its spatial term:
+// The BSSRDF, in the separable, normalised form of pbrt-v3 (PBR3 sec. 11.4.1,
+// SeparableBSSRDF and its Sw), with J01's dipole profile as its spatial term:
 //   S(xo, wo; xi, wi) = Ft(eta, wo) Rd(|xi - xo|) Sw(wi),
 //   Sw(wi) = Ft(eta, wi) / (c pi),  c = 1 - Fdr_ext(eta),
 // which is J01 eq. 6's (1/pi) Ft Rd Ft with the incident Fresnel term
@@ -14,7 +14,9 @@
 // all the light the profile says leaves (its total diffuse reflectance
 // R_d = integral of Rd over the plane) leaves. J01's own form loses another
 // factor (1 - Fdr_ext) ~ 0.91 at eta 1.5 that its R_d already accounts for
-// (the boundary condition A below is that internal reflection). Under
+// (the boundary condition A below is that internal reflection). pbrt-v3
+// takes c = 1 - 2 FM1(1/eta) from a fit of the Fresnel moment; here c is
+// integrated numerically (dipole.cpp). Under
 // uniform illumination L of a half space the reflected radiance is then
 // L (Fr(wo) + Ft(wo) R_d): exactly L for a white (non-absorbing) medium.
 // No eta^2 radiance factor: light enters and leaves the same medium.
@@ -43,7 +45,7 @@ public:
 
     // The radial profile sampler covers this fraction of each channel's
     // R_d; exit points farther than r_max(ch) are never proposed by that
-    // channel (pbrt-v3 truncates at the same 0.999, PBR3 sec. 15.4.1).
+    // channel (pbrt-v3 truncates at the same 0.999, PBR3 sec. 15.4).
     static constexpr double kCdfMax = 0.999;
 
     // J01 eq. 4: diffuse reflectance per unit area at distance r, RGB.
