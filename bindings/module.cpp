@@ -179,6 +179,8 @@ PYBIND11_MODULE(_core, m) {
              },
              py::arg("channel"), py::arg("r"), "density per unit area of a point at distance r")
         .def("r_max", &Dipole::r_max)
+        .def("exit_lobe", [](const Dipole& d) -> const Bsdf& { return d.exit_lobe(); },
+             py::return_value_policy::reference_internal, "cos(wo) Sw(wo), the lobe paths leave an exit point by")
         .def_property_readonly("eta", &Dipole::eta)
         .def_property_readonly("sw_norm", &Dipole::sw_norm)
         .def_property_readonly("A", [](const Dipole& d) { return d.A; })
