@@ -284,6 +284,13 @@ def test_loader_errors_name_the_element(sub, shape, match):
         rm.load_dict(_with_sub(sub, **shape)).core()
 
 
+def test_core_refuses_bad_values_without_aborting():
+    for kw in ({"sigma_a": -1.0, "sigma_s": 1.0}, {"sigma_a": 1.0, "sigma_s": float("nan")},
+               {"sigma_a": 1.0, "sigma_s": 1.0, "g": 1.0}, {"sigma_a": 1.0, "sigma_s": 1.0, "eta": 0.0}):
+        with pytest.raises(ValueError, match="subsurface 'dipole'"):
+            dipole(**kw)
+
+
 def test_loader_forms_and_xml(tmp_path):
     # sigma_t + albedo, scale, g, Mitsuba 0.6 aliases, a matching dielectric.
     d = rm.load_dict(_with_sub({"type": "dipole", "sigmaT": _rgb([1, 2, 4]), "albedo": 0.75, "scale": 2.0,
