@@ -138,6 +138,58 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("phase", &MediumDesc::phase)
         .def_readwrite("g", &MediumDesc::g);
 
+    py::class_<DipoleDesc>(m, "DipoleDesc")
+        .def(py::init<>())
+        .def_readwrite("id", &DipoleDesc::id)
+        .def_property("sigma_a", [](const DipoleDesc& d) { return color_tuple(d.sigma_a); },
+                      [](DipoleDesc& d, py::object v) { d.sigma_a = to_color(v); })
+        .def_property("sigma_s", [](const DipoleDesc& d) { return color_tuple(d.sigma_s); },
+                      [](DipoleDesc& d, py::object v) { d.sigma_s = to_color(v); })
+        .def_readwrite("g", &DipoleDesc::g)
+        .def_readwrite("int_ior", &DipoleDesc::int_ior)
+        .def_readwrite("ext_ior", &DipoleDesc::ext_ior);
+
+    // The dipole profile on its own (tests/test_dipole.py): Rd(r), its
+    // total, and the radial sampler with its density.
+    py::class_<Dipole>(m, "Dipole")
+        .def(py::init<const DipoleDesc&>())
+        .def("rd",
+             [](const Dipole& d, py::array_t<double, py::array::c_style | py::array::forcecast> r) {
+                 std::vector<float> out(3 * size_t(r.size()));
+                 for (py::ssize_t i = 0; i < r.size(); ++i)
+                     for (int c = 0; c < 3; ++c) out[3 * i + c] = float(d.rd(c, r.data()[i]));
+                 return to_numpy(std::move(out), {py::ssize_t(r.size()), 3});
+             },
+             py::arg("r"), "J01 eq. 4, per unit area, (N, 3)")
+        .def_property_readonly("total_rd", [](const Dipole& d) { return color_tuple(d.total_rd()); })
+        .def("sample_r",
+             [](const Dipole& d, int ch, py::array_t<double, py::array::c_style | py::array::forcecast> u) {
+                 if (ch < 0 || ch > 2) throw py::value_error("channel must be 0, 1 or 2");
+                 py::array_t<double> out(u.size());
+                 for (py::ssize_t i = 0; i < u.size(); ++i) out.mutable_data()[i] = d.sample_r(ch, u.data()[i]);
+                 return out;
+             },
+             py::arg("channel"), py::arg("u"))
+        .def("pdf_a",
+             [](const Dipole& d, int ch, py::array_t<double, py::array::c_style | py::array::forcecast> r) {
+                 if (ch < 0 || ch > 2) throw py::value_error("channel must be 0, 1 or 2");
+                 py::array_t<double> out(r.size());
+                 for (py::ssize_t i = 0; i < r.size(); ++i) out.mutable_data()[i] = d.pdf_a(ch, r.data()[i]);
+                 return out;
+             },
+             py::arg("channel"), py::arg("r"), "density per unit area of a point at distance r")
+        .def("r_max", &Dipole::r_max)
+        .def("exit_lobe", [](const Dipole& d) -> const Bsdf& { return d.exit_lobe(); },
+             py::return_value_policy::reference_internal, "cos(wo) Sw(wo), the lobe paths leave an exit point by")
+        .def_property_readonly("eta", &Dipole::eta)
+        .def_property_readonly("sw_norm", &Dipole::sw_norm)
+        .def_property_readonly("A", [](const Dipole& d) { return d.A; })
+        .def_property_readonly("fdr_int", [](const Dipole& d) { return d.fdr_int; })
+        .def_property_readonly("alpha_p", [](const Dipole& d) { return color_tuple(d.alpha_p); })
+        .def_property_readonly("sigma_tr", [](const Dipole& d) { return color_tuple(d.sigma_tr); })
+        .def_property_readonly("z_r", [](const Dipole& d) { return color_tuple(d.z_r); })
+        .def_property_readonly("z_v", [](const Dipole& d) { return color_tuple(d.z_v); });
+
     py::class_<IntegratorDesc>(m, "IntegratorDesc")
         .def(py::init<>())
         .def_readwrite("type", &IntegratorDesc::type)
@@ -185,6 +237,7 @@ PYBIND11_MODULE(_core, m) {
              py::arg("id"), py::arg("to_world"), py::arg("bsdf"), py::arg("flip_normals") = false)
         .def("add_medium", &Scene::add_medium)
         .def("set_shape_media", &Scene::set_shape_media, py::arg("shape"), py::arg("interior"), py::arg("exterior"))
+        .def("add_dipole", &Scene::add_dipole, py::arg("shape"), py::arg("desc"))
         .def_property_readonly("medium_count", [](const Scene& s) { return s.media.size(); })
         .def("add_area_emitter", &Scene::add_area_emitter)
         .def("add_emitter", &Scene::add_emitter)
@@ -291,6 +344,7 @@ PYBIND11_MODULE(_core, m) {
             d["has_delta_emitters"] = s.features.has_delta_emitters;
             d["has_environment"] = s.features.has_environment;
             d["has_media"] = s.features.has_media;
+            d["has_dipole"] = s.features.has_dipole;
             return d;
         })
         // Photons of `paths` light paths (photon_trace.h), for pictures of

@@ -97,6 +97,16 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
                 scene.add_area_emitter(idx, _emitter(s.emitter))
             if s.sensor is not None:
                 sensor_shape = idx
+            if s.subsurface is not None:
+                c = _core.DipoleDesc()
+                d = s.subsurface
+                c.id = d.id
+                c.sigma_a = tuple(float(x) for x in d.sigma_a)
+                c.sigma_s = tuple(float(x) for x in d.sigma_s)
+                c.g = float(d.g)
+                c.int_ior = float(d.int_ior)
+                c.ext_ior = float(d.ext_ior)
+                scene.add_dipole(idx, c)
             if s.interior is not None or s.exterior is not None:
                 scene.set_shape_media(idx, _medium_index(scene, media, s.interior, desc.source),
                                       _medium_index(scene, media, s.exterior, desc.source))

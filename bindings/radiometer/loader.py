@@ -88,6 +88,25 @@ volume     gridvolume: filename (Mitsuba's .vol, version 3, float32, 1 or 3
                [false], filter_type ['trilinear'], wrap_mode ['clamp'], raw,
                accel (accepted); constvolume: value [1].
 phase      isotropic; hg: g [0.8] in (-1, 1).
+subsurface dipole (Mitsuba 0.6's plugin; nested in a shape, which it turns
+               into a smooth dielectric boundary over a dipole BSSRDF, Jensen
+               et al. 2001; renderer/scene/dipole.h): sigma_a + sigma_s, or
+               sigma_t + albedo (albedo = sigma_s / sigma_t), each an rgb or a
+               float, per unit length; sigma_s is the scattering coefficient
+               itself, NOT the reduced one: sigma_s' = sigma_s (1 - g) with g
+               [0] in (-1, 1); scale [1] multiplies the coefficients;
+               int_ior ['bk7'], ext_ior ['air'] (IORs as for dielectric).
+               Mitsuba 0.6's camelCase names (sigmaA, sigmaS, sigmaT, intIOR,
+               extIOR) are accepted as aliases, and irrSamples (its
+               irradiance cache's density) is accepted and ignored: exit
+               points are sampled per path here. Its material presets are
+               not supported. The shape may nest no bsdf (a smooth
+               dielectric of the dipole's IORs is made), a `dielectric` of
+               the same IORs, or, as Mitsuba 0.6's documentation sets it up,
+               a `plastic` of the same IORs with diffuse_reflectance 0 (only
+               its Fresnel reflection: the same boundary); no interior
+               medium. Only the `path` and `volpath` integrators render it;
+               the others refuse the scene.
 
 Decisions where Mitsuba leaves a choice (see also the functions' comments)
 -------------------------------------------------------------------------
@@ -117,6 +136,7 @@ import numpy as np
 
 from .scene_desc import (
     BsdfDesc,
+    DipoleDesc,
     EmitterDesc,
     GridDesc,
     IntegratorDesc,
@@ -178,6 +198,7 @@ PLUGINS = {
     "medium": ("homogeneous", "heterogeneous"),
     "phase": ("isotropic", "hg"),
     "volume": ("gridvolume", "constvolume"),
+    "subsurface": ("dipole",),
 }
 _CATEGORY_OF = {t: c for c, types in PLUGINS.items() for t in types}
 
@@ -1378,8 +1399,82 @@ class _Builder:
                               f"'{sensor.type}'", sensor.place)
             s.sensor = self.sensor(sensor, on_shape=True)
         s.interior, s.exterior = self._media_of(p)
+        sub = p.child("subsurface")
+        if sub is not None:
+            s.subsurface = self.subsurface(sub)
+            d = s.subsurface
+            if s.interior is not None:
+                raise p.error("a shape with a dipole subsurface cannot also have an interior medium "
+                              "(the dipole models the inside; use a dielectric + interior medium for "
+                              "random-walk subsurface instead)", sub.place)
+            if s.bsdf is None:
+                s.bsdf = BsdfDesc(type="dielectric", id=f"{sub.place}: dipole boundary",
+                                  int_ior=d.int_ior, ext_ior=d.ext_ior)
+            elif s.bsdf.type not in ("dielectric", "plastic") or (
+                    s.bsdf.type == "plastic" and any(x != 0 for x in s.bsdf.diffuse_reflectance)):
+                raise p.error(f"a shape with a dipole subsurface takes no bsdf, a smooth 'dielectric' or a "
+                              f"'plastic' with diffuse_reflectance 0 (its boundary), got '{s.bsdf.type}'"
+                              + (" with a diffuse part" if s.bsdf.type == "plastic" else ""), bsdf.place)
+            elif (abs(s.bsdf.int_ior - d.int_ior) > 1e-6 * d.int_ior
+                  or abs(s.bsdf.ext_ior - d.ext_ior) > 1e-6 * d.ext_ior):
+                raise p.error(f"the {s.bsdf.type}'s IORs ({s.bsdf.int_ior}, {s.bsdf.ext_ior}) differ from "
+                              f"the dipole's ({d.int_ior}, {d.ext_ior})", bsdf.place)
+            if s.bsdf.type == "plastic":  # the same boundary, as the renderer's dielectric
+                s.bsdf = BsdfDesc(type="dielectric", id=s.bsdf.id, int_ior=d.int_ior, ext_ior=d.ext_ior)
         p.done()
         return s
+
+    # -- subsurface ----------------------------------------------------------
+
+    def subsurface(self, node):
+        return self.cached(node, self._subsurface)
+
+    def _subsurface(self, node):
+        p = _Params(node)
+        if p.has("material"):
+            raise p.error("material presets are not supported: give sigma_a + sigma_s (or sigma_t + albedo)",
+                          node.props["material"].place)
+        p.int("irrSamples", 16, lo=1)  # Mitsuba 0.6's irradiance cache density: nothing to set here
+
+        def name_of(name, alias):
+            """The parameter given under its name or Mitsuba 0.6's alias."""
+            if p.has(name) and p.has(alias):
+                raise p.error(f"'{name}' given twice (also as '{alias}')", node.props[alias].place)
+            return alias if p.has(alias) else name
+
+        a_, s_, t_ = name_of("sigma_a", "sigmaA"), name_of("sigma_s", "sigmaS"), name_of("sigma_t", "sigmaT")
+        i_, e_ = name_of("int_ior", "intIOR"), name_of("ext_ior", "extIOR")
+        given_ts = p.has(t_) or p.has("albedo")
+        given_as = p.has(a_) or p.has(s_)
+        if given_ts and given_as:
+            raise p.error("give either sigma_a + sigma_s or sigma_t + albedo, not both")
+        if not given_ts and not given_as:
+            raise p.error("needs sigma_a + sigma_s (or sigma_t + albedo)")
+        scale = p.float("scale", 1.0, check="positive")
+        if given_as:
+            sa = np.array(p.rgb(a_, 0.0))
+            ss = np.array(p.rgb(s_, 0.0))
+        else:
+            st = np.array(p.rgb(t_, 1.0))
+            albedo = np.array(p.rgb("albedo", 0.75))
+            if np.any(albedo > 1.0):
+                raise p.error(f"albedo must lie in [0, 1], got {tuple(albedo.tolist())}",
+                              node.props["albedo"].place)
+            ss = st * albedo
+            sa = st - ss
+        g = p.float("g", 0.0)
+        if not -1.0 < g < 1.0:
+            raise p.error(f"parameter 'g' must lie in (-1, 1), got {g}", node.props["g"].place)
+        d = DipoleDesc(id=node.id or node.place, g=g,
+                       sigma_a=tuple(float(x) for x in sa * scale),
+                       sigma_s=tuple(float(x) for x in ss * scale),
+                       int_ior=p.ior(i_, "bk7"), ext_ior=p.ior(e_, "air"))
+        if not all(math.isfinite(x) for x in d.sigma_a + d.sigma_s):
+            raise p.error(f"the coefficients times scale overflow: {d.sigma_a}, {d.sigma_s}")
+        if not any(a + b > 0 for a, b in zip(d.sigma_a, d.sigma_s)):
+            raise p.error("sigma_a + sigma_s is 0 in every channel: nothing to scatter")
+        p.done()
+        return d
 
     def _sphere(self, p, s, m):
         """Mitsuba: to_world * translate(center) * scale(radius), split by polar
@@ -1597,6 +1692,10 @@ def _assemble(nodes, ids, source, base_dir):
             b.medium(node)  # a declaration for refs; validate it even if unused
         elif cat == "integrator":
             integrators.append((b.integrator(node), node.place))
+        elif cat == "subsurface":
+            if not node.referenced:
+                raise SceneError(f"{node.place}: {node.label()}: must be nested in a shape")
+            b.subsurface(node)
         else:
             raise SceneError(f"{node.place}: {node.label()}: must be nested in a sensor, "
                              f"not at the top level")

@@ -82,6 +82,18 @@ class MediumDesc:
 
 
 @dataclass
+class DipoleDesc:
+    """A dipole BSSRDF (Jensen et al. 2001) on a shape: Mitsuba 0.6's
+    `dipole` subsurface plugin, resolved (renderer/scene/dipole.h)."""
+    id: str = ""  # the place it came from, for error messages
+    sigma_a: tuple = field(default_factory=lambda: _rgb(0.0))  # per unit length, scale applied
+    sigma_s: tuple = field(default_factory=lambda: _rgb(1.0))  # NOT reduced; scale applied
+    g: float = 0.0  # sigma_s' = sigma_s (1 - g)
+    int_ior: float = 1.5046
+    ext_ior: float = 1.000277
+
+
+@dataclass
 class ShapeDesc:
     type: str = "mesh"  # mesh sphere disk (rectangle, cube, obj, ply become meshes)
     id: str = ""
@@ -98,6 +110,7 @@ class ShapeDesc:
     sensor: Optional["SensorDesc"] = None  # an irradiancemeter attached to this shape
     interior: Optional[MediumDesc] = None  # medium inside (against the normal)
     exterior: Optional[MediumDesc] = None  # medium outside (the normal's side)
+    subsurface: Optional[DipoleDesc] = None  # a dipole BSSRDF; bsdf is then its dielectric boundary
 
 
 @dataclass

@@ -135,6 +135,10 @@ public:
     // The render driver refuses a scene with media for one that does not
     // (rather than render it as if the media were vacuum).
     virtual bool supports_media() const { return false; }
+    // Whether this estimator renders the dipole BSSRDF (scene/dipole.h).
+    // Only the camera-path loops (path, volpath) sample its exit points;
+    // the render driver refuses a dipole scene for any other, by name.
+    virtual bool supports_dipole() const { return false; }
     // The estimator that renders `scene` (called once per render, before any
     // sample): `path` hands a scene with media to its media-aware loop
     // (volpath.cpp), so that its own surface loop has no media code at all.

@@ -12,7 +12,11 @@
 // rendered by the media-aware loop of volpath.cpp (for_scene hands it over,
 // once per render); a scene without media runs the surface loop below,
 // which has no media code at all.
+// A shape with a dipole BSSRDF (scene/dipole.h) is handled by
+// dipole_step (specular reflection or a sampled exit point, the path going
+// on from there with the exit lobe as its BSDF): step 4a.
 #include "integrators/common.h"
+#include "integrators/dipole_step.h"
 #include "integrators/volpath.h"
 
 namespace rm {
@@ -23,6 +27,7 @@ public:
         : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), media_(make_volpath_integrator(d)) {}
 
     bool supports_media() const override { return true; }
+    bool supports_dipole() const override { return true; }
     const Integrator& for_scene(const Scene& scene) const override {
         if (!scene.features.has_media) return *this;
         media_->mask = mask;
@@ -71,32 +76,53 @@ public:
             // 3. Stop at max_depth (Mitsuba's meaning: depth + 1 segments so far),
             //    or when no requested effect class is reachable any more.
             if (max_depth_ >= 0 && depth + 1 >= max_depth_) break;
-            if (!pc.can_reach(mask)) break;
-            const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
+            if (!pc.can_reach(mask, scene.features.has_dipole)) break;
+            const Bsdf* bsdf = scene.bsdfs[shape.bsdf].get();
             Vec3 wi = it.to_local(it.wi);
+            BsdfSample bs;
+            bool sampled = false;
 
-            // 4. Next event estimation (smooth lobes only).
-            if (bsdf.has_smooth() && !scene.emitters.empty()) {
-                PathClass pn = pc;
-                pn.push(false);
-                int ncls = pn.classify();
-                if (mask[ncls]) {
-                    Color ld = estimate_direct(scene, it, bsdf, wi, sampler, stats);
-                    out.add(ncls, beta * ld);
+            // 4a. A dipole BSSRDF (dipole_step.h): specular reflection, or the
+            //     subsurface exit point xi, where the path goes on (a B vertex)
+            //     with the exit lobe Sw as its BSDF.
+            if (shape.dipole >= 0) {
+                const Dipole& dp = *scene.dipoles[shape.dipole];
+                DipoleStep st = dipole_step(scene, dp, it, sampler, stats);
+                if (st.kind == DipoleStep::kFailed) break;
+                if (st.kind == DipoleStep::kReflected) {
+                    bs = st.reflection;
+                    sampled = true;
                 } else {
-                    // Keep the random-number stream aligned whatever the mask is.
-                    sampler.next_1d(); sampler.next_2d(); sampler.next_1d();
+                    beta *= st.weight;
+                    pc.subsurface = true;
+                    bsdf = &dp.exit_lobe();
+                    wi = Vec3(0.f, 0.f, 1.f);
                 }
             }
 
-            // 5. Sample the BSDF for the next direction.
-            BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+            if (!sampled) {
+                // 4. Next event estimation (smooth lobes only).
+                if (bsdf->has_smooth() && !scene.emitters.empty()) {
+                    PathClass pn = pc;
+                    pn.push(false);
+                    int ncls = pn.classify();
+                    if (mask[ncls]) {
+                        Color ld = estimate_direct(scene, it, *bsdf, wi, sampler, stats);
+                        out.add(ncls, beta * ld);
+                    } else {
+                        // Keep the random-number stream aligned whatever the mask is.
+                        sampler.next_1d(); sampler.next_2d(); sampler.next_1d();
+                    }
+                }
+                // 5. Sample the BSDF for the next direction.
+                bs = bsdf->sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+            }
             if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
             beta *= bs.weight;
             eta_scale *= sqr(bs.eta);
             // An index-matched boundary (null) passes light unchanged: it is no
             // vertex of the path's class, though it counts towards max_depth as in Mitsuba's `path`.
-            if (bsdf.flags() != kNull) pc.push(bs.is_delta);
+            if (bsdf->flags() != kNull) pc.push(bs.is_delta);
             prev_pdf_w = bs.pdf_w;
             prev_delta = bs.is_delta;
             ray = it.spawn(it.to_world(bs.wo));

@@ -122,6 +122,14 @@ RenderOutput render(const Scene& scene, const Integrator& requested, const Rende
         throw std::invalid_argument("integrator '" + integrator.type +
                                     "' does not support participating media yet, and this scene has media; "
                                     "use integrator 'volpath' (or 'path', the same estimator)");
+    if (scene.features.has_dipole && !integrator.supports_dipole()) {
+        std::string shape;
+        for (const auto& s : scene.shapes)
+            if (s->dipole >= 0) { shape = s->id; break; }
+        throw std::invalid_argument("integrator '" + integrator.type + "' cannot render the dipole BSSRDF (subsurface "
+                                    "'dipole' on shape '" + shape + "'): only the camera-path estimators sample its "
+                                    "exit points; use integrator 'path' (or 'volpath')");
+    }
     if (integrator.owns_driver()) return integrator.drive(scene, opts, poll);
     if (integrator.is_light_tracer()) return render_light_paths(scene, integrator, opts, poll);
     const Sensor& sensor = *scene.sensor;

@@ -37,6 +37,7 @@
 //    the exterior when d . n > 0, else the interior); the camera starts in
 //    the sensor's medium.
 #include "integrators/common.h"
+#include "integrators/dipole_step.h"
 #include "integrators/media_common.h"
 #include "integrators/volpath.h"
 
@@ -191,25 +192,48 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         if (prm.max_depth >= 0 && depth + 1 >= prm.max_depth) break;
         if (!pc.can_reach(mask, true)) break;
         Vec3 wi = it.to_local(it.wi);
+        const Bsdf* bsdf_at = &bsdf;
+        BsdfSample bs;
+        bool sampled = false;
 
-        // 8. Next event estimation at the surface, through media.
-        if (bsdf.has_smooth() && !scene.emitters.empty()) {
-            PathClass pn = pc;
-            pn.push(false);
-            int ncls = pn.classify();
-            if (mask[ncls]) {
-                Color ld = direct_through_media(
-                    scene, it, medium, sampler, stats,
-                    [&](const Vec3& wo) { return bsdf.eval(ctx, wi, it.to_local(wo)); },
-                    [&](const Vec3& wo) { return bsdf.pdf_w(ctx, wi, it.to_local(wo)); });
-                out.add(ncls, beta * ld);
+        // 7a. A dipole BSSRDF (dipole_step.h), as in path.cpp: specular
+        //     reflection, or the exit point xi (a B vertex) with the exit
+        //     lobe as its BSDF. The path never enters the object, so the
+        //     current medium (outside it) stays.
+        if (shape.dipole >= 0) {
+            const Dipole& dp = *scene.dipoles[shape.dipole];
+            DipoleStep st = dipole_step(scene, dp, it, sampler, stats);
+            if (st.kind == DipoleStep::kFailed) break;
+            if (st.kind == DipoleStep::kReflected) {
+                bs = st.reflection;
+                sampled = true;
             } else {
-                sampler.next_1d(); sampler.next_2d(); sampler.next_1d();
+                beta *= st.weight;
+                pc.subsurface = true;
+                bsdf_at = &dp.exit_lobe();
+                wi = Vec3(0.f, 0.f, 1.f);
             }
         }
 
-        // 9. BSDF sampling; the medium changes when the sample crosses a boundary.
-        BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+        if (!sampled) {
+            // 8. Next event estimation at the surface, through media.
+            if (bsdf_at->has_smooth() && !scene.emitters.empty()) {
+                PathClass pn = pc;
+                pn.push(false);
+                int ncls = pn.classify();
+                if (mask[ncls]) {
+                    Color ld = direct_through_media(
+                        scene, it, medium, sampler, stats,
+                        [&](const Vec3& wo) { return bsdf_at->eval(ctx, wi, it.to_local(wo)); },
+                        [&](const Vec3& wo) { return bsdf_at->pdf_w(ctx, wi, it.to_local(wo)); });
+                    out.add(ncls, beta * ld);
+                } else {
+                    sampler.next_1d(); sampler.next_2d(); sampler.next_1d();
+                }
+            }
+            // 9. BSDF sampling; the medium changes when the sample crosses a boundary.
+            bs = bsdf_at->sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+        }
         if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
         beta *= bs.weight;
         eta_scale *= sqr(bs.eta);
@@ -233,6 +257,7 @@ public:
         type = d.type;
     }
     bool supports_media() const override { return true; }
+    bool supports_dipole() const override { return true; }
     void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
                 ThreadStats& stats) const override {
         volpath_sample(scene, sampler, ray, out, stats, prm_, mask);

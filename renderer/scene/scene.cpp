@@ -146,6 +146,17 @@ void Scene::set_shape_media(int shape, int interior, int exterior) {
     shapes[shape]->medium_exterior = exterior;
 }
 
+int Scene::add_dipole(int shape, const DipoleDesc& desc) {
+    if (committed_) throw std::logic_error("scene is already committed");
+    if (shape < 0 || shape >= int(shapes.size())) throw std::invalid_argument("add_dipole: shape index out of range");
+    if (shapes[shape]->dipole >= 0)
+        throw std::invalid_argument("shape '" + shapes[shape]->id + "' already has a subsurface model");
+    dipoles.push_back(std::make_unique<Dipole>(desc));
+    shapes[shape]->dipole = int(dipoles.size()) - 1;
+    features.has_dipole = true;
+    return shapes[shape]->dipole;
+}
+
 void Scene::commit() {
     if (!sensor) throw std::invalid_argument("scene has no sensor");
     if (sensor_desc.medium < -1 || sensor_desc.medium >= int(media.size()))
@@ -157,6 +168,7 @@ void Scene::commit() {
         if (f & (kDeltaReflection | kDeltaTransmission)) features.has_delta_bsdf = true;
         if (f & kSmooth) features.has_smooth_bsdf = true;
         if (s->medium_interior >= 0 || s->medium_exterior >= 0) features.has_media = true;
+        if (s->dipole >= 0) features.has_smooth_bsdf = true;  // the exit lobe (dipole.h)
     }
     if (sensor_desc.medium >= 0) features.has_media = true;
     committed_ = true;

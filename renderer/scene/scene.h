@@ -10,6 +10,7 @@
 
 #include "scene/bsdf.h"
 #include "scene/desc.h"
+#include "scene/dipole.h"
 #include "scene/emitter.h"
 #include "scene/medium.h"
 #include "scene/records.h"
@@ -26,6 +27,7 @@ struct SceneFeatures {
     bool has_delta_emitters = false;
     bool has_environment = false;
     bool has_media = false;          // some shape or the sensor references a medium
+    bool has_dipole = false;         // some shape has a dipole BSSRDF (only path/volpath render it)
 };
 
 class Scene {
@@ -50,6 +52,11 @@ public:
     // SensorDesc::medium.
     int add_medium(const MediumDesc& desc);
     void set_shape_media(int shape, int interior, int exterior);
+    // A dipole BSSRDF (Mitsuba 0.6's `dipole` subsurface) on a shape: its
+    // boundary is a smooth dielectric of the dipole's IORs whose
+    // transmitted light comes back out through the dipole profile.
+    // Returns its index in `dipoles`.
+    int add_dipole(int shape, const DipoleDesc& desc);
     void commit();  // builds the BVH; the scene is read-only afterwards
 
     // Closest hit in (ray.tmin, ray.tmax); fills `it` (wi = -ray.d).
@@ -81,6 +88,7 @@ public:
     std::vector<std::unique_ptr<Emitter>> emitters;
     std::vector<const Emitter*> environment;  // emitters hit by escaping rays
     std::vector<std::unique_ptr<Medium>> media;
+    std::vector<std::unique_ptr<Dipole>> dipoles;
     std::unique_ptr<Sensor> sensor;
     SensorDesc sensor_desc;
     SceneFeatures features;
