@@ -273,15 +273,10 @@ STRESS = ROOT / "stress"
 @pytest.mark.parametrize("path", sorted(p for p in STRESS.glob("*.xml") if not p.stem.endswith("_ref")),
                          ids=lambda p: p.stem)
 def test_stress_scenes_finite_nonnegative(path):
-    """No NaN, Inf or negative value anywhere, emitters at infinity included;
-    scenes with media (not supported by bdpt yet) are refused with a message
-    saying so."""
+    """No NaN, Inf or negative value anywhere, emitters at infinity and the
+    medium stress scenes included (test_stress.py also checks that they are lit)."""
     scene = rm.load_file(path)
-    try:
-        res = rm.render(scene, integrator="bdpt", spp=16, seed=0)
-    except ValueError as e:
-        assert path.stem.startswith("media_") and "does not support participating media" in str(e), str(e)
-        return
+    res = rm.render(scene, integrator="bdpt", spp=16, seed=0)
     assert_clean(res, path.stem)
 
 

@@ -74,7 +74,9 @@
 // computed from the same densities (Veach 1997, sec. 9.2.1 and eq. 10.9),
 // so the estimator stays unbiased; only their variance is less than
 // optimal where the transmittance varies strongly along a path (thick media).
+#include <algorithm>
 #include <climits>
+#include <cmath>
 #include <stdexcept>
 
 #include "film/film.h"
@@ -301,25 +303,30 @@ private:
             double a = double(emitter_pick_prob(scene)) * em->pdf_emission_a(x[k].it.p);
             if (a > 0.0) p_le = a;
         }
-        // Strategy with tt camera vertices x_0 .. x_{tt-1} and the rest from the light.
-        auto density = [&](int tt) {
-            double p = 1.0;
-            for (int i = 1; i < tt; ++i) p *= pc[i];
-            for (int i = tt; i <= k; ++i) p *= (i == k && tt < k) ? p_le : pl[i];
+        // Strategy with tt camera vertices x_0 .. x_{tt-1} and the rest from
+        // the light: the log of its density (a product of up to hundreds of
+        // vertex densities in media overflows a double, raised to beta).
+        auto log_density = [&](int tt) {
+            double p = 0.0;
+            for (int i = 1; i < tt; ++i) p += std::log(pc[i]);
+            for (int i = tt; i <= k; ++i) p += std::log((i == k && tt < k) ? p_le : pl[i]);
             return p;
         };
         auto valid = [&](int tt) {
             if (tt == k + 1) return !em->is_delta();  // s = 0: the camera path hits the emitter
             return !x[tt - 1].delta && !x[tt].delta;
         };
-        double sum = 0.0, mine = 0.0;
-        for (int tt = 1; tt <= k + 1; ++tt) {
-            if (!valid(tt)) continue;
-            double h = mis_ == Mis::Uniform ? 1.0 : std::pow(density(tt), mis_ == Mis::Balance ? 1.0 : double(beta_));
-            sum += h;
-            if (tt == t) mine = h;
-        }
-        return sum > 0.0 ? float(mine / sum) : 0.f;
+        // w = h_t / sum h, h = p^beta, as exp(log h - max log h).
+        const double b = mis_ == Mis::Uniform ? 0.0 : mis_ == Mis::Balance ? 1.0 : double(beta_);
+        std::vector<double> lh(k + 2, -INFINITY);
+        double top = -INFINITY;
+        for (int tt = 1; tt <= k + 1; ++tt)
+            if (valid(tt)) top = std::max(top, lh[tt] = b * log_density(tt));
+        if (!std::isfinite(top) || !valid(t)) return 0.f;
+        double sum = 0.0;
+        for (int tt = 1; tt <= k + 1; ++tt)
+            if (valid(tt)) sum += std::exp(lh[tt] - top);
+        return float(std::exp(lh[t] - top) / sum);
     }
 
     float heuristic(float r) const {
