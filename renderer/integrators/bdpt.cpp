@@ -64,16 +64,22 @@
 // estimate of the whole path's contribution: the connection samples nothing
 // and so needs no spectral weight of its own.
 //
-// MIS densities with medium vertices: pbrt-v3's choice (sec. 16.3.4: its
-// Vertex::ConvertDensity and Vertex::Pdf leave out transmittance and the
-// free-flight densities): the per-vertex densities of the weights are the
-// geometric ones only (solid angle to area, without a cosine at a medium
-// vertex: subpath.cpp's to_area), with no sigma_t T or T factor and no
-// hero channel. The weights stay a partition of unity over the strategies
-// that can make a path, since all strategies' weights of that path are
-// computed from the same densities (Veach 1997, sec. 9.2.1 and eq. 10.9),
-// so the estimator stays unbiased; only their variance is less than
-// optimal where the transmittance varies strongly along a path (thick media).
+// MIS densities with medium vertices: pbrt-v3's choice (sec. 16.3.1, its
+// Vertex::Pdf and ConvertDensity leave out transmittance and the free-flight
+// densities): the per-vertex densities of the weights are the geometric
+// ones only (solid angle to area, without a cosine at a medium vertex:
+// subpath.cpp's to_area), with no sigma_t T or T factor and no hero
+// channel. The weights stay a partition of unity over the strategies that
+// can make a path, since all strategies' weights of that path are computed
+// from the same densities (Veach 1997, sec. 9.2.1 and eq. 10.9), so the
+// estimator stays unbiased. What is left out is smaller than it looks: an
+// inner medium vertex x_i is sampled in every strategy exactly once, from
+// one side or the other, and both sides' true densities carry the same
+// sigma_t(x_i) (and scattering probability), which cancel in the ratios of
+// eq. 10.9; only the transmittances of the segment the vertex was reached
+// along differ (T(x_{i-1}, x_i) from the camera side, T(x_i, x_{i+1}) from
+// the light's), so the weights are less than optimal only where those
+// differ strongly (thick, chromatic or strongly varying media).
 #include <algorithm>
 #include <climits>
 #include <cmath>
