@@ -616,18 +616,20 @@ PYBIND11_MODULE(_core, m) {
         "bdpt_mis_check",
         [](const Scene& scene, const IntegratorDesc& idesc, uint64_t seed, int n) {
             if (!scene.committed()) throw py::value_error("bdpt_mis_check: scene is not committed");
-            std::vector<float> fast, brute;
+            std::vector<float> fast, brute, sums;
             std::vector<int> strategy;
             {
                 py::gil_scoped_release nogil;
-                bdpt_mis_check(scene, idesc, seed, n, fast, brute, strategy);
+                bdpt_mis_check(scene, idesc, seed, n, fast, brute, sums, strategy);
             }
             return py::make_tuple(py::array_t<float>(fast.size(), fast.data()),
                                   py::array_t<float>(brute.size(), brute.data()),
+                                  py::array_t<float>(sums.size(), sums.data()),
                                   py::array_t<int>(strategy.size(), strategy.data()));
         },
         py::arg("scene"), py::arg("integrator"), py::arg("seed"), py::arg("n"),
-        "test hook: bdpt's MIS weights (linear-time) and brute-force ones for the strategies of n sample pairs");
+        "test hook: bdpt's MIS weights (linear-time), brute-force ones and the linear-time weights' sum over "
+        "each path's strategies, for the strategies of n sample pairs");
     m.def(
         "render",
         [](const Scene& scene, const IntegratorDesc& idesc, std::vector<bool> effects, int spp, double seconds,

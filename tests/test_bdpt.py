@@ -226,7 +226,9 @@ def test_mis_weights_match_brute_force(which, mis):
     force weights of one path sum to 1 by construction, so this checks that
     bdpt's weights of one path sum to 1, delta vertices (mirror, plastic's
     coat, an orthographic camera, point lights) and emitters at infinity
-    (constant, directional) included."""
+    (constant, directional) included. Directly too: bdpt's weights of every
+    strategy of each sampled path (the path re-split at every vertex, each
+    side carrying its walk's densities) sum to 1."""
     if which == "cornell":
         scene = rm.load_file(CORNELL, res=8, rfilter="box")
     elif which == "mirror_ball_point":
@@ -243,10 +245,11 @@ def test_mis_weights_match_brute_force(which, mis):
                             extra=GLOSSY)
     else:
         scene = rm.load_file(mirror.XML, res=8)
-    fast, brute, strategy = _mis_check(scene, **mis)
+    fast, brute, sums, strategy = _mis_check(scene, **mis)
     assert len(fast) > 1000 and len(np.unique(strategy)) > 10
     assert np.all(np.isfinite(fast)) and np.all((fast >= 0) & (fast <= 1 + 1e-6))
     np.testing.assert_allclose(fast, brute, rtol=2e-4, atol=1e-6, err_msg=which)
+    np.testing.assert_allclose(sums, 1.0, rtol=0, atol=1e-4, err_msg=f"{which}: weights of one path")
 
 
 # ------------------------------------------------------------------ determinism, errors, stress
@@ -273,15 +276,10 @@ STRESS = ROOT / "stress"
 @pytest.mark.parametrize("path", sorted(p for p in STRESS.glob("*.xml") if not p.stem.endswith("_ref")),
                          ids=lambda p: p.stem)
 def test_stress_scenes_finite_nonnegative(path):
-    """No NaN, Inf or negative value anywhere, emitters at infinity included;
-    scenes with media (not supported by bdpt yet) are refused with a message
-    saying so."""
+    """No NaN, Inf or negative value anywhere, emitters at infinity and the
+    medium stress scenes included (test_stress.py also checks that they are lit)."""
     scene = rm.load_file(path)
-    try:
-        res = rm.render(scene, integrator="bdpt", spp=16, seed=0)
-    except ValueError as e:
-        assert path.stem.startswith("media_") and "does not support participating media" in str(e), str(e)
-        return
+    res = rm.render(scene, integrator="bdpt", spp=16, seed=0)
     assert_clean(res, path.stem)
 
 

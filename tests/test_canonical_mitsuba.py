@@ -36,8 +36,8 @@ against the reference with the same blocked z-test and reference variance
 floor, at the budgets and block sizes of MEDIA (measured per scene in its
 card.md); their references are also checked for form, and the two with an
 independent answer (Beer-Lambert; the slab's diffuse transmittance) against
-it. `ptracer` against these references: tests/test_ptracer_media.py; `bdpt`
-refuses media for now (issue 6, later parts).
+it. `ptracer` against these references: tests/test_ptracer_media.py; `bdpt`:
+tests/test_bdpt_media.py.
 """
 import math
 from pathlib import Path

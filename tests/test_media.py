@@ -138,7 +138,7 @@ def test_bad_media_xml_names_the_line(tmp_path):
         rm.load_file(p)
 
 
-@pytest.mark.parametrize("estimator", ["direct", "bdpt"])
+@pytest.mark.parametrize("estimator", ["direct"])
 def test_estimators_without_media_refuse_media(estimator):
     """Rendering media as vacuum would be a silent error: refuse."""
     scene = rm.load_dict(slab_dict({"type": "homogeneous"}))

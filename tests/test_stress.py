@@ -114,7 +114,7 @@ MEDIA_SCENES = {
     "media_camera_in_glass": {"lit": [(*ALL, "environment through the medium and the glass")]},
     "media_grid_sparse": {"lit": [(*ALL, "backlight through the cloud")]},
 }
-SUPPORTS_MEDIA = {"path", "volpath", "ptracer"}
+SUPPORTS_MEDIA = {"path", "volpath", "ptracer", "bdpt"}
 # Media scenes where light tracing cannot light the checked region (the
 # sanity checks still apply): the camera sees it only through glass, and a
 # light path never connects to a pinhole through a delta vertex.

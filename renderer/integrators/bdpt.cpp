@@ -40,7 +40,49 @@
 // planar density times |cos|, y0 with its direction's light-sampling
 // density (subpath.cpp). Not supported (refused by check_scene): sensors
 // without importance (radiance/irradiance meters).
+//
+// Participating media (issue 6; Veach 1997 ch. 10 over the volume path
+// measure of Pauly et al. 2000; pbrt-v3 sec. 16.3): both subpaths walk
+// through media with subpath.cpp's random_walk, the camera subpath from the
+// near clip in the sensor's medium (as volpath's camera rays), the light
+// subpath from its emitter's medium (as ptracer's). Medium vertices are
+// connectible like diffuse surface vertices: a connection evaluates the
+// phase function there (no cosine: the volume measure has none) and is
+// weighted by the transmittance of the connecting segment through media and
+// index-matched boundaries (Scene::transmittance: Beer-Lambert, ratio
+// tracking in grids, as volpath's next event estimation), any other surface
+// blocking it; s = 0 (the camera walk reaching an emitter) carries the
+// transmittance in the walk's throughput, t = 1 is connect_to_sensor.
+//
+// Spectral MIS in connections: each subpath draws its own hero channel, and
+// its beta is f / mean_c p_c of its prefix, an unbiased estimate of the
+// prefix's contribution under the one-sample balance heuristic over the
+// three channels (media_common.h's SpectralThroughput; Miller et al. 2019,
+// sec. 5.2). The two subpaths are independent, so the product
+// beta_z * c * beta_y (c the connection's f_z Tr f_y / d^2, Tr per channel
+// and not sampled, as in volpath's next event estimation) is an unbiased
+// estimate of the whole path's contribution: the connection samples nothing
+// and so needs no spectral weight of its own.
+//
+// MIS densities with medium vertices: pbrt-v3's choice (sec. 16.3.1, its
+// Vertex::Pdf and ConvertDensity leave out transmittance and the free-flight
+// densities): the per-vertex densities of the weights are the geometric
+// ones only (solid angle to area, without a cosine at a medium vertex:
+// subpath.cpp's to_area), with no sigma_t T or T factor and no hero
+// channel. The weights stay a partition of unity over the strategies that
+// can make a path, since all strategies' weights of that path are computed
+// from the same densities (Veach 1997, sec. 9.2.1 and eq. 10.9), so the
+// estimator stays unbiased. What is left out is smaller than it looks: an
+// inner medium vertex x_i is sampled in every strategy exactly once, from
+// one side or the other, and both sides' true densities carry the same
+// sigma_t(x_i) (and scattering probability), which cancel in the ratios of
+// eq. 10.9; only the transmittances of the segment the vertex was reached
+// along differ (T(x_{i-1}, x_i) from the camera side, T(x_i, x_{i+1}) from
+// the light's), so the weights are less than optimal only where those
+// differ strongly (thick, chromatic or strongly varying media).
+#include <algorithm>
 #include <climits>
+#include <cmath>
 #include <stdexcept>
 
 #include "film/film.h"
@@ -69,6 +111,7 @@ public:
     }
 
     bool is_light_tracer() const override { return true; }
+    bool supports_media() const override { return true; }
     int strategy_depth() const override { return strategy_depth_; }
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator 'bdpt' runs through the light-path driver, not camera rays");
@@ -79,11 +122,6 @@ public:
             throw std::invalid_argument("integrator 'bdpt': sensor '" + scene.sensor_desc.type +
                                         "' cannot be reached by light subpaths (bdpt connects to cameras with a "
                                         "film); use integrator 'path' or a perspective or orthographic camera");
-        // Medium vertices in bdpt's MIS are issue 6's next step; the shared
-        // walk (subpath.cpp) moves through media only for ptracer so far.
-        if (scene.features.has_media)
-            throw std::invalid_argument("integrator 'bdpt' does not support participating media yet, and this "
-                                        "scene has media; use integrator 'volpath' or 'ptracer'");
         const SensorDesc& sd = scene.sensor_desc;
         filter_ = std::make_unique<FilterSampler>(sd.rfilter, sd.filter_radius, sd.filter_stddev);
     }
@@ -109,16 +147,30 @@ public:
         float u1 = sampler.next_1d();
         Vec2 u2 = sampler.next_2d(), u3 = sampler.next_2d();
         SensorRay sr = sensor.sample_ray(film_pos, u1, u2, u3);
-        {
-            PathVertex z0;
-            z0.type = VType::Camera;
-            z0.it.p = sr.ray.o;
-            z0.beta = sr.weight;
-            z0.pdf_fwd = 1.f;
-            cam.push_back(z0);
-        }
+        PathVertex z0;
+        z0.type = VType::Camera;
+        z0.it.p = sr.ray.o;
+        z0.beta = sr.weight;
+        z0.pdf_fwd = 1.f;
         int max_cam = max_depth_ < 0 ? INT_MAX : max_depth_ + 1;  // z0 .. z_max_depth
-        random_walk(scene, sampler, sr.ray, sr.weight, TransportMode::Radiance, max_cam, rr_depth_, cam, stats);
+        if (!scene.features.has_media) {
+            cam.push_back(z0);
+            random_walk(scene, sampler, sr.ray, sr.weight, TransportMode::Radiance, max_cam, rr_depth_, cam, stats);
+        } else {
+            // Through media the walk starts at the near clip in the
+            // sensor's medium (volpath's camera rays; connect_to_sensor's
+            // transmittance also ends there); z0 stays at the pinhole, where
+            // the densities of the weights are measured from.
+            Ray ray = sr.ray;
+            ray.o = ray.o + ray.d * ray.tmin;
+            ray.tmax = std::isinf(ray.tmax) ? kInf : ray.tmax - ray.tmin;
+            ray.tmin = 0.f;
+            MediumTracker mt{scene.sensor_desc.medium, false};
+            z0.medium = mt.medium;
+            cam.push_back(z0);
+            random_walk(scene, sampler, ray, sr.weight, TransportMode::Radiance, max_cam, rr_depth_, cam, stats,
+                        nullptr, &mt);
+        }
 
         // 2. The light subpath: an emitter picked uniformly (as NEE), a ray of light leaving it.
         int max_light = max_depth_ < 0 ? INT_MAX : max_depth_;  // y0 .. y_{max_depth - 1}
@@ -166,9 +218,12 @@ public:
     // random sample pairs, the weight of mis_weight (linear-time ratios) and
     // the weight from the strategies' full path densities, each a product
     // over all vertices, computed from scratch (Veach 1997, eqs. 10.5-10.6
-    // and 9.13). Visibility is ignored: weights do not depend on it.
+    // and 9.13), and (split_sum) the sum of mis_weight over every strategy
+    // of the same full path. Visibility is ignored: weights do not depend on it. Medium
+    // vertices take part like any connectible vertex (their densities: the
+    // file's head comment).
     void mis_check(const Scene& scene, uint64_t seed, int n, std::vector<float>& fast, std::vector<float>& brute,
-                   std::vector<int>& strategy) const {
+                   std::vector<float>& sums, std::vector<int>& strategy) const {
         check_scene(scene);
         ThreadStats stats;
         const int P = scene.sensor->width * scene.sensor->height;
@@ -186,8 +241,9 @@ public:
                     if (max_depth_ >= 0 && s + t - 1 > max_depth_) continue;
                     if (s == 0 && !(cam[t - 1].emitter && (cam[t - 1].type == VType::Surface || cam[t - 1].infinite)))
                         continue;
-                    if (s > 0 && cam[t - 1].type != VType::Surface) continue;
-                    if (s > 1 && light[s - 1].type != VType::Surface) continue;
+                    // connection ends: surface or medium vertices (not an escaped camera path)
+                    if (s > 0 && cam[t - 1].type != VType::Surface && cam[t - 1].type != VType::Medium) continue;
+                    if (s > 1 && light[s - 1].type != VType::Surface && light[s - 1].type != VType::Medium) continue;
                     if (s > 0 && (!cam[t - 1].connectible() || !light[s - 1].connectible())) continue;
                     // s = 1 behind a one-sided area light carries nothing (and has no light-sampling density)
                     if (s == 1 && !light[0].emitter->is_delta() && !light[0].infinite &&
@@ -199,32 +255,52 @@ public:
                         light[0].pdf_fwd = light_origin_pdf(scene, light[0], cam[t - 1]);
                     fast.push_back(mis_weight(scene, s, t));
                     brute.push_back(brute_weight(scene, s, t));
+                    sums.push_back(split_sum(scene, s, t));
                     if (!light.empty()) light[0].pdf_fwd = saved_fwd;
-                    strategy.push_back(s * 1000 + t);
+                    // + 1000000 when the strategy's path has a medium vertex (the tests
+                    // check that media scenes exercise them)
+                    bool medium = false;
+                    for (int i = 1; i < t; ++i) medium = medium || cam[i].type == VType::Medium;
+                    for (int i = 1; i < s; ++i) medium = medium || light[i].type == VType::Medium;
+                    strategy.push_back(s * 1000 + t + (medium ? 1000000 : 0));
                 }
         }
     }
 
 private:
-    // The full path x_0 (camera) .. x_k (light) of strategy (s, t), every
-    // strategy's density as a product of per-vertex densities, each vertex's
-    // density in the camera direction (pc) and in the light direction (pl);
-    // a delta vertex contributes 1 to the vertex after it (the delta
-    // functions are common to all strategies that can make the path).
-    float brute_weight(const Scene& scene, int s, int t) const {
+    // The full path x_0 (camera) .. x_k (light) of strategy (s, t), each
+    // vertex's density in the camera direction (pc) and in the light
+    // direction (pl), computed from scratch; a delta vertex contributes 1 to
+    // the vertex after it (the delta functions are common to all strategies
+    // that can make the path).
+    struct FullPath {
+        std::vector<PathVertex> x;
+        std::vector<double> pc, pl;
+        double p_le = 1.0;  // the light subpath's own density of x_k (pl[k] is next event estimation's)
+        int k = 0;
+        // whether strategy tt (tt camera vertices) can make the path
+        bool valid(int tt) const {
+            if (tt == k + 1) return !x[k].emitter->is_delta();  // s = 0: the camera path hits the emitter
+            return !x[tt - 1].delta && !x[tt].delta;
+        }
+    };
+    FullPath full_path(const Scene& scene, int s, int t) const {
         std::vector<PathVertex>& cam = cam_ref();
         std::vector<PathVertex>& light = light_ref();
-        std::vector<PathVertex> x;
+        FullPath fp;
+        std::vector<PathVertex>& x = fp.x;
         for (int i = 0; i < t; ++i) x.push_back(cam[i]);
         for (int i = s - 1; i >= 0; --i) x.push_back(light[i]);
-        const int k = int(x.size()) - 1;
+        const int k = fp.k = int(x.size()) - 1;
         if (s > 0) { x[t - 1].delta = false; x[t].delta = false; }
         x[k].delta = false;
         if (s == 0) {  // the emitter the camera path ended on acts as the light vertex
             x[k].type = VType::Light;
         }
         const Emitter* em = x[k].emitter;
-        std::vector<double> pc(k + 1, 1.0), pl(k + 1, 1.0);
+        std::vector<double>&pc = fp.pc, &pl = fp.pl;
+        pc.assign(k + 1, 1.0);
+        pl.assign(k + 1, 1.0);
         for (int i = 1; i <= k; ++i) {
             if (x[i - 1].delta) continue;
             double p = i == 1 ? camera_pdf_a(scene, x[1]) : pdf_to(scene, x[i - 1], &x[i - 2], x[i]);
@@ -244,30 +320,79 @@ private:
         // for strategies with s' >= 2 light vertices.
         // (Where next event estimation cannot reach x_k, both keep the
         // remapped density, as nee_over_emission's ratio of 1 does.)
-        double p_le = pl[k];
+        fp.p_le = pl[k];
         if (!em->is_delta() && !x[k].infinite && light_origin_pdf(scene, x[k], x[k - 1]) > 0.f) {
             double a = double(emitter_pick_prob(scene)) * em->pdf_emission_a(x[k].it.p);
-            if (a > 0.0) p_le = a;
+            if (a > 0.0) fp.p_le = a;
         }
-        // Strategy with tt camera vertices x_0 .. x_{tt-1} and the rest from the light.
-        auto density = [&](int tt) {
-            double p = 1.0;
-            for (int i = 1; i < tt; ++i) p *= pc[i];
-            for (int i = tt; i <= k; ++i) p *= (i == k && tt < k) ? p_le : pl[i];
+        return fp;
+    }
+
+    // Strategy (s, t)'s weight from every strategy's full path density, a
+    // product of per-vertex densities.
+    float brute_weight(const Scene& scene, int s, int t) const {
+        const FullPath fp = full_path(scene, s, t);
+        const int k = fp.k;
+        // Strategy with tt camera vertices x_0 .. x_{tt-1} and the rest from
+        // the light: the log of its density (a product of up to hundreds of
+        // vertex densities in media overflows a double, raised to beta).
+        auto log_density = [&](int tt) {
+            double p = 0.0;
+            for (int i = 1; i < tt; ++i) p += std::log(fp.pc[i]);
+            for (int i = tt; i <= k; ++i) p += std::log((i == k && tt < k) ? fp.p_le : fp.pl[i]);
             return p;
         };
-        auto valid = [&](int tt) {
-            if (tt == k + 1) return !em->is_delta();  // s = 0: the camera path hits the emitter
-            return !x[tt - 1].delta && !x[tt].delta;
-        };
-        double sum = 0.0, mine = 0.0;
+        // w = h_t / sum h, h = p^beta, as exp(log h - max log h).
+        const double b = mis_ == Mis::Uniform ? 0.0 : mis_ == Mis::Balance ? 1.0 : double(beta_);
+        std::vector<double> lh(k + 2, -INFINITY);
+        double top = -INFINITY;
+        for (int tt = 1; tt <= k + 1; ++tt)
+            if (fp.valid(tt)) top = std::max(top, lh[tt] = b * log_density(tt));
+        if (!std::isfinite(top) || !fp.valid(t)) return 0.f;
+        double sum = 0.0;
+        for (int tt = 1; tt <= k + 1; ++tt)
+            if (fp.valid(tt)) sum += std::exp(lh[tt] - top);
+        return float(std::exp(lh[t] - top) / sum);
+    }
+
+    // The sum of mis_weight (the renderer's linear-time weights) over every
+    // strategy that can make strategy (s, t)'s full path: the path split
+    // into tt camera and k + 1 - tt light vertices, each subpath's vertices
+    // carrying the densities their walks would store (pdf_fwd along the
+    // subpath, pdf_rev against it, from full_path). A partition of unity
+    // sums to 1 (Veach 1997, eq. 9.13's weights of one sample over all
+    // techniques).
+    float split_sum(const Scene& scene, int s, int t) const {
+        const FullPath fp = full_path(scene, s, t);
+        const int k = fp.k;
+        std::vector<PathVertex>& cam = cam_ref();
+        std::vector<PathVertex>& light = light_ref();
+        std::vector<PathVertex> cam_saved = cam, light_saved = light;
+        double sum = 0.0;
         for (int tt = 1; tt <= k + 1; ++tt) {
-            if (!valid(tt)) continue;
-            double h = mis_ == Mis::Uniform ? 1.0 : std::pow(density(tt), mis_ == Mis::Balance ? 1.0 : double(beta_));
-            sum += h;
-            if (tt == t) mine = h;
+            if (!fp.valid(tt)) continue;
+            const int ss = k + 1 - tt;
+            if (ss + tt - 1 < 1 || (ss == 1 && tt == 1)) continue;  // (1, 1) is left to (0, 2)
+            cam.assign(fp.x.begin(), fp.x.begin() + tt);
+            light.clear();
+            for (int i = k; i >= tt; --i) light.push_back(fp.x[i]);
+            for (int i = 1; i < tt; ++i) {
+                cam[i].pdf_fwd = float(fp.pc[i]);
+                cam[i].pdf_rev = float(fp.pl[i]);
+            }
+            for (int j = 0; j < ss; ++j) {
+                int i = k - j;
+                light[j].pdf_fwd = float(j == 0 ? (ss == 1 ? fp.pl[k] : fp.p_le) : fp.pl[i]);
+                light[j].pdf_rev = float(fp.pc[i]);
+            }
+            if (tt == 1) {  // light tracing: the camera vertex as connect() places it
+                cam[0].pdf_fwd = 1.f;
+            }
+            sum += mis_weight(scene, ss, tt);
         }
-        return sum > 0.0 ? float(mine / sum) : 0.f;
+        cam = std::move(cam_saved);
+        light = std::move(light_saved);
+        return float(sum);
     }
 
     float heuristic(float r) const {
@@ -350,7 +475,6 @@ private:
                   int& effect, float& w, bool hidden, ThreadStats& stats) const {
         std::vector<PathVertex>& cam = cam_ref();
         std::vector<PathVertex>& light = light_ref();
-        BsdfContext ctx_r, ctx_i{TransportMode::Importance};
         Color L(0.f);
         w = 0.f;
         // Random numbers for s = 1 are drawn whatever happens, so the stream
@@ -395,18 +519,18 @@ private:
         } else if (s == 1) {
             // Next event estimation with a fresh emitter sample.
             PathVertex& z = cam[t - 1];
-            if (!z.connectible() || z.type != VType::Surface) return L;
+            if (!z.connectible() || (z.type != VType::Surface && z.type != VType::Medium)) return L;
             size_t n = scene.emitters.size();
             if (n == 0) return L;
             const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n)), n - 1)];
             DirectSample ds = e.sample_direct(z.it.p, u_l, u_extra);
             if (!(ds.pdf_w > 0.f) || is_black(ds.radiance)) return L;
-            Color f = z.bsdf->eval(ctx_r, z.it.to_local(z.it.wi), z.it.to_local(ds.d));
+            Color f = scatter_value(z, ds.d, TransportMode::Radiance);
             if (is_black(f)) return L;
-            ++stats.shadow_rays;
-            if (!scene.visible(z.it, ds)) return L;
+            Color tr = connection_transmittance(scene, z, ds, sampler, stats);
+            if (is_black(tr)) return L;
             float pick = emitter_pick_prob(scene);
-            L = z.beta * f * ds.radiance / (ds.pdf_w * pick);
+            L = z.beta * f * tr * ds.radiance / (ds.pdf_w * pick);
             PathVertex y0;
             y0.type = VType::Light;
             y0.emitter = &e;
@@ -434,32 +558,62 @@ private:
             else light.pop_back();
             return L;
         } else {
-            // Connect y_{s-1} and z_{t-1}: f_L f_E / d^2, the cosines inside the evals.
+            // Connect y_{s-1} and z_{t-1}: f_L Tr f_E / d^2 (Veach 1997,
+            // eq. 10.8), the cosines inside the BSDF evals, none at a medium
+            // vertex; Tr the segment's transmittance (1 or 0 without media).
             PathVertex& y = light[s - 1];
             PathVertex& z = cam[t - 1];
-            if (y.type != VType::Surface || z.type != VType::Surface || !y.connectible() || !z.connectible()) return L;
+            auto scatters = [](const PathVertex& v) { return v.type == VType::Surface || v.type == VType::Medium; };
+            if (!scatters(y) || !scatters(z) || !y.connectible() || !z.connectible()) return L;
             Vec3 d = y.it.p - z.it.p;
             float d2 = length_sq(d);
             if (!(d2 > 0.f)) return L;
             float dist = std::sqrt(d2);
             d = d / dist;
-            Color fz = z.bsdf->eval(ctx_r, z.it.to_local(z.it.wi), z.it.to_local(d));
+            Color fz = scatter_value(z, d, TransportMode::Radiance);
             if (is_black(fz)) return L;
-            Color fy = y.bsdf->eval(ctx_i, y.it.to_local(y.it.wi), y.it.to_local(-d)) *
-                       shading_correction(y.it, y.it.wi, -d);
+            Color fy = scatter_value(y, -d, TransportMode::Importance);
             if (is_black(fy)) return L;
             DirectSample ds;
             ds.p = y.it.p;
-            ds.n = y.it.n;
+            ds.n = y.it.n;  // zero at a medium vertex: the shadow ray ends at the point itself
             ds.eps = y.it.eps;
             ds.d = d;
             ds.dist = dist;
-            ++stats.shadow_rays;
-            if (!scene.visible(z.it, ds)) return L;
-            L = z.beta * fz * fy * y.beta / d2;
+            Color tr = connection_transmittance(scene, z, ds, sampler, stats);
+            if (is_black(tr)) return L;
+            L = z.beta * fz * tr * fy * y.beta / d2;
         }
         w = mis_weight(scene, s, t);
         return L;
+    }
+
+    // What a connection end v scatters towards wo, v.it.wi pointing back
+    // along its own subpath: at a medium vertex the phase function alone
+    // (the volume path measure has no cosine; pbrt-v3 sec. 16.3.1's
+    // Vertex::f), at a surface the BSDF times |cos|, adjoint with the
+    // shading-normal correction on the light subpath (common.h).
+    static Color scatter_value(const PathVertex& v, const Vec3& wo, TransportMode mode) {
+        if (v.type == VType::Medium) return Color(v.phase->eval(v.it.wi, wo));
+        BsdfContext ctx{mode};
+        Color f = v.bsdf->eval(ctx, v.it.to_local(v.it.wi), v.it.to_local(wo));
+        if (mode == TransportMode::Importance) f *= shading_correction(v.it, v.it.wi, wo);
+        return f;
+    }
+
+    // The transmittance of the connection from z (a surface or medium
+    // vertex) to ds.p: without media visibility (1 or 0); with media
+    // Scene::transmittance, starting in the medium on the side of z the
+    // connection leaves to (a medium vertex's own), Beer-Lambert per segment
+    // or ratio tracking in grids (an unbiased estimate per channel, drawing
+    // from `sampler`), 0 at any surface that is not index-matched, as
+    // volpath's next event estimation.
+    static Color connection_transmittance(const Scene& scene, const PathVertex& z, const DirectSample& ds,
+                                          Sampler& sampler, ThreadStats& stats) {
+        ++stats.shadow_rays;
+        if (!scene.features.has_media) return scene.visible(z.it, ds) ? Color(1.f) : Color(0.f);
+        int m = z.type == VType::Medium ? z.medium : Scene::medium_after(z.it, ds.d, z.medium);
+        return scene.transmittance(z.it, ds, m, stats.rays, sampler);
     }
 
     int classify(int s, int t) const { return classify_strategy(cam_ref(), light_ref(), s, t); }
@@ -484,8 +638,8 @@ private:
 std::unique_ptr<Integrator> make_bdpt_integrator(const IntegratorDesc& d) { return std::make_unique<BdptIntegrator>(d); }
 
 void bdpt_mis_check(const Scene& scene, const IntegratorDesc& d, uint64_t seed, int n, std::vector<float>& fast,
-                    std::vector<float>& brute, std::vector<int>& strategy) {
-    BdptIntegrator(d).mis_check(scene, seed, n, fast, brute, strategy);
+                    std::vector<float>& brute, std::vector<float>& sums, std::vector<int>& strategy) {
+    BdptIntegrator(d).mis_check(scene, seed, n, fast, brute, sums, strategy);
 }
 
 }  // namespace rm

@@ -155,9 +155,11 @@ std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& desc, const Ef
 
 // Test hook of bdpt.cpp: for the strategies (s, t) of n random sample
 // pairs, the MIS weight as bdpt computes it and as a brute-force product of
-// every strategy's path density gives it; strategy = 1000 s + t.
+// every strategy's path density gives it, and the sum of bdpt's weights
+// over every strategy of the same path (`sums`); strategy = 1000 s + t,
+// plus 1000000 when the path has a medium vertex.
 void bdpt_mis_check(const Scene& scene, const IntegratorDesc& d, uint64_t seed, int n, std::vector<float>& fast,
-                    std::vector<float>& brute, std::vector<int>& strategy);
+                    std::vector<float>& brute, std::vector<float>& sums, std::vector<int>& strategy);
 
 // Power heuristic with beta = 2 (Veach 1997, eq. 9.13), for one sample per strategy.
 inline float mis_power(float pdf_a, float pdf_b) {

@@ -15,7 +15,7 @@
 namespace rm {
 
 // Medium: a scattering event inside a participating medium (ptracer's light
-// subpaths; bdpt does not walk through media yet).
+// subpaths, both of bdpt's subpaths).
 enum class VType : uint8_t { Camera, Light, Surface, Medium };
 
 // One vertex of either subpath. pdf_fwd is the area density with which the
@@ -31,9 +31,14 @@ struct PathVertex {
     const Bsdf* bsdf = nullptr;
     const Emitter* emitter = nullptr;  // the light of a Light vertex, or the area emitter a surface carries
     const PhaseFunction* phase = nullptr;  // a Medium vertex's phase function
-    // Through media (ptracer): pdf_fwd / pdf_rev above are the geometric
-    // densities only (no free-flight or transmittance factor), which light
-    // tracing never reads; bdpt's MIS with medium vertices must add them.
+    // Through media: pdf_fwd / pdf_rev above are the geometric densities
+    // only (solid angle to area, no cosine at a medium vertex), without the
+    // free-flight (sigma_t T) or transmittance (T) factors. Light tracing
+    // never reads them; bdpt's MIS weights use them as they are, pbrt-v3's
+    // choice (sec. 16.3.1, Vertex::Pdf and ConvertDensity): the weights of all
+    // strategies of a path come from the same densities, so they still sum
+    // to 1 and the estimator stays unbiased (Veach 1997, sec. 9.2.1);
+    // bdpt.cpp's head comment says why little is lost.
     int medium = -1;        // the medium the vertex was reached through (a Medium vertex's own)
     bool enclosed = false;  // a Medium vertex behind a non-null boundary: B, not V (MediumTracker)
     bool connectible() const { return type != VType::Surface || bsdf->has_smooth(); }
@@ -81,8 +86,8 @@ using WalkStop = std::function<bool(const std::vector<PathVertex>&)>;
 
 // Extends `path` (its start vertex, the camera or the light, already in it)
 // from `ray` with throughput `beta`, up to max_vertices vertices in all.
-// `media`: null for a walk that ignores media (bdpt, which refuses media
-// scenes); else the walk starts in that medium state and samples free
+// `media`: null for a walk that ignores media (scenes without media);
+// else the walk starts in that medium state and samples free
 // flights, medium vertices (VType::Medium) and phase-function directions,
 // with the spectral MIS throughput of media_common.h, and crosses
 // index-matched boundaries without making them vertices (they do not count
