@@ -69,6 +69,38 @@ def slab_dict(medium, res=8, bsdf="null", sensor_medium=None, integrator="volpat
 # -- loading ------------------------------------------------------------------
 
 
+def _ball_in_fog(exterior, fog_box=False):
+    """A glass ball holding a dense medium, in fog: around the camera (the
+    sensor's medium, unbounded), or inside a null cube holding the fog."""
+    fog = {"type": "homogeneous", "sigma_t": 0.1, "albedo": 0.9}
+    d = slab_dict({"type": "homogeneous", "sigma_t": 5.0}, bsdf="dielectric",
+                  sensor_medium=None if fog_box else fog)
+    d["slab"]["to_world"] = np.diag([0.3, 0.3, 0.3, 1.0])  # the dense cube, now small, in the middle
+    if exterior:
+        d["slab"]["exterior"] = fog
+    if fog_box:
+        d["fog_box"] = {"type": "cube", "to_world": np.diag([2.5, 2.5, 2.5, 1.0]), "bsdf": {"type": "null"},
+                        "interior": fog}
+    return d
+
+
+@pytest.mark.parametrize("fog_box", [False, True], ids=["camera_fog", "fog_cube"])
+def test_medium_shape_in_fog_without_exterior_warns(fog_box):
+    """The scene-modelling trap (a medium-filled shape in fog that does not
+    declare the fog as its exterior: paths leaving it are in vacuum, as in
+    Mitsuba 3) loads, renders as written, and warns, naming the shape."""
+    with pytest.warns(rm.SceneWarning, match=r"shape scene\['slab'\] declares an interior medium but no exterior"):
+        s = rm.load_dict(_ball_in_fog(exterior=False, fog_box=fog_box))
+    assert len(s.desc.warnings) == 1
+    assert ("sensor's medium" in s.desc.warnings[0]) != fog_box, s.desc.warnings
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", rm.SceneWarning)  # declared: no warning
+        s = rm.load_dict(_ball_in_fog(exterior=True, fog_box=fog_box))
+    assert s.desc.warnings == []
+
+
 def test_homogeneous_forms_load():
     m = rm.load_dict(slab_dict({"type": "homogeneous", "sigma_t": 2.0, "albedo": _rgb([0.1, 0.5, 0.9]),
                                 "scale": 3.0, "phase": {"type": "hg", "g": 0.3}})).desc.shapes[0].interior

@@ -7,6 +7,7 @@ from __future__ import annotations
 __version__ = "0.1.0"
 
 from .scene_desc import SceneError
+from .loader import SceneWarning
 from .render import EFFECTS, RenderCancelled, RenderResult, render
 from .scene import Scene
 
@@ -41,5 +42,5 @@ def read_exr(path):
     return _read(path)
 
 
-__all__ = ["load_file", "load_dict", "render", "write_exr", "read_exr", "Scene", "SceneError", "RenderResult",
+__all__ = ["load_file", "load_dict", "render", "write_exr", "read_exr", "Scene", "SceneError", "SceneWarning", "RenderResult",
            "RenderCancelled", "EFFECTS", "__version__"]

@@ -142,3 +142,4 @@ class SceneDesc:
     sensor: SensorDesc = field(default_factory=SensorDesc)
     integrator: IntegratorDesc = field(default_factory=IntegratorDesc)
     source: str = "<dict>"  # file path or "<dict>", for messages
+    warnings: list = field(default_factory=list)  # [str], also raised as SceneWarning at load
