@@ -121,7 +121,8 @@ RenderOutput render(const Scene& scene, const Integrator& requested, const Rende
     if (scene.features.has_media && !integrator.supports_media())
         throw std::invalid_argument("integrator '" + integrator.type +
                                     "' does not support participating media yet, and this scene has media; "
-                                    "use integrator 'volpath' (or 'path', the same estimator)");
+                                    "use integrator 'volpath' (or 'path', the same estimator), or 'photonmapper' "
+                                    "(volume photon map and ray marching)");
     if (integrator.owns_driver()) return integrator.drive(scene, opts, poll);
     if (integrator.is_light_tracer()) return render_light_paths(scene, integrator, opts, poll);
     const Sensor& sensor = *scene.sensor;
