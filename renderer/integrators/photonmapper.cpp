@@ -204,8 +204,11 @@ public:
 
 private:
     // Jensen 2001, eq. 7.6, over the lookup_size nearest photons within r2_max.
+    // by_medium (scenes with media): photons whose light path scattered in a
+    // medium go to by_medium[0] (volume class) or [1] (subsurface) instead
+    // of the returned sum.
     Color estimate(const PhotonMap& map, float r2_max, const Interaction& it, const Bsdf& bsdf, const Vec3& wi,
-                   int max_photon_depth, std::vector<Neighbour>& nb) const {
+                   int max_photon_depth, std::vector<Neighbour>& nb, Color* by_medium = nullptr) const {
         if (max_photon_depth < 1) return Color(0.f);
         map.knn(it.p, lookup_size_, r2_max, nb, max_photon_depth);
         if (nb.empty()) return Color(0.f);
@@ -219,7 +222,10 @@ private:
             float c = std::fabs(wp.z);
             if (!(c > 1e-7f)) continue;
             // eval returns f |cos theta_p|; the photon's flux already holds the cosine.
-            sum += bsdf.eval(ctx, wi, wp) * ph.power * (1.f / c);
+            Color v = bsdf.eval(ctx, wi, wp) * ph.power * (1.f / c);
+            if (by_medium && (ph.flags & kPhotonVolumePath)) by_medium[0] += v * (1.f / (kPi * r2));
+            else if (by_medium && (ph.flags & kPhotonSubsurfacePath)) by_medium[1] += v * (1.f / (kPi * r2));
+            else sum += v;
         }
         return sum * (1.f / (kPi * r2));
     }
@@ -419,13 +425,19 @@ Color PhotonMapper::march(const Scene& scene, const Maps& maps, Sampler& sampler
                           EffectRadiance& out, std::vector<Neighbour>& nb, ThreadStats& stats) const {
     const int m = mt.medium;
     const Medium& med = *scene.media[m];
-    // A ray that leaves the scene in an unbounded medium is marched to the
-    // bounding sphere; beyond it the medium's transmittance to infinity
-    // (0, or 1 in a channel without extinction) is all that is kept.
+    // A ray that leaves the scene in an unbounded homogeneous medium is
+    // marched to 20 mean free paths of its thinnest channel (transmittance
+    // e^-20), but at least to the scene's bounding sphere and at most 64
+    // times its radius (about 1000 automatic steps); beyond, only the
+    // transmittance to infinity (0, or 1 in a channel without extinction)
+    // is kept: in-scattering that far out is left out (a truncation).
     Color beyond(1.f);
     float t_max = t_hit;
     if (std::isinf(t_hit) && med.homogeneous) {
-        t_max = sphere_exit(ray, maps.center, maps.radius * 1.01f);
+        float far = 64.f * maps.radius;
+        float st_min = min_component(med.sigma_t);
+        if (st_min > 0.f) far = std::min(far, 20.f / st_min);
+        t_max = std::max(sphere_exit(ray, maps.center, maps.radius * 1.01f), far);
         beyond = med.transmittance(kInf);
     }
     float t0, t1;  // where the medium is (a grid's box; everywhere for the others)
@@ -533,7 +545,12 @@ Color PhotonMapper::gather_media(const Scene& scene, const Maps& maps, Sampler& 
             int budget = photon_budget(max_depth_, c + g);
             if (budget < 1) break;
             Vec3 wi2 = it.to_local(it.wi);
-            if (b2.has_smooth()) sum += th.beta * estimate(maps.global, maps.r2_global, it, b2, wi2, budget, nb);
+            if (b2.has_smooth() && maps.has_global) {
+                Color split[2] = {Color(0.f), Color(0.f)};
+                sum += th.beta * estimate(maps.global, maps.r2_global, it, b2, wi2, budget, nb, split);
+                if (mask[kVolume]) out.add(kVolume, beta * th.beta * split[0] * inv_n);
+                if (mask[kSubsurface]) out.add(kSubsurface, beta * th.beta * split[1] * inv_n);
+            }
             if (!(b2.flags() & kDelta)) break;
             BsdfSample bs2 = b2.sample(ctx, wi2, sampler.next_1d(), sampler.next_2d());
             if (!(bs2.pdf_w > 0.f) || is_black(bs2.weight) || !bs2.is_delta) break;
@@ -611,17 +628,19 @@ void PhotonMapper::radiance_media(const Scene& scene, const Maps& maps, Sampler&
                 out.add(cls_c, beta * estimate(maps.caustic, maps.r2_caustic, it, bsdf, wi,
                                                photon_budget(max_depth_, c), nb));
             // 5. Indirect light: final gathering through media, or the global
-            //    map at x. The global map's photons may have scattered in a
-            //    medium on their way; they are filed here as surface light.
+            //    map at x. Global photons whose light scattered in a medium
+            //    on its way are filed as volume or subsurface light.
             int cls_i = via_specular ? kSpecular : kIndirect;
-            if (final_gather_ && maps.has_volume) {
+            bool any = mask[cls_i] || mask[kVolume] || mask[kSubsurface];
+            if (any && final_gather_ && (maps.has_global || maps.has_volume)) {
                 Color li = gather_media(scene, maps, sampler, it, bsdf, wi, c, mt, pc, beta, out, nb, stats);
                 if (mask[cls_i]) out.add(cls_i, beta * li);
-            } else if (maps.has_global && mask[cls_i]) {
-                Color li = final_gather_
-                               ? gather_media(scene, maps, sampler, it, bsdf, wi, c, mt, pc, beta, out, nb, stats)
-                               : estimate(maps.global, maps.r2_global, it, bsdf, wi, photon_budget(max_depth_, c), nb);
-                out.add(cls_i, beta * li);
+            } else if (any && maps.has_global) {
+                Color split[2] = {Color(0.f), Color(0.f)};
+                Color li = estimate(maps.global, maps.r2_global, it, bsdf, wi, photon_budget(max_depth_, c), nb, split);
+                if (mask[cls_i]) out.add(cls_i, beta * li);
+                if (mask[kVolume]) out.add(kVolume, beta * split[0]);
+                if (mask[kSubsurface]) out.add(kSubsurface, beta * split[1]);
             }
         }
         // 6. Specular reflection and refraction by Monte Carlo ray tracing;

@@ -89,6 +89,7 @@ void trace_media_path(const Scene& scene, const PhotonTraceSpec& spec, const Emi
     BsdfContext ctx{TransportMode::Importance};
     int k = 0;                 // scattering vertices before the current one
     bool all_specular = true;  // each of them scattered specularly
+    uint32_t medium_flags = 0; // kPhotonVolumePath / kPhotonSubsurfacePath once it scattered in a medium
     // volpath's roulette (volpath.cpp says why): only once the throughput
     // fell below its start, capped at 0.95 beyond kLongWalk events.
     constexpr int kLongWalk = 1024;
@@ -124,6 +125,7 @@ void trace_media_path(const Scene& scene, const PhotonTraceSpec& spec, const Emi
                                          (uint32_t(mt.medium + 1) << kPhotonMediumShift));
                 ++k;
                 all_specular = false;
+                medium_flags |= mt.enclosed ? kPhotonSubsurfacePath : kPhotonVolumePath;
                 if (spec.caustic_only) break;  // L S+ D only: a medium vertex ends a caustic path
                 if (spec.max_depth >= 0 && depth >= spec.max_depth) break;
                 PhaseSample ps = med.phase->sample(-ray.d, sampler.next_2d());
@@ -149,7 +151,7 @@ void trace_media_path(const Scene& scene, const PhotonTraceSpec& spec, const Emi
             bool keep = spec.caustic_only ? caustic : spec.indirect_only ? !all_specular : (spec.store_direct || !direct);
             if (keep)
                 store(it.p, it.wi, (direct ? kPhotonDirect : 0u) | (all_specular ? 0u : kPhotonIndirect) |
-                                       (uint32_t(std::min(depth, 255)) << kPhotonDepthShift));
+                                       medium_flags | (uint32_t(std::min(depth, 255)) << kPhotonDepthShift));
         }
         if (spec.max_depth >= 0 && depth >= spec.max_depth) break;
         // 5. Scatter by the adjoint BSDF; the medium changes when the sample crosses a boundary.
