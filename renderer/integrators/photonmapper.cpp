@@ -38,6 +38,15 @@
 //   final_gather           false: the global map seen directly at x (ours, true)
 //   max_depth, rr_depth, hide_emitters   as in `path` (maxDepth, rrDepth, hideEmitters)
 //   (granularity, Mitsuba's work-unit size, is accepted and ignored.)
+// In scenes with media (the second part of this file):
+//   volume_photons         photons stored in the volume photon map (volumePhotons, 250000)
+//   volume_lookup_radius   maximum lookup radius, volume map (volumeLookupRadius, 0.05)
+//   volume_lookup_size     photons per volume radiance estimate (ours, 64)
+//   step_size              ray-marching step in world units (ours; 0 = automatic:
+//                          half the mean free path of the medium's densest channel,
+//                          at most 1/16 of the scene's radius)
+// In a scene with media, max_depth counts scattering vertices (surface or
+// medium; index-matched boundaries excluded), as volpath's does.
 // max_depth bounds whole paths: a photon of depth d (segments from its
 // emitter, photon_trace.h) is read at a vertex c segments from the camera
 // only when d + c <= max_depth.
@@ -45,8 +54,9 @@
 // Only what the scene calls for (DESIGN section 3): no caustic map unless
 // the scene has both specular and non-specular surfaces and the caustic or
 // specular class is simulated; no global map unless the indirect class (or
-// the specular class, through specular surfaces) is. res.stats["photon_maps"]
-// lists the maps built.
+// the specular class, through specular surfaces) is; no volume map unless
+// the scene has media and the volume or subsurface class is simulated.
+// res.stats["photon_maps"] lists the maps built.
 //
 // Bias: the estimate blurs the photon density over the disc of radius r (and
 // counts photons of nearby surfaces: corners read brighter), and n / (pi r_n^2)
