@@ -217,8 +217,9 @@ def _lit_dark(img):
 #                  160000: -5.7 +- 1.7 % / -12 +- 7 %
 #                  640000: -3.9 +- 1.2 % / -8 +- 2 %
 # and with this test's seeds 0-2 (volpath at 1024 spp / Mitsuba), the lit
-# half: 10000 -10.4 % / -10.5 % (RMS 11.8 %), 80000 -7.4 % / -7.5 %
-# (7.6 %), 640000 -4.7 % / -4.8 % (4.9 %).
+# half: 10000 -10.6 % / -10.7 % (RMS 12.0 %), 80000 -7.6 % / -7.7 %
+# (7.8 %), 640000 -4.8 % / -4.9 % (5.0 %). (The 6-seed rows above were
+# taken with half the default step; the step moves noise, not the mean.)
 # The lit half's bias is the boundary bias of the volume estimate: camera
 # rays enter through the top face, where the in-scattered light is
 # largest and the estimate's sphere is half outside the slab; it shrinks

@@ -30,7 +30,7 @@ INTEGRATOR_PARAMS = {
     # and ignored); gather_rays and final_gather are ours. In scenes with media (issue 6): volume_photons
     # (volumePhotons) in the volume photon map, volume_lookup_radius (volumeLookupRadius), and ours:
     # volume_lookup_size (photons per volume estimate) and step_size (ray marching, world units;
-    # 0 = half the densest channel's mean free path, at most 1/16 of the scene's radius).
+    # 0 = the densest channel's mean free path, at most 1/16 of the scene's radius).
     # Radii are relative to the scene's bounding-sphere radius. See renderer/integrators/photonmapper.cpp.
     "photonmapper": dict(_COMMON, direct_samples=(int, 16), global_photons=(int, 250000),
                          caustic_photons=(int, 250000), global_lookup_radius=(float, 0.05),

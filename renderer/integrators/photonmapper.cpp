@@ -43,7 +43,7 @@
 //   volume_lookup_radius   maximum lookup radius, volume map (volumeLookupRadius, 0.05)
 //   volume_lookup_size     photons per volume radiance estimate (ours, 64)
 //   step_size              ray-marching step in world units (ours; 0 = automatic:
-//                          half the mean free path of the medium's densest channel,
+//                          one mean free path of the medium's densest channel,
 //                          at most 1/16 of the scene's radius)
 // In a scene with media, max_depth counts scattering vertices (surface or
 // medium; index-matched boundaries excluded), as volpath's does.
@@ -805,16 +805,23 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
         maps.has_volume = true;
         maps.r2_volume = sqr(volume_radius_ * radius);
     }
-    // Ray-marching steps (scenes with media): step_size, or half the mean
-    // free path of the medium's densest channel (its majorant in a grid),
-    // at most 1/16 of the scene's radius.
+    // Ray-marching steps (scenes with media): step_size, or one mean free
+    // path of the medium's densest channel (its majorant in a grid), at
+    // most 1/16 of the scene's radius. The step moves the variance and the
+    // time, not the expectation (jittered steps, exact or ratio-tracked
+    // transmittance). Measured on translucent_slab (32 x 32, 8 spp, 320 000
+    // photons; the slab's mean free path is 0.05): steps 0.005 / 0.025 /
+    // 0.05 / 0.2 took 4.7 / 1.3 / 0.4 / 0.1 s of camera pass for a per-pixel
+    // relative deviation of 9.2 / 9.5 / 10.7 / 29 %; one mean free path is
+    // the most efficient of these (1 / (variance x time) 3 times half a
+    // mean free path's, 6 times a tenth's; timings on 2 shared cores, +-50 %).
     if (f.has_media) {
         maps.step.resize(scene.media.size());
         for (size_t m = 0; m < scene.media.size(); ++m) {
             const Medium& med = *scene.media[m];
             float st = max_component(med.homogeneous ? med.sigma_t : med.majorant);
             float auto_step = radius / 16.f;
-            if (st > 0.f) auto_step = std::min(auto_step, 0.5f / st);
+            if (st > 0.f) auto_step = std::min(auto_step, 1.f / st);
             maps.step[m] = step_size_ > 0.f ? step_size_ : auto_step;
         }
     }
