@@ -314,15 +314,19 @@ private:
 // multiple scattering, volume caustics, light refracted into a translucent
 // object). Single scattering (L V: light reaching the medium point straight
 // from an emitter, through media and null boundaries) is not stored: the
-// camera pass computes it by light sampling, as Jensen & Christensen do
-// (sec. 3.1: "the photon map ... is used only for multiple scattering").
+// camera pass computes it by light sampling, as Jensen & Christensen
+// compute single scattering by ray marching with shadow rays and keep the
+// volume map for the indirect (multiply scattered) part.
 // The two cover disjoint path sets, so nothing is counted twice. Light
 // entering a translucent object through its dielectric surface is a
 // specular vertex (shadow rays cannot pass glass), so inside such an object
 // all in-scattered light comes from the photon map.
 //
-// Pass 2 marches along every camera ray segment through a medium (Jensen &
-// Christensen 1998, eq. 13; Jensen 2001, eq. 10.22):
+// Pass 2 marches along every camera ray segment through a medium (the
+// seed's "ray marching (numerical solution of differential equation)";
+// Jensen & Christensen 1998's ray marching, Jensen 2001, ch. 10,
+// here with a fixed, jittered step; equation numbers of those texts are
+// not cited here because they could not be checked):
 //   L(x, w) = sum_k Tr(x, x_k) [sigma_s(x_k) L_d(x_k, w) + L_m(x_k, w)] dt
 //             + Tr(x, x_s) L(x_s, w),
 // x_k = x + (k + u) dt w, one uniform jitter u per segment and camera
@@ -332,11 +336,13 @@ private:
 //   L_d = int p(w', w) L_direct(x_k, w') dw', one light sample through
 //         media (Scene::transmittance);
 //   L_m = sigma_s int p L_indirect dw' ~ sum_p p(w_p, w) Phi_p / (4/3 pi r^3)
-//         over the volume_lookup_size nearest volume photons (the seed;
-//         Jensen & Christensen 1998, eq. 11). Units: the photons scattered
-//         per unit volume and solid angle are d^2 Phi = sigma_s L dw dV
-//         (eq. 9), so the sum over the sphere's volume already carries
-//         sigma_s: no sigma_s factor on L_m, unlike L_d.
+//         over the volume_lookup_size nearest volume photons (the seed's
+//         formula; Jensen & Christensen 1998's volume radiance estimate).
+//         Units: the seed's L(x, w') = d^2 Phi / (sigma_s dw' dV), i.e. the
+//         photons scattered per unit volume and solid angle are
+//         d^2 Phi = sigma_s L dw dV, so the sum over the sphere's volume
+//         already carries sigma_s: no sigma_s factor on L_m, unlike L_d
+//         (W / (m^3 sr), integrated over dt [m] to radiance).
 // Both estimates read only what the camera path may still use (max_depth).
 // Surfaces along the way are lit as without media (direct light through
 // media, caustic map, final gathering), times the transmittance of the

@@ -74,7 +74,7 @@ Photon make_photon(const Vec3& p, const Vec3& wi, const Color& power, uint32_t f
 // power th.beta the walk carries there. That power already holds the
 // event's sigma_s / (density of scattering there) (free_flight_*), so the
 // stored photons are distributed with density sigma_s(x) int L(x, w) dw per
-// unit volume (Jensen & Christensen 1998, eq. 9: d^2 Phi = sigma_s L dw dV):
+// unit volume (the seed: d^2 Phi = sigma_s L dw dV, Jensen & Christensen 1998):
 // what the camera pass's Phi / (4/3 pi r^3) estimate divides by volume.
 void trace_media_path(const Scene& scene, const PhotonTraceSpec& spec, const Emitter& e, const EmissionSample& es,
                       const Color& beta0, Sampler& sampler, std::vector<Photon>& out, ThreadStats& stats) {

@@ -36,7 +36,7 @@ struct PhotonTraceSpec {
     // photons, at medium scattering events that follow at least one
     // scattering vertex (L X+ V: multiple scattering and volume caustics;
     // single scattering L V is computed by the camera pass's next event
-    // estimation, Jensen & Christensen 1998, sec. 3.1). Without it, a
+    // estimation, as Jensen & Christensen 1998 compute it). Without it, a
     // photon tracer in a medium scene stores surface photons only.
     bool volume = false;
 };
