@@ -55,7 +55,8 @@
 // the scene has both specular and non-specular surfaces and the caustic or
 // specular class is simulated; no global map unless the indirect class (or
 // the specular class, through specular surfaces) is; no volume map unless
-// the scene has media and the volume or subsurface class is simulated.
+// the scene has media that scatter and the volume or subsurface class is
+// simulated.
 // res.stats["photon_maps"] lists the maps built.
 //
 // Bias: the estimate blurs the photon density over the disc of radius r (and
@@ -777,7 +778,10 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     // light segment, one more vertex and the camera segment.
     maps.center = center;
     maps.radius = radius;
-    bool need_volume = lights && f.has_media && volume_photons_ > 0 && long_paths &&
+    // Purely absorbing media (homogeneous with sigma_s = 0) never store one.
+    bool scattering_media = false;
+    for (const auto& med : scene.media) scattering_media |= !med->homogeneous || !is_black(med->sigma_s);
+    bool need_volume = lights && f.has_media && scattering_media && volume_photons_ > 0 && long_paths &&
                        (mask[kVolume] || mask[kSubsurface]);
     if (need_volume) {
         PhotonTraceSpec spec;
