@@ -18,7 +18,9 @@ tail), and one at 16384 spp moved a half-image mean by 5 %.
 
 Bias = mean over `seeds` photonmapper renders (independent photon maps)
 minus the reference, relative to it; its standard error combines the seeds'
-spread and the reference's. "volpath same-time se" is the relative standard
+spread and the reference's. K: volume_boundary_rays (0: the seed's
+Phi / (4/3 pi r^3); 16: the sphere's volume inside the medium measured with
+16 rays). "volpath same-time se" is the relative standard
 error our volpath reaches per region in the time of one photonmapper
 render (the se of its own render, from its per-pixel variance, scaled by
 sqrt(its seconds / render seconds)): the unbiased estimator's error to set
@@ -61,7 +63,10 @@ SCENES = {
     # every diffuse surface of translucent_slab is black: no surface maps
     "translucent_slab": (halves_cols, 4, 512, {"global_photons": 0, "caustic_photons": 0}),
 }
-BUDGETS = (20000, 80000, 320000)  # volume photons; volume_lookup_size stays at its default, 64
+# (volume photons, volume_boundary_rays): the seed's estimate at three
+# budgets, then the boundary-corrected one (photonmapper.cpp) at two;
+# volume_lookup_size stays at its default, 64.
+CONFIGS = ((20000, 0), (80000, 0), (320000, 0), (80000, 16), (320000, 16))
 
 
 def main(argv=None):
@@ -71,7 +76,7 @@ def main(argv=None):
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "volume_photon.json"))
     args = ap.parse_args(argv)
     rows, refs_info = [], []
-    print(f"{'scene':<18}{'photons':>8}  {'region':<19}{'bias %':>8}{'se %':>6}{'s/render':>9}{'trace s':>8}"
+    print(f"{'scene':<18}{'photons':>8}{'K':>4}  {'region':<19}{'bias %':>8}{'se %':>6}{'s/render':>9}{'trace s':>8}"
           f"{'volpath same-time se %':>23}{'volpath err %':>14}")
     for name, (regions, spp, vp_spp, extra) in SCENES.items():
         scene = rm.load_file(ROOT / "reference_scenes" / name / "scene.xml", res=args.res)
@@ -90,12 +95,13 @@ def main(argv=None):
         refs_info.append({"scene": name, "reference": "Mitsuba 3 reference.exr", "volpath_spp": vp_spp,
                           "volpath_seconds": vp_s,
                           "volpath_rel_err": {k: vp_reg[k] / ref_reg[k] - 1 for k in ref_reg}})
-        for n_photons in BUDGETS:
+        for n_photons, k_rays in CONFIGS:
             renders, secs, trace = [], [], []
             for s in range(args.seeds):
                 t = time.perf_counter()
                 r = rm.render(scene, integrator=dict({"type": "photonmapper", "volume_photons": n_photons,
-                                                      "direct_samples": 1, "gather_rays": 8}, **extra),
+                                                      "volume_boundary_rays": k_rays, "direct_samples": 1,
+                                                      "gather_rays": 8}, **extra),
                               spp=spp, seed=s)
                 secs.append(time.perf_counter() - t)
                 trace.append(r.stats["photon_maps"]["volume"]["trace_seconds"] +
@@ -107,12 +113,13 @@ def main(argv=None):
                 se = float(np.hypot(got.std(ddof=1) / np.sqrt(len(got)), ref_se[reg]))
                 bias = float(got.mean() / want - 1)
                 same_time = vp_se[reg] / vp_reg[reg] * np.sqrt(vp_s / sec)
-                rows.append({"scene": name, "volume_photons": n_photons, "region": reg, "reference": want,
+                rows.append({"scene": name, "volume_photons": n_photons, "volume_boundary_rays": k_rays,
+                             "region": reg, "reference": want,
                              "mean": float(got.mean()), "rel_bias": bias, "rel_se": se / want,
                              "seed_spread": float(got.std(ddof=1) / want), "seconds_per_render": sec,
                              "volume_map_seconds": float(np.median(trace)), "spp": spp,
                              "volpath_same_time_rel_se": float(same_time)})
-                print(f"{name:<18}{n_photons:>8}  {reg:<19}{100 * bias:>+8.2f}{100 * se / want:>6.2f}{sec:>9.2f}"
+                print(f"{name:<18}{n_photons:>8}{k_rays:>4}  {reg:<19}{100 * bias:>+8.2f}{100 * se / want:>6.2f}{sec:>9.2f}"
                       f"{float(np.median(trace)):>8.2f}{100 * same_time:>23.2f}"
                       f"{100 * (vp_reg[reg] / want - 1):>+14.2f}", flush=True)
     out = {"benchmark": "volume_photon", "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),

@@ -30,14 +30,16 @@ INTEGRATOR_PARAMS = {
     # and ignored); gather_rays and final_gather are ours. In scenes with media (issue 6): volume_photons
     # (volumePhotons) in the volume photon map, volume_lookup_radius (volumeLookupRadius), and ours:
     # volume_lookup_size (photons per volume estimate) and step_size (ray marching, world units;
-    # 0 = the densest channel's mean free path, at most 1/16 of the scene's radius).
+    # 0 = the densest channel's mean free path, at most 1/16 of the scene's radius);
+    # volume_boundary_rays K > 0 (ours) corrects the estimate's sphere volume for the part of it
+    # behind the medium's boundary, measured with K rays (0: the seed's 4/3 pi r^3).
     # Radii are relative to the scene's bounding-sphere radius. See renderer/integrators/photonmapper.cpp.
     "photonmapper": dict(_COMMON, direct_samples=(int, 16), global_photons=(int, 250000),
                          caustic_photons=(int, 250000), global_lookup_radius=(float, 0.05),
                          caustic_lookup_radius=(float, 0.0125), lookup_size=(int, 120), gather_rays=(int, 32),
                          final_gather=(bool, True), volume_photons=(int, 250000),
                          volume_lookup_radius=(float, 0.05), volume_lookup_size=(int, 64),
-                         step_size=(float, 0.0), granularity=(int, None)),
+                         step_size=(float, 0.0), volume_boundary_rays=(int, 0), granularity=(int, None)),
     # Stochastic progressive photon mapping (Hachisuka & Jensen 2009): Mitsuba 0.6's photonCount,
     # initialRadius (0 = automatic), alpha, maxDepth, rrDepth; granularity accepted and ignored.
     # One pass per spp. See renderer/integrators/sppm.cpp.
@@ -159,7 +161,7 @@ def _integrator_desc(spec, scene_integrator: IntegratorDesc):
         raise SceneError(f"{where}['strategy_images']: must be a path depth in 0..16 (0: none), "
                          f"got {out['strategy_images']}")
     if itype == "photonmapper":
-        for k in ("direct_samples", "global_photons", "caustic_photons", "volume_photons"):
+        for k in ("direct_samples", "global_photons", "caustic_photons", "volume_photons", "volume_boundary_rays"):
             if out[k] < 0:
                 raise SceneError(f"{where}['{k}']: must be >= 0, got {out[k]}")
         for k in ("lookup_size", "gather_rays", "volume_lookup_size"):
@@ -194,7 +196,7 @@ def _core_integrator(spec: dict):
     for k in ("max_depth", "rr_depth", "hide_emitters", "emitter_samples", "bsdf_samples", "mis", "beta",
               "strategy_images", "direct_samples", "global_photons", "caustic_photons", "global_lookup_radius",
               "caustic_lookup_radius", "lookup_size", "gather_rays", "final_gather", "volume_photons",
-              "volume_lookup_radius", "volume_lookup_size", "step_size", "photon_count",
+              "volume_lookup_radius", "volume_lookup_size", "step_size", "volume_boundary_rays", "photon_count",
               "initial_radius", "alpha"):
         if k in spec:
             setattr(c, k, spec[k])

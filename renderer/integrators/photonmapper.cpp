@@ -42,6 +42,8 @@
 //   volume_photons         photons stored in the volume photon map (volumePhotons, 250000)
 //   volume_lookup_radius   maximum lookup radius, volume map (volumeLookupRadius, 0.05)
 //   volume_lookup_size     photons per volume radiance estimate (ours, 64)
+//   volume_boundary_rays   K > 0: correct the volume estimate's sphere for its part
+//                          outside the medium with K rays (ours, 0: the seed's estimate)
 //   step_size              ray-marching step in world units (ours; 0 = automatic:
 //                          one mean free path of the medium's densest channel,
 //                          at most 1/16 of the scene's radius)
@@ -72,6 +74,7 @@
 
 #include "integrators/common.h"
 #include "integrators/media_common.h"
+#include "core/warp.h"
 #include "integrators/render.h"
 #include "photon/photon_trace.h"
 
@@ -119,7 +122,8 @@ public:
           global_radius_(d.global_lookup_radius), caustic_radius_(d.caustic_lookup_radius),
           lookup_size_(d.lookup_size), gather_rays_(d.gather_rays), final_gather_(d.final_gather),
           volume_photons_(d.volume_photons), volume_radius_(d.volume_lookup_radius),
-          volume_lookup_size_(d.volume_lookup_size), step_size_(d.step_size) {
+          volume_lookup_size_(d.volume_lookup_size), step_size_(d.step_size),
+          boundary_rays_(d.volume_boundary_rays) {
         auto bad = [](const std::string& p, const std::string& what) {
             throw std::invalid_argument("integrator 'photonmapper': " + p + " " + what);
         };
@@ -134,6 +138,7 @@ public:
         if (!(volume_radius_ > 0.f) || !std::isfinite(volume_radius_)) bad("volume_lookup_radius", "must be > 0");
         if (volume_lookup_size_ < 1) bad("volume_lookup_size", "must be >= 1");
         if (!(step_size_ >= 0.f) || !std::isfinite(step_size_)) bad("step_size", "must be >= 0 (0 = automatic)");
+        if (boundary_rays_ < 0 || boundary_rays_ > 1024) bad("volume_boundary_rays", "must be in 0..1024");
     }
 
     bool supports_media() const override { return true; }
@@ -282,8 +287,9 @@ private:
     Color march(const Scene& scene, const Maps& maps, Sampler& sampler, const Ray& ray, float t_hit,
                 const MediumTracker& mt, const PathClass& pc, int c, const Color& beta, EffectRadiance& out,
                 std::vector<Neighbour>& nb, ThreadStats& stats) const;
-    Color volume_estimate(const Maps& maps, int medium, const Vec3& p, const Vec3& wi, const PhaseFunction& phase,
-                          int max_photon_depth, std::vector<Neighbour>& nb) const;
+    Color volume_estimate(const Scene& scene, const Maps& maps, int medium, const Vec3& p, const Vec3& wi,
+                          const PhaseFunction& phase, int max_photon_depth, std::vector<Neighbour>& nb,
+                          Sampler& sampler, ThreadStats& stats) const;
     Color gather_media(const Scene& scene, const Maps& maps, Sampler& sampler, const Interaction& x,
                        const Bsdf& bsdf, const Vec3& wi, int c, const MediumTracker& mt, const PathClass& pc,
                        const Color& beta, EffectRadiance& out, std::vector<Neighbour>& nb, ThreadStats& stats) const;
@@ -298,6 +304,7 @@ private:
     float volume_radius_;
     int volume_lookup_size_;
     float step_size_;
+    int boundary_rays_;
 };
 
 
@@ -414,9 +421,19 @@ float sphere_exit(const Ray& ray, const Vec3& center, float radius) {
 // sum over the n nearest photons of medium `medium` within the maximum
 // radius of p(w_p, w) Phi_p, over the sphere's volume (r: the n-th photon's
 // distance, or the maximum radius when fewer are found).
-Color PhotonMapper::volume_estimate(const Maps& maps, int medium, const Vec3& p, const Vec3& wi,
-                                    const PhaseFunction& phase, int max_photon_depth,
-                                    std::vector<Neighbour>& nb) const {
+//
+// volume_boundary_rays K > 0 (ours; off by default, the seed's estimate):
+// near a boundary the sphere holds photons only in its part inside the
+// medium, so 4/3 pi r^3 overstates the volume they came from (the boundary
+// bias above). The part inside, seen from p, is V = int_S2 min(d(w), r)^3 / 3
+// dw, d(w) the distance to the first surface in direction w; K rays,
+// stratified in cos theta with a random azimuth, estimate it as
+// (4 pi / K) sum_k min(d_k, r)^3 / 3 (exact in expectation for whatever is
+// visible from p; surfaces inside the sphere with photons behind them make
+// it overcorrect). The ratio to the estimate is consistent, not unbiased.
+Color PhotonMapper::volume_estimate(const Scene& scene, const Maps& maps, int medium, const Vec3& p, const Vec3& wi,
+                                    const PhaseFunction& phase, int max_photon_depth, std::vector<Neighbour>& nb,
+                                    Sampler& sampler, ThreadStats& stats) const {
     if (!maps.has_volume || max_photon_depth < 1 || medium < 0 || medium >= int(maps.volume.size()))
         return Color(0.f);
     const PhotonMap& map = maps.volume[medium];
@@ -430,7 +447,24 @@ Color PhotonMapper::volume_estimate(const Maps& maps, int medium, const Vec3& p,
         const Photon& ph = map.photons()[n.idx];
         sum += ph.power * phase.eval(wi, ph.wi);
     }
-    return sum * (1.f / ((4.f / 3.f) * kPi * r2 * std::sqrt(r2)));
+    float volume_fraction = 1.f;
+    if (boundary_rays_ > 0) {
+        float r = std::sqrt(r2), frac = 0.f;
+        Vec2 u = sampler.next_2d();
+        for (int k = 0; k < boundary_rays_; ++k) {
+            // Stratified in z (= cos theta), azimuth by the golden angle from u.y.
+            float uz = (float(k) + u.x) / float(boundary_rays_);
+            float uphi = u.y + float(k) * 0.6180339887f;
+            Vec3 d = warp::square_to_uniform_sphere(Vec2(uz, uphi - std::floor(uphi)));
+            Interaction it;
+            ++stats.rays;
+            float t = scene.intersect(Ray{p, d, 0.f, r}, it) ? std::min(it.t, r) : r;
+            frac += (t / r) * (t / r) * (t / r);
+        }
+        // Floored at 1/K, so that a lookup boxed in by nearby surfaces cannot blow up.
+        volume_fraction = std::max(frac / float(boundary_rays_), 1.f / float(boundary_rays_));
+    }
+    return sum * (1.f / ((4.f / 3.f) * kPi * r2 * std::sqrt(r2) * volume_fraction));
 }
 
 // Ray marching over the segment [0, t_hit) of `ray` through the current
@@ -492,7 +526,7 @@ Color PhotonMapper::march(const Scene& scene, const Maps& maps, Sampler& sampler
         if (nee)
             s += ss * direct_media(scene, mi, m, sampler, stats,
                                    [&](const Vec3& wo) { return Color(phase.eval(wi, wo)); });
-        s += volume_estimate(maps, m, y, wi, phase, budget, nb);
+        s += volume_estimate(scene, maps, m, y, wi, phase, budget, nb, sampler, stats);
         out.add(cls, beta * tr * s * dt);
     }
     tr *= med.segment_transmittance(ray.o + ray.d * t_prev, ray.d, t1 - t_prev, sampler);
@@ -544,7 +578,8 @@ Color PhotonMapper::gather_media(const Scene& scene, const Maps& maps, Sampler& 
                     if (!scene.emitters.empty() && (max_depth_ < 0 || c + g + 1 <= max_depth_))
                         li += direct_media(scene, mi, gm.medium, sampler, stats,
                                            [&](const Vec3& w2) { return Color(phase.eval(mi.wi, w2)); });
-                    Color lm = volume_estimate(maps, gm.medium, y, mi.wi, phase, photon_budget(max_depth_, c + g), nb);
+                    Color lm = volume_estimate(scene, maps, gm.medium, y, mi.wi, phase,
+                                               photon_budget(max_depth_, c + g), nb, sampler, stats);
                     Color ss = sigma_s_at(med, y);
                     for (int ch = 0; ch < 3; ++ch)
                         if (ss[ch] > 0.f) li[ch] += lm[ch] / ss[ch];
