@@ -209,6 +209,11 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("lookup_size", &IntegratorDesc::lookup_size)
         .def_readwrite("gather_rays", &IntegratorDesc::gather_rays)
         .def_readwrite("final_gather", &IntegratorDesc::final_gather)
+        .def_readwrite("volume_photons", &IntegratorDesc::volume_photons)
+        .def_readwrite("volume_lookup_radius", &IntegratorDesc::volume_lookup_radius)
+        .def_readwrite("volume_lookup_size", &IntegratorDesc::volume_lookup_size)
+        .def_readwrite("step_size", &IntegratorDesc::step_size)
+        .def_readwrite("volume_boundary_rays", &IntegratorDesc::volume_boundary_rays)
         .def_readwrite("photon_count", &IntegratorDesc::photon_count)
         .def_readwrite("initial_radius", &IntegratorDesc::initial_radius)
         .def_readwrite("alpha", &IntegratorDesc::alpha);

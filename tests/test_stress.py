@@ -35,7 +35,8 @@ ESTIMATORS = ["path", "direct", "ptracer", "bdpt", "photonmapper", "sppm"]
 # photon estimators' defaults (250 000 photons, 16 shadow and 32 gather rays)
 # cost minutes over the sweep; stability does not depend on them.
 SWEEP_PARAMS = {
-    "photonmapper": {"global_photons": 20000, "caustic_photons": 20000, "direct_samples": 1, "gather_rays": 4},
+    "photonmapper": {"global_photons": 20000, "caustic_photons": 20000, "volume_photons": 20000, "direct_samples": 1,
+                     "gather_rays": 4},
     "sppm": {"photon_count": 10000},
 }
 # Estimators that refuse emitters at infinity (constant, directional), with
@@ -114,7 +115,7 @@ MEDIA_SCENES = {
     "media_camera_in_glass": {"lit": [(*ALL, "environment through the medium and the glass")]},
     "media_grid_sparse": {"lit": [(*ALL, "backlight through the cloud")]},
 }
-SUPPORTS_MEDIA = {"path", "volpath", "ptracer", "bdpt"}
+SUPPORTS_MEDIA = {"path", "volpath", "ptracer", "bdpt", "photonmapper"}
 # Media scenes where light tracing cannot light the checked region (the
 # sanity checks still apply): the camera sees it only through glass, and a
 # light path never connects to a pinhole through a delta vertex.

@@ -27,12 +27,19 @@ INTEGRATOR_PARAMS = {
     # Photon mapping (Jensen), Mitsuba 0.6's parameters in snake_case (directSamples -> direct_samples,
     # globalPhotons, causticPhotons, globalLookupRadius, causticLookupRadius, lookupSize, maxDepth,
     # rrDepth, hideEmitters; the camelCase names are aliases, MITSUBA06_ALIASES; granularity accepted
-    # and ignored); gather_rays and final_gather are ours. Not yet: volumePhotons (media, issue 6).
+    # and ignored); gather_rays and final_gather are ours. In scenes with media (issue 6): volume_photons
+    # (volumePhotons) in the volume photon map, volume_lookup_radius (volumeLookupRadius), and ours:
+    # volume_lookup_size (photons per volume estimate) and step_size (ray marching, world units;
+    # 0 = the densest channel's mean free path, at most 1/16 of the scene's radius);
+    # volume_boundary_rays K > 0 (ours) corrects the estimate's sphere volume for the part of it
+    # behind the medium's boundary, measured with K rays (0: the seed's 4/3 pi r^3).
     # Radii are relative to the scene's bounding-sphere radius. See renderer/integrators/photonmapper.cpp.
     "photonmapper": dict(_COMMON, direct_samples=(int, 16), global_photons=(int, 250000),
                          caustic_photons=(int, 250000), global_lookup_radius=(float, 0.05),
                          caustic_lookup_radius=(float, 0.0125), lookup_size=(int, 120), gather_rays=(int, 32),
-                         final_gather=(bool, True), granularity=(int, None)),
+                         final_gather=(bool, True), volume_photons=(int, 250000),
+                         volume_lookup_radius=(float, 0.05), volume_lookup_size=(int, 64),
+                         step_size=(float, 0.0), volume_boundary_rays=(int, 0), granularity=(int, None)),
     # Stochastic progressive photon mapping (Hachisuka & Jensen 2009): Mitsuba 0.6's photonCount,
     # initialRadius (0 = automatic), alpha, maxDepth, rrDepth; granularity accepted and ignored.
     # One pass per spp. See renderer/integrators/sppm.cpp.
@@ -45,6 +52,7 @@ MITSUBA06_ALIASES = {
     "photonmapper": {"directSamples": "direct_samples", "globalPhotons": "global_photons",
                      "causticPhotons": "caustic_photons", "globalLookupRadius": "global_lookup_radius",
                      "causticLookupRadius": "caustic_lookup_radius", "lookupSize": "lookup_size",
+                     "volumePhotons": "volume_photons", "volumeLookupRadius": "volume_lookup_radius",
                      "maxDepth": "max_depth", "rrDepth": "rr_depth", "hideEmitters": "hide_emitters"},
     "sppm": {"photonCount": "photon_count", "initialRadius": "initial_radius", "maxDepth": "max_depth",
              "rrDepth": "rr_depth", "hideEmitters": "hide_emitters"},
@@ -153,13 +161,16 @@ def _integrator_desc(spec, scene_integrator: IntegratorDesc):
         raise SceneError(f"{where}['strategy_images']: must be a path depth in 0..16 (0: none), "
                          f"got {out['strategy_images']}")
     if itype == "photonmapper":
-        for k in ("direct_samples", "global_photons", "caustic_photons"):
+        for k in ("direct_samples", "global_photons", "caustic_photons", "volume_photons", "volume_boundary_rays"):
             if out[k] < 0:
                 raise SceneError(f"{where}['{k}']: must be >= 0, got {out[k]}")
-        for k in ("lookup_size", "gather_rays"):
+        for k in ("lookup_size", "gather_rays", "volume_lookup_size"):
             if out[k] < 1:
                 raise SceneError(f"{where}['{k}']: must be >= 1, got {out[k]}")
-        for k in ("global_lookup_radius", "caustic_lookup_radius"):
+        if not out["step_size"] >= 0:
+            raise SceneError(f"{where}['step_size']: must be >= 0 (world units; 0 = automatic), "
+                             f"got {out['step_size']}")
+        for k in ("global_lookup_radius", "caustic_lookup_radius", "volume_lookup_radius"):
             if not out[k] > 0:
                 raise SceneError(f"{where}['{k}']: must be > 0 (relative to the scene's radius), got {out[k]}")
     if itype == "sppm":
@@ -184,7 +195,8 @@ def _core_integrator(spec: dict):
     c.type = spec["type"]
     for k in ("max_depth", "rr_depth", "hide_emitters", "emitter_samples", "bsdf_samples", "mis", "beta",
               "strategy_images", "direct_samples", "global_photons", "caustic_photons", "global_lookup_radius",
-              "caustic_lookup_radius", "lookup_size", "gather_rays", "final_gather", "photon_count",
+              "caustic_lookup_radius", "lookup_size", "gather_rays", "final_gather", "volume_photons",
+              "volume_lookup_radius", "volume_lookup_size", "step_size", "volume_boundary_rays", "photon_count",
               "initial_radius", "alpha"):
         if k in spec:
             setattr(c, k, spec[k])

@@ -121,7 +121,8 @@ RenderOutput render(const Scene& scene, const Integrator& requested, const Rende
     if (scene.features.has_media && !integrator.supports_media())
         throw std::invalid_argument("integrator '" + integrator.type +
                                     "' does not support participating media yet, and this scene has media; "
-                                    "use integrator 'volpath' (or 'path', the same estimator)");
+                                    "use integrator 'volpath' (or 'path', the same estimator), 'bdpt', 'ptracer', or "
+                                    "'photonmapper' (volume photon map and ray marching)");
     if (scene.features.has_dipole && !integrator.supports_dipole()) {
         std::string shape;
         for (const auto& s : scene.shapes)

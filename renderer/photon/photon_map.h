@@ -42,6 +42,11 @@ struct Photon {
 constexpr uint32_t kPhotonIndirect = 1u << 2;
 // The photon is the first vertex of its light path (direct light at x).
 constexpr uint32_t kPhotonDirect = 1u << 3;
+// Scenes with media: the light path scattered in a medium before this
+// vertex (V), or in a medium behind a non-null boundary (B; MediumTracker),
+// so the photon's light belongs to the volume or subsurface class.
+constexpr uint32_t kPhotonVolumePath = 1u << 4;
+constexpr uint32_t kPhotonSubsurfacePath = 1u << 5;
 
 struct Neighbour {
     float d2;      // squared distance to the query point

@@ -3,6 +3,7 @@
 #include <chrono>
 
 #include "integrators/common.h"
+#include "integrators/media_common.h"
 #include "integrators/parallel.h"
 
 namespace rm {
@@ -46,6 +47,128 @@ void normalise(std::vector<Photon>& ph, uint64_t paths) {
     for (Photon& p : ph) p.power *= inv;
 }
 
+
+// The shape an area emitter lies on (-1 for the others): where its light
+// starts decides the medium it starts in (emitter_medium).
+int emitter_shape_of(const Scene& scene, const Emitter& e) {
+    for (size_t i = 0; i < scene.shapes.size(); ++i) {
+        int k = scene.shapes[i]->emitter;
+        if (k >= 0 && scene.emitters[k].get() == &e) return int(i);
+    }
+    return -1;
+}
+
+Photon make_photon(const Vec3& p, const Vec3& wi, const Color& power, uint32_t flags) {
+    Photon ph;
+    ph.p = p;
+    ph.wi = wi;
+    ph.power = power;
+    ph.flags = flags;
+    return ph;
+}
+
+// Photon tracing through participating media (photon_trace.h): the walk of
+// subpath.cpp's random_walk for light subpaths, storing photons instead of
+// vertices. Surface photons follow the rules of trace_photon_path; volume
+// photons (spec.volume) are stored at medium scattering events, with the
+// power th.beta the walk carries there. That power already holds the
+// event's sigma_s / (density of scattering there) (free_flight_*), so the
+// stored photons are distributed with density sigma_s(x) int L(x, w) dw per
+// unit volume (the seed: d^2 Phi = sigma_s L dw dV, Jensen & Christensen 1998):
+// what the camera pass's Phi / (4/3 pi r^3) estimate divides by volume.
+void trace_media_path(const Scene& scene, const PhotonTraceSpec& spec, const Emitter& e, const EmissionSample& es,
+                      const Color& beta0, Sampler& sampler, std::vector<Photon>& out, ThreadStats& stats) {
+    Ray ray;
+    ray.o = es.p + es.n * es.eps;
+    ray.d = es.d;
+    MediumTracker mt;
+    mt.medium = emitter_medium(scene, ray, es.n, emitter_shape_of(scene, e));
+    // Hero channel of spectral MIS, drawn once per light path (media_common.h).
+    SpectralThroughput th(std::min(int(sampler.next_1d() * 3.f), 2), beta0);
+    const float b0 = max_component(beta0);
+    BsdfContext ctx{TransportMode::Importance};
+    int k = 0;                 // scattering vertices before the current one
+    bool all_specular = true;  // each of them scattered specularly
+    uint32_t medium_flags = 0; // kPhotonVolumePath / kPhotonSubsurfacePath once it scattered in a medium
+    // volpath's roulette (volpath.cpp says why): only once the throughput
+    // fell below its start, capped at 0.95 beyond kLongWalk events.
+    constexpr int kLongWalk = 1024;
+    auto roulette = [&](int depth, float rr_u) {
+        if (depth < spec.rr_depth) return true;
+        float q = b0 > 0.f ? max_component(th.beta) / b0 : 0.f;
+        if (depth >= kLongWalk) q = std::min(q, 0.95f);
+        if (q >= 1.f) return true;
+        if (!(rr_u < q)) return false;
+        th.beta /= q;
+        return true;
+    };
+    auto store = [&](const Vec3& p, const Vec3& wi, uint32_t flags) {
+        if (!is_finite(th.beta) || is_black(th.beta)) return;
+        out.push_back(make_photon(p, wi, th.beta, flags));
+        ++stats.photons;
+    };
+    for (int depth = 1, guard = 0; guard < (1 << 20); ++guard) {  // depth: scattering vertex about to be made
+        Interaction it;
+        ++stats.rays;
+        bool hit = scene.intersect(ray, it);
+        // 1. Free flight through the current medium.
+        if (mt.medium >= 0) {
+            const Medium& med = *scene.media[mt.medium];
+            float t = 0.f;
+            FlightEvent event = free_flight(med, ray, hit ? it.t : ray.tmax, sampler, th, t);
+            if (event == kAbsorbed) break;
+            if (event == kScattered) {
+                Vec3 p = ray.o + ray.d * t;
+                // 2. A volume photon at a multiple-scattering event (k > 0).
+                if (spec.volume && k > 0)
+                    store(p, -ray.d, kPhotonIndirect | (uint32_t(std::min(depth, 255)) << kPhotonDepthShift) |
+                                         (uint32_t(mt.medium + 1) << kPhotonMediumShift));
+                ++k;
+                all_specular = false;
+                medium_flags |= mt.enclosed ? kPhotonSubsurfacePath : kPhotonVolumePath;
+                if (spec.caustic_only) break;  // L S+ D only: a medium vertex ends a caustic path
+                if (spec.max_depth >= 0 && depth >= spec.max_depth) break;
+                PhaseSample ps = med.phase->sample(-ray.d, sampler.next_2d());
+                if (!(ps.pdf_w > 0.f)) break;
+                th.beta *= ps.weight;
+                ray = Ray{p, ps.wo, 0.f, kInf};
+                if (!roulette(depth++, sampler.next_1d())) break;
+                continue;
+            }
+        }
+        if (!hit) break;
+        const Bsdf& bsdf = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
+        // 3. An index-matched boundary: no vertex, only a change of medium.
+        if (bsdf.flags() == kNull) {
+            mt.cross(it, ray.d, true);
+            ray = it.spawn(ray.d);
+            continue;
+        }
+        // 4. A surface photon where a non-specular lobe can scatter it
+        //    (as trace_photon_path; none in a volume-only pass).
+        if (!spec.volume && bsdf.has_smooth()) {
+            bool direct = k == 0, caustic = k > 0 && all_specular;
+            bool keep = spec.caustic_only ? caustic : spec.indirect_only ? !all_specular : (spec.store_direct || !direct);
+            if (keep)
+                store(it.p, it.wi, (direct ? kPhotonDirect : 0u) | (all_specular ? 0u : kPhotonIndirect) |
+                                       medium_flags | (uint32_t(std::min(depth, 255)) << kPhotonDepthShift));
+        }
+        if (spec.max_depth >= 0 && depth >= spec.max_depth) break;
+        // 5. Scatter by the adjoint BSDF; the medium changes when the sample crosses a boundary.
+        Vec3 wi = it.to_local(it.wi);
+        BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+        if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
+        Vec3 wo = it.to_world(bs.wo);
+        th.beta *= bs.weight * shading_correction(it, it.wi, wo);
+        ++k;
+        all_specular = all_specular && bs.is_delta;
+        if (spec.caustic_only && !all_specular) break;
+        mt.cross(it, wo, false);
+        ray = it.spawn(wo);
+        if (!roulette(depth++, sampler.next_1d())) break;
+    }
+}
+
 }  // namespace
 
 void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path,
@@ -67,6 +190,10 @@ void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t
     EmissionSample es = e.sample_emission(u_pos, u_extra, u_dir, center, radius);
     if (!(es.pdf_a > 0.f) || !(es.pdf_w > 0.f) || is_black(es.weight)) return;
     Color beta = es.weight * (1.f / emitter_pick_prob(scene));  // flux of the path
+    if (scene.features.has_media) {
+        trace_media_path(scene, spec, e, es, beta, sampler, out, stats);
+        return;
+    }
     Color thr(1.f);                                              // throughput since the emitter
     Ray ray;
     ray.o = es.p + es.n * es.eps;

@@ -20,6 +20,10 @@ namespace rm {
 // Segments from the emitter to the photon's vertex, in Photon::flags.
 constexpr int kPhotonDepthShift = 8;
 inline int photon_depth(const Photon& p) { return int((p.flags >> kPhotonDepthShift) & 0xffu); }
+// A volume photon's medium (index into Scene::media) in Photon::flags bits
+// 16-31 as index + 1; 0 for a surface photon.
+constexpr int kPhotonMediumShift = 16;
+inline int photon_medium(const Photon& p) { return int(p.flags >> kPhotonMediumShift) - 1; }
 
 struct PhotonTraceSpec {
     int max_depth = -1;        // light-path segments to the last stored photon; -1 = unbounded
@@ -28,10 +32,24 @@ struct PhotonTraceSpec {
     bool store_direct = true;  // keep photons at the first vertex (L D: direct light)
     bool indirect_only = false;// keep only photons whose path had a non-specular vertex before
     uint64_t stream = 0;       // decorrelates the random streams of different maps
+    // Scenes with media only (Scene::features.has_media): keep only volume
+    // photons, at medium scattering events that follow at least one
+    // scattering vertex (L X+ V: multiple scattering and volume caustics;
+    // single scattering L V is computed by the camera pass's next event
+    // estimation, as Jensen & Christensen 1998 compute it). Without it, a
+    // photon tracer in a medium scene stores surface photons only.
+    bool volume = false;
 };
 
 // Traces light path `path` of pass `pass` and appends its photons, their
-// power not yet divided by the number of paths traced.
+// power not yet divided by the number of paths traced. In a scene with
+// media the path takes free flights through them (the seed's photon
+// tracing in participating media: mean free path 1 / sigma_t, scatter with
+// probability sigma_s / sigma_t else absorb, the new direction drawn from
+// the phase function), crosses index-matched boundaries without a vertex,
+// and its power follows the hero-channel spectral MIS throughput of
+// media_common.h; `depth` then counts scattering vertices (surface or
+// medium, null boundaries excluded), as volpath's max_depth does.
 void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path,
                        uint64_t pass, std::vector<Photon>& out, ThreadStats& stats);
 

@@ -100,6 +100,12 @@ struct IntegratorDesc {
     int lookup_size = 120;           // lookupSize
     int gather_rays = 32;            // final-gathering rays per camera sample
     bool final_gather = true;        // false: the global map seen directly (shows its bias)
+    // photonmapper in scenes with media (issue 6): the volume photon map and ray marching
+    int volume_photons = 250000;     // volumePhotons
+    float volume_lookup_radius = 0.05f;  // maximum lookup radius, relative as above
+    int volume_lookup_size = 64;     // photons per volume radiance estimate
+    float step_size = 0.f;           // ray-marching step, world units; 0 = automatic
+    int volume_boundary_rays = 0;    // > 0: that many rays correct the estimate's volume at medium boundaries
     // sppm (Mitsuba 0.6: photonCount, initialRadius, alpha)
     int photon_count = 250000;       // photons emitted per pass
     float initial_radius = 0.f;      // world units; 0 = automatic
