@@ -121,4 +121,21 @@ DipoleStep dipole_step(const Scene& scene, const Dipole& dp, Interaction& it, Sa
     return st;
 }
 
+bool camera_dipole_vertex(const Scene& scene, const Dipole& dp, Interaction& it, Sampler& sampler,
+                          ThreadStats& stats, Color& beta, PathClass& pc, const Bsdf*& bsdf, Vec3& wi,
+                          BsdfSample& bs, bool& sampled) {
+    DipoleStep st = dipole_step(scene, dp, it, sampler, stats);
+    if (st.kind == DipoleStep::kFailed) return false;
+    if (st.kind == DipoleStep::kReflected) {
+        bs = st.reflection;
+        sampled = true;
+    } else {
+        beta *= st.weight;
+        pc.subsurface = true;
+        bsdf = &dp.exit_lobe();
+        wi = Vec3(0.f, 0.f, 1.f);
+    }
+    return true;
+}
+
 }  // namespace rm

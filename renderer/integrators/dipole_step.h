@@ -22,6 +22,18 @@ struct DipoleStep {
 // event estimation at xi and continues the path with Dipole::exit_lobe().
 DipoleStep dipole_step(const Scene& scene, const Dipole& dp, Interaction& it, Sampler& sampler, ThreadStats& stats);
 
+// A camera path's vertex on a dipole shape (path.cpp step 4a, volpath.cpp
+// step 7a): one function, so that the surface and the media loop stay one
+// estimator. Runs dipole_step and folds its outcome into the path state:
+// on specular reflection `bs` is that sample and `sampled` is set (no next
+// event estimation, no BSDF sampling); on an exit point, `it` is xi, `beta`
+// takes the weight, the path class is marked subsurface, and `bsdf` / `wi`
+// become the exit lobe and its local incident direction (the normal).
+// Returns false when the path ends (light from inside, or no exit point).
+bool camera_dipole_vertex(const Scene& scene, const Dipole& dp, Interaction& it, Sampler& sampler,
+                          ThreadStats& stats, Color& beta, PathClass& pc, const Bsdf*& bsdf, Vec3& wi,
+                          BsdfSample& bs, bool& sampled);
+
 // The exit-point proposal on its own (tests): from `xo` on shape `shape`,
 // with the random numbers given; returns false on failure, else the exit
 // point and the weight Rd / pdf.

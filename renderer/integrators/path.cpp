@@ -85,20 +85,10 @@ public:
             // 4a. A dipole BSSRDF (dipole_step.h): specular reflection, or the
             //     subsurface exit point xi, where the path goes on (a B vertex)
             //     with the exit lobe Sw as its BSDF.
-            if (shape.dipole >= 0) {
-                const Dipole& dp = *scene.dipoles[shape.dipole];
-                DipoleStep st = dipole_step(scene, dp, it, sampler, stats);
-                if (st.kind == DipoleStep::kFailed) break;
-                if (st.kind == DipoleStep::kReflected) {
-                    bs = st.reflection;
-                    sampled = true;
-                } else {
-                    beta *= st.weight;
-                    pc.subsurface = true;
-                    bsdf = &dp.exit_lobe();
-                    wi = Vec3(0.f, 0.f, 1.f);
-                }
-            }
+            if (shape.dipole >= 0 &&
+                !camera_dipole_vertex(scene, *scene.dipoles[shape.dipole], it, sampler, stats, beta, pc, bsdf,
+                                      wi, bs, sampled))
+                break;
 
             if (!sampled) {
                 // 4. Next event estimation (smooth lobes only).

@@ -200,20 +200,10 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         //     reflection, or the exit point xi (a B vertex) with the exit
         //     lobe as its BSDF. The path never enters the object, so the
         //     current medium (outside it) stays.
-        if (shape.dipole >= 0) {
-            const Dipole& dp = *scene.dipoles[shape.dipole];
-            DipoleStep st = dipole_step(scene, dp, it, sampler, stats);
-            if (st.kind == DipoleStep::kFailed) break;
-            if (st.kind == DipoleStep::kReflected) {
-                bs = st.reflection;
-                sampled = true;
-            } else {
-                beta *= st.weight;
-                pc.subsurface = true;
-                bsdf_at = &dp.exit_lobe();
-                wi = Vec3(0.f, 0.f, 1.f);
-            }
-        }
+        if (shape.dipole >= 0 &&
+            !camera_dipole_vertex(scene, *scene.dipoles[shape.dipole], it, sampler, stats, beta, pc, bsdf_at, wi,
+                                  bs, sampled))
+            break;
 
         if (!sampled) {
             // 8. Next event estimation at the surface, through media.
