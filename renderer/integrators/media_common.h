@@ -1,9 +1,13 @@
 // Pieces of media transport shared by the camera-path loop (volpath.cpp)
 // and the light subpaths of ptracer (subpath.cpp): the spectral-MIS path
 // throughput, the two free-flight samplers, medium tracking across
-// boundaries and the medium an emitter's light starts in.
+// boundaries and the medium an emitter's light starts in; and light
+// sampling through media (volpath.cpp, photonmapper.cpp).
 #pragma once
-#include "integrators/integrator.h"
+#include <cstddef>
+#include <type_traits>
+
+#include "integrators/common.h"
 
 namespace rm {
 
@@ -88,5 +92,29 @@ struct MediumTracker {
 // assumption of this rule; a camera enclosed by a medium boundary with a
 // light outside it would break it).
 int emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, int it_shape);
+
+// NEE at a scattering vertex `it` (surface or medium) through media and
+// index-matched boundaries: `f_of(wo)` is the BSDF value (times cosine) or
+// the phase function, `pdf_of(wo)` the density of the direction sampling
+// it competes with, weighted by the power heuristic (Veach 1997, eq. 9.13).
+// pdf_of = nullptr: light samples only, no MIS weight (photonmapper, where
+// nothing else finds the emitters from `it`).
+template <typename EvalF, typename PdfF>
+Color direct_through_media(const Scene& scene, const Interaction& it, int medium, Sampler& sampler,
+                           ThreadStats& stats, EvalF f_of, PdfF pdf_of) {
+    DirectSample ds;
+    if (!sample_light(scene, it.p, sampler, ds)) return Color(0.f);
+    Color f = f_of(ds.d);
+    if (is_black(f)) return Color(0.f);
+    ++stats.shadow_rays;
+    int m = it.kind == VertexKind::Medium ? medium : Scene::medium_after(it, ds.d, medium);
+    Color tr = scene.transmittance(it, ds, m, stats.rays, sampler);
+    if (is_black(tr)) return Color(0.f);
+    float light_pdf = ds.pdf_w * emitter_pick_prob(scene);
+    float w = 1.f;
+    if constexpr (!std::is_same_v<PdfF, std::nullptr_t>)
+        if (!ds.is_delta) w = mis_power(light_pdf, pdf_of(ds.d));
+    return f * tr * ds.radiance * (w / light_pdf);
+}
 
 }  // namespace rm

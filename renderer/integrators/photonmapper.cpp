@@ -375,24 +375,6 @@ private:
 
 namespace {
 
-// Light sampling from a surface or medium vertex through media and
-// index-matched boundaries; light samples only (nothing else finds the
-// emitters from here in this estimator, so no MIS weight, as step 2 of the
-// surface loop). f_of(wo): the BSDF value times cosine, or the phase function.
-template <typename EvalF>
-Color direct_media(const Scene& scene, const Interaction& it, int medium, Sampler& sampler, ThreadStats& stats,
-                   EvalF f_of) {
-    DirectSample ds;
-    if (!sample_light(scene, it.p, sampler, ds)) return Color(0.f);
-    Color f = f_of(ds.d);
-    if (is_black(f)) return Color(0.f);
-    ++stats.shadow_rays;
-    int m = it.kind == VertexKind::Medium ? medium : Scene::medium_after(it, ds.d, medium);
-    Color tr = scene.transmittance(it, ds, m, stats.rays, sampler);
-    if (is_black(tr)) return Color(0.f);
-    return f * tr * ds.radiance * (1.f / (ds.pdf_w * emitter_pick_prob(scene)));
-}
-
 Interaction medium_vertex(const Vec3& p, const Vec3& wi) {
     Interaction mi;
     mi.kind = VertexKind::Medium;
@@ -528,8 +510,8 @@ Color PhotonMapper::march(const Scene& scene, const Maps& maps, Sampler& sampler
         Interaction mi = medium_vertex(y, wi);
         Color s(0.f);
         if (nee)
-            s += ss * direct_media(scene, mi, m, sampler, stats,
-                                   [&](const Vec3& wo) { return Color(phase.eval(wi, wo)); });
+            s += ss * direct_through_media(scene, mi, m, sampler, stats,
+                                           [&](const Vec3& wo) { return Color(phase.eval(wi, wo)); }, nullptr);
         s += volume_estimate(scene, maps, m, y, wi, phase, budget, nb, sampler, stats);
         out.add(cls, beta * tr * s * dt);
     }
@@ -580,8 +562,9 @@ Color PhotonMapper::gather_media(const Scene& scene, const Maps& maps, Sampler& 
                     const PhaseFunction& phase = *med.phase;
                     Color li(0.f);
                     if (!scene.emitters.empty() && (max_depth_ < 0 || c + g + 1 <= max_depth_))
-                        li += direct_media(scene, mi, gm.medium, sampler, stats,
-                                           [&](const Vec3& w2) { return Color(phase.eval(mi.wi, w2)); });
+                        li += direct_through_media(scene, mi, gm.medium, sampler, stats,
+                                                   [&](const Vec3& w2) { return Color(phase.eval(mi.wi, w2)); },
+                                                   nullptr);
                     Color lm = volume_estimate(scene, maps, gm.medium, y, mi.wi, phase,
                                                photon_budget(max_depth_, c + g), nb, sampler, stats);
                     Color ss = sigma_s_at(med, y);
@@ -673,8 +656,9 @@ void PhotonMapper::radiance_media(const Scene& scene, const Maps& maps, Sampler&
             if (mask[cls_d] && direct_samples_ > 0 && !scene.emitters.empty()) {
                 Color ld(0.f);
                 for (int i = 0; i < direct_samples_; ++i)
-                    ld += direct_media(scene, it, mt.medium, sampler, stats,
-                                       [&](const Vec3& wo) { return bsdf.eval(ctx, wi, it.to_local(wo)); });
+                    ld += direct_through_media(scene, it, mt.medium, sampler, stats,
+                                               [&](const Vec3& wo) { return bsdf.eval(ctx, wi, it.to_local(wo)); },
+                                               nullptr);
                 out.add(cls_d, beta * ld / float(direct_samples_));
             }
             // 4. Caustics from the caustic map (its photons came through

@@ -43,29 +43,6 @@
 
 namespace rm {
 
-namespace {
-
-// NEE at a scattering vertex `it` (surface or medium) through media: `f(wo)`
-// is the BSDF value (times cosine) or the phase function, `pdf(wo)` the
-// density of the direction sampling it competes with.
-template <typename EvalF, typename PdfF>
-Color direct_through_media(const Scene& scene, const Interaction& it, int medium, Sampler& sampler,
-                           ThreadStats& stats, EvalF f_of, PdfF pdf_of) {
-    DirectSample ds;
-    if (!sample_light(scene, it.p, sampler, ds)) return Color(0.f);
-    Color f = f_of(ds.d);
-    if (is_black(f)) return Color(0.f);
-    ++stats.shadow_rays;
-    int m = it.kind == VertexKind::Medium ? medium : Scene::medium_after(it, ds.d, medium);
-    Color tr = scene.transmittance(it, ds, m, stats.rays, sampler);
-    if (is_black(tr)) return Color(0.f);
-    float light_pdf = ds.pdf_w * emitter_pick_prob(scene);
-    float w = ds.is_delta ? 1.f : mis_power(light_pdf, pdf_of(ds.d));
-    return f * tr * ds.radiance * (w / light_pdf);
-}
-
-}  // namespace
-
 void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
                     ThreadStats& stats, const VolPathParams& prm, const EffectMask& mask) {
     // The camera ray starts at its near-clip point (as Mitsuba's cameras do),
