@@ -7,7 +7,7 @@ from radiometer.analysis.blocks import (ALPHA, BLOCK, block_mean, block_var_boun
 from radiometer.analysis.stats import z_test  # noqa: F401
 
 
-# --- shared by the estimator tests (test_ptracer.py, test_bdpt.py) -----------
+# --- shared by the estimator tests (test_ptracer.py, test_bdpt*.py) ----------
 
 
 def blocked_z(a, var_a, b, var_b=None, alpha=ALPHA, a_correlated=False):
@@ -52,6 +52,31 @@ def assert_same_bytes_whatever_threads(scene, integrator, spp):
             assert x.effects[k].tobytes() == r[0].effects[k].tobytes()
     other = rm.render(scene, integrator=integrator, spp=spp, seed=10, threads=2)
     assert other.image.tobytes() != r[0].image.tobytes()
+
+
+def assert_strategies_estimate_their_depth(runs):
+    """`runs`: renders with strategy_images, one seed each. Unweighted, every
+    strategy (s, t) of a depth d = s + t - 1 >= 2 is an unbiased estimate of
+    that depth's light (Veach 1997, sec. 10.2): its image mean minus the
+    MIS-weighted depth total is tested for zero mean over the runs
+    (one-sample t, alpha = 0.01 Bonferroni over the strategies tested).
+    Power: the same test must reject the strategies scaled by 1.1."""
+    from scipy import stats as st
+
+    keys = [k for k in runs[0].strategies_unweighted if sum(k) - 1 >= 2]
+    alpha = 0.01 / len(keys)
+    for scale in (1.0, 1.1):
+        worst = 1.0
+        for s, t in keys:
+            d = s + t - 1
+            diffs = [scale * r.strategies_unweighted[(s, t)].mean() -
+                     sum(v.mean() for (a, b), v in r.strategies.items() if a + b - 1 == d) for r in runs]
+            p = st.ttest_1samp(diffs, 0.0).pvalue
+            worst = min(worst, p)
+            if scale == 1.0:
+                assert p >= alpha, f"strategy ({s}, {t}) disagrees with its depth's total: p {p:.2e}"
+        if scale != 1.0:
+            assert worst < alpha, f"strategies scaled by {scale} went undetected (smallest p {worst:.2e})"
 
 
 def assert_clean(res, where=""):

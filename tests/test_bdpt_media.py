@@ -36,9 +36,9 @@ import numpy as np
 import pytest
 
 import radiometer as rm
-from refcompare import (_rgb, assert_clean, assert_same_bytes_whatever_threads, blocked_z, blocked_z_test, lookat,
-                        reference_variance_floor)
-from test_media import slab_dict, write_vol
+from refcompare import (_rgb, assert_clean, assert_same_bytes_whatever_threads, assert_strategies_estimate_their_depth,
+                        blocked_z, blocked_z_test, lookat, reference_variance_floor)
+from test_media import hot_voxel_grid, slab_dict
 
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
 ALPHA = 0.01
@@ -175,26 +175,11 @@ def test_unweighted_strategies_each_estimate_their_depth_in_fog():
     Bonferroni over the strategies): a connection that lost its
     transmittance or evaluated a cosine at a medium vertex would fail.
     Power: the same test rejects a strategy scaled by 1.1."""
-    from scipy import stats as st
-
     depth = 3
     scene = rm.load_dict(fog_room(res=8))
     runs = [rm.render(scene, integrator={"type": "bdpt", "max_depth": depth, "strategy_images": depth}, spp=32,
                       seed=40 + k) for k in range(8)]
-    keys = [k for k in runs[0].strategies_unweighted if sum(k) - 1 >= 2]
-    alpha = 0.01 / len(keys)
-    for scale in (1.0, 1.1):
-        worst = 1.0
-        for s, t in keys:
-            d = s + t - 1
-            diffs = [scale * r.strategies_unweighted[(s, t)].mean() -
-                     sum(v.mean() for (a, b), v in r.strategies.items() if a + b - 1 == d) for r in runs]
-            p = st.ttest_1samp(diffs, 0.0).pvalue
-            worst = min(worst, p)
-            if scale == 1.0:
-                assert p >= alpha, f"strategy ({s}, {t}) disagrees with its depth's total: p {p:.2e}"
-        if scale != 1.0:
-            assert worst < alpha, f"strategies scaled by {scale} went undetected (smallest p {worst:.2e})"
+    assert_strategies_estimate_their_depth(runs)
 
 
 # -- against volpath ------------------------------------------------------------
@@ -255,27 +240,15 @@ def test_grid_medium_matches_homogeneous_volpath(tmp_path):
     null) rendered by bdpt (delta tracking in the walks, ratio tracking in
     every connection) against the same homogeneous medium rendered by
     volpath; 2 % rejected."""
-    a = rm.render(rm.load_dict(slab_scene(medium=_grid(tmp_path))), integrator="bdpt", spp=256, seed=1)
-    b = rm.render(rm.load_dict(slab_scene(medium={"type": "homogeneous", "albedo": 0.9, "phase": {"type": "hg", "g": 0.5},
-                                                  "sigma_t": _rgb([1.0, 2.0, 0.5])})),
-                  integrator="volpath", spp=1024, seed=2)
+    het, hom = hot_voxel_grid(tmp_path)
+    a = rm.render(rm.load_dict(slab_scene(medium=het)), integrator="bdpt", spp=256, seed=1)
+    b = rm.render(rm.load_dict(slab_scene(medium=hom)), integrator="volpath", spp=1024, seed=2)
     assert_clean(a, "grid")
     assert a.effects["volume"].mean() > 0.05 * a.image.mean()
     passed, msg = blocked_z(a.image, a.variance, b.image, b.variance)
     assert passed, msg
     passed, msg = blocked_z(a.image, a.variance, b.image * 1.02, b.variance * 1.02 ** 2)
     assert not passed, f"a 2 % error went undetected:\n{msg}"
-
-
-def _grid(tmp_path):
-    g = np.empty((4, 4, 4, 3), np.float32)
-    g[...] = [1.0, 2.0, 0.5]
-    g[0, 0, 0] = [6.0, 6.0, 6.0]
-    write_vol(tmp_path / "c.vol", g)
-    m = np.diag([6.0, 6.0, 3.0, 1.0])
-    m[:3, 3] = [-5.0, -5.0, -2.0]  # the hot voxel's influence ends 3 units from the slab
-    return {"type": "heterogeneous", "albedo": 0.9, "phase": {"type": "hg", "g": 0.5},
-            "sigma_t": {"type": "gridvolume", "filename": str(tmp_path / "c.vol"), "to_world": m}}
 
 
 # -- against Mitsuba 3's references ------------------------------------------------
@@ -333,7 +306,7 @@ def test_bdpt_matches_mitsuba_media_reference(name):
 
 def test_same_bytes_whatever_threads_grid_medium(tmp_path):
     """Ratio and delta tracking draw random numbers: still the same bytes on 1, 2 and 3 threads."""
-    scene = rm.load_dict(slab_scene(medium=_grid(tmp_path), res=8))
+    scene = rm.load_dict(slab_scene(medium=hot_voxel_grid(tmp_path)[0], res=8))
     assert_same_bytes_whatever_threads(scene, "bdpt", 8)
 
 

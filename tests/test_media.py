@@ -438,6 +438,28 @@ def test_grid_volume_single_scattering_matches_closed_form(tmp_path):
     assert 2 * norm.sf(abs(v - 1.02 * exact) / se) < ALPHA, f"a 2 % error went undetected (se {se / exact:.4f})"
 
 
+def hot_voxel_grid(tmp_path):
+    """The scattering medium of slab_dict's slab (albedo 0.9, HG 0.5,
+    sigma_t 1 / 2 / 0.5) twice: as a 3-channel grid medium and as the same
+    homogeneous medium; returns (grid, homogeneous). The grid (written to
+    tmp_path / "c.vol") is constant except for one hot voxel (6) at a
+    corner of a grid spanning 3x the slab, whose trilinear falloff ends 3
+    units from the slab: sigma_t is exactly constant inside the slab, but
+    the majorant is 6, so most tentative collisions are null. Shared by the
+    grid-against-homogeneous test of each estimator."""
+    g = np.empty((4, 4, 4, 3), np.float32)
+    g[...] = [1.0, 2.0, 0.5]
+    g[0, 0, 0] = [6.0, 6.0, 6.0]
+    write_vol(tmp_path / "c.vol", g)
+    m = np.diag([6.0, 6.0, 3.0, 1.0])
+    m[:3, 3] = [-5.0, -5.0, -2.0]  # the hot voxel's influence ends 3 units from the slab
+    phase = {"type": "hg", "g": 0.5}
+    het = {"type": "heterogeneous", "albedo": 0.9, "phase": phase,
+           "sigma_t": {"type": "gridvolume", "filename": str(tmp_path / "c.vol"), "to_world": m}}
+    hom = {"type": "homogeneous", "albedo": 0.9, "phase": phase, "sigma_t": _rgb([1.0, 2.0, 0.5])}
+    return het, hom
+
+
 def test_constant_grid_equals_homogeneous(tmp_path):
     """A scattering slab (albedo 0.9, HG 0.5, sigma_t 1 / 2 / 0.5) as a
     3-channel grid medium against the same homogeneous medium, image to image
@@ -446,15 +468,7 @@ def test_constant_grid_equals_homogeneous(tmp_path):
     ends 3 units from the slab: sigma_t is exactly constant inside the slab,
     but the majorant (6) makes 83 % to 92 % of the tentative collisions
     null, and shadow rays ratio-track against it."""
-    g = np.empty((4, 4, 4, 3), np.float32)
-    g[...] = [1.0, 2.0, 0.5]
-    g[0, 0, 0] = [6.0, 6.0, 6.0]
-    write_vol(tmp_path / "c.vol", g)
-    m = np.diag([6.0, 6.0, 3.0, 1.0])
-    m[:3, 3] = [-5.0, -5.0, -2.0]  # the hot voxel's influence ends 3 units from the slab
-    het = {"type": "heterogeneous", "albedo": 0.9, "phase": {"type": "hg", "g": 0.5},
-           "sigma_t": {"type": "gridvolume", "filename": str(tmp_path / "c.vol"), "to_world": m}}
-    hom = {"type": "homogeneous", "albedo": 0.9, "phase": {"type": "hg", "g": 0.5}, "sigma_t": _rgb([1.0, 2.0, 0.5])}
+    het, hom = hot_voxel_grid(tmp_path)
 
     def scene(med):
         d = slab_dict(med, res=16)

@@ -41,7 +41,7 @@ from scipy.integrate import quad
 import radiometer as rm
 
 from refcompare import blocked_z, blocked_z_test, lookat, reference_variance_floor
-from test_media import slab_dict, write_vol
+from test_media import hot_voxel_grid, slab_dict
 
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
 ALPHA = 0.01
@@ -175,16 +175,7 @@ def test_grid_medium_matches_homogeneous_volpath(tmp_path):
     most tentative collisions are null; the sensor connections ratio-track
     against it) rendered by ptracer, against the same homogeneous medium
     rendered by volpath; 2 % rejected."""
-    g = np.empty((4, 4, 4, 3), np.float32)
-    g[...] = [1.0, 2.0, 0.5]
-    g[0, 0, 0] = [6.0, 6.0, 6.0]
-    write_vol(tmp_path / "c.vol", g)
-    m = np.diag([6.0, 6.0, 3.0, 1.0])
-    m[:3, 3] = [-5.0, -5.0, -2.0]  # the hot voxel's influence ends 3 units from the slab
-    phase = {"type": "hg", "g": 0.5}
-    het = {"type": "heterogeneous", "albedo": 0.9, "phase": phase,
-           "sigma_t": {"type": "gridvolume", "filename": str(tmp_path / "c.vol"), "to_world": m}}
-    hom = {"type": "homogeneous", "albedo": 0.9, "phase": phase, "sigma_t": _rgb([1.0, 2.0, 0.5])}
+    het, hom = hot_voxel_grid(tmp_path)
 
     def scene(med):
         d = slab_dict(med, res=16)

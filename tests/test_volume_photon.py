@@ -38,7 +38,7 @@ from scipy.stats import norm
 import radiometer as rm
 
 from refcompare import assert_clean, assert_same_bytes_whatever_threads
-from test_media import _rgb, _single_scatter_exact, slab_dict, write_vol
+from test_media import _rgb, _single_scatter_exact, hot_voxel_grid, slab_dict
 
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
 ALPHA = 0.01
@@ -335,16 +335,7 @@ def test_grid_medium_matches_homogeneous_volpath(tmp_path):
     transmittance. Against volpath on the same homogeneous medium (1024
     spp): measured image mean -0.3 to -0.7 % per channel, volume class
     -0.1 to -0.7 % (2 seeds at 100 000 photons); held to 2 % / 3 %."""
-    g = np.empty((4, 4, 4, 3), np.float32)
-    g[...] = [1.0, 2.0, 0.5]
-    g[0, 0, 0] = [6.0, 6.0, 6.0]
-    write_vol(tmp_path / "c.vol", g)
-    m = np.diag([6.0, 6.0, 3.0, 1.0])
-    m[:3, 3] = [-5.0, -5.0, -2.0]
-    phase = {"type": "hg", "g": 0.5}
-    het = {"type": "heterogeneous", "albedo": 0.9, "phase": phase,
-           "sigma_t": {"type": "gridvolume", "filename": str(tmp_path / "c.vol"), "to_world": m}}
-    hom = {"type": "homogeneous", "albedo": 0.9, "phase": phase, "sigma_t": _rgb([1.0, 2.0, 0.5])}
+    het, hom = hot_voxel_grid(tmp_path)
 
     def scene(med):
         d = slab_dict(med, res=16)
