@@ -176,18 +176,10 @@ public:
             if (bsdf.has_smooth()) {
                 // 2. Direct light by ray tracing: light samples only (nothing
                 //    else finds emitters from x, so no MIS weight: bsdf_frac 0).
-                int cls_d = via_specular ? kSpecular : kDirect;
-                if (mask[cls_d] && direct_samples_ > 0 && !scene.emitters.empty()) {
-                    Color ld(0.f);
-                    for (int i = 0; i < direct_samples_; ++i)
-                        ld += estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f);
-                    out.add(cls_d, beta * ld / float(direct_samples_));
-                }
                 // 3. Caustics from the caustic map.
-                int cls_c = via_specular ? kSpecular : kCaustic;
-                if (maps.has_caustic && mask[cls_c])
-                    out.add(cls_c, beta * estimate(maps.caustic, maps.r2_caustic, it, bsdf, wi,
-                                                   photon_budget(max_depth_, c), nb));
+                direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb, [&] {
+                    return estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f);
+                });
                 // 4. Indirect light from the global map: final gathering, or the
                 //    map read at x itself.
                 int cls_i = via_specular ? kSpecular : kIndirect;
@@ -219,6 +211,27 @@ public:
     }
 
 private:
+    // At a camera vertex x with a smooth lobe, in both camera loops
+    // (radiance, radiance_media): direct light as the mean of
+    // direct_samples_ light samples, each from `direct_one()` (the surface
+    // or the through-media estimator), and caustics from the caustic map;
+    // c: segments from the camera to x.
+    template <typename DirectF>
+    void direct_and_caustics(const Scene& scene, const Maps& maps, const Interaction& it, const Bsdf& bsdf,
+                             const Vec3& wi, int c, bool via_specular, const Color& beta, EffectRadiance& out,
+                             std::vector<Neighbour>& nb, DirectF direct_one) const {
+        int cls_d = via_specular ? kSpecular : kDirect;
+        if (mask[cls_d] && direct_samples_ > 0 && !scene.emitters.empty()) {
+            Color ld(0.f);
+            for (int i = 0; i < direct_samples_; ++i) ld += direct_one();
+            out.add(cls_d, beta * ld / float(direct_samples_));
+        }
+        int cls_c = via_specular ? kSpecular : kCaustic;
+        if (maps.has_caustic && mask[cls_c])
+            out.add(cls_c, beta * estimate(maps.caustic, maps.r2_caustic, it, bsdf, wi, photon_budget(max_depth_, c),
+                                           nb));
+    }
+
     // Jensen 2001, eq. 7.6, over the lookup_size nearest photons within r2_max.
     // by_medium (scenes with media): photons whose light path scattered in a
     // medium go to by_medium[0] (volume class) or [1] (subsurface) instead
@@ -652,21 +665,13 @@ void PhotonMapper::radiance_media(const Scene& scene, const Maps& maps, Sampler&
         const bool via_specular = pc.scatter_vertices > 0;
         if (bsdf.has_smooth()) {
             // 3. Direct light, through media.
-            int cls_d = via_specular ? kSpecular : kDirect;
-            if (mask[cls_d] && direct_samples_ > 0 && !scene.emitters.empty()) {
-                Color ld(0.f);
-                for (int i = 0; i < direct_samples_; ++i)
-                    ld += direct_through_media(scene, it, mt.medium, sampler, stats,
-                                               [&](const Vec3& wo) { return bsdf.eval(ctx, wi, it.to_local(wo)); },
-                                               nullptr);
-                out.add(cls_d, beta * ld / float(direct_samples_));
-            }
             // 4. Caustics from the caustic map (its photons came through
             //    media unscattered: L S+ D).
-            int cls_c = via_specular ? kSpecular : kCaustic;
-            if (maps.has_caustic && mask[cls_c])
-                out.add(cls_c, beta * estimate(maps.caustic, maps.r2_caustic, it, bsdf, wi,
-                                               photon_budget(max_depth_, c), nb));
+            direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb, [&] {
+                return direct_through_media(scene, it, mt.medium, sampler, stats,
+                                            [&](const Vec3& wo) { return bsdf.eval(ctx, wi, it.to_local(wo)); },
+                                            nullptr);
+            });
             // 5. Indirect light: final gathering through media, or the global
             //    map at x. Global photons whose light scattered in a medium
             //    on its way are filed as volume or subsurface light.
@@ -756,7 +761,9 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     ThreadStats pstats;
     uint64_t total = opts.seconds > 0 ? 0 : uint64_t(scene.sensor->width) * scene.sensor->height * uint64_t(opts.spp);
     std::function<bool()> poll_once = [&] { return !poll || poll(0, total); };
-    auto build = [&](const char* name, const PhotonTraceSpec& spec, uint64_t target, PhotonMap& map) {
+    // Traces one map's photons and files its stats; `make(photons)` builds
+    // the tree(s) from them. False when cancelled.
+    auto trace_and_build = [&](const char* name, const PhotonTraceSpec& spec, uint64_t target, auto&& make) {
         PhotonPass pass = trace_photons_until(scene, spec, opts.seed, target, threads, poll_once, pstats);
         if (pass.cancelled) return false;
         PhotonMapStats s;
@@ -766,11 +773,15 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
         s.trace_seconds = pass.seconds;
         s.target_reached = pass.target_reached;
         auto tb = Clock::now();
-        map.build(std::move(pass.photons), threads);
+        make(std::move(pass.photons));
         s.build_seconds = since(tb);
         s.bytes_per_photon = double(PhotonMap::bytes_per_photon());
         info.push_back(s);
         return true;
+    };
+    auto build = [&](const char* name, const PhotonTraceSpec& spec, uint64_t target, PhotonMap& map) {
+        return trace_and_build(name, spec, target,
+                               [&](std::vector<Photon>&& photons) { map.build(std::move(photons), threads); });
     };
     // Light-path segments a photon may need: at least one camera segment
     // follows it (two with final gathering, for the global map).
@@ -812,29 +823,20 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
         spec.rr_depth = rr_depth_;
         spec.volume = true;
         spec.stream = 3;
-        PhotonPass pass = trace_photons_until(scene, spec, opts.seed, uint64_t(volume_photons_), threads, poll_once,
-                                              pstats);
-        if (pass.cancelled) return empty_render_output(scene, threads, since(t0));
-        PhotonMapStats s;
-        s.name = "volume";
-        s.photons = pass.photons.size();
-        s.paths = pass.paths;
-        s.trace_seconds = pass.seconds;
-        s.target_reached = pass.target_reached;
-        auto tb = Clock::now();
         // One tree per medium (the photons are in path order, so each
         // tree's input, and hence the tree, depends on the seed alone).
-        std::vector<std::vector<Photon>> per(scene.media.size());
-        for (const Photon& ph : pass.photons) {
-            int m = photon_medium(ph);
-            if (m >= 0 && m < int(per.size())) per[m].push_back(ph);
-        }
-        pass.photons = {};
-        maps.volume.resize(per.size());
-        for (size_t m = 0; m < per.size(); ++m) maps.volume[m].build(std::move(per[m]), threads);
-        s.build_seconds = since(tb);
-        s.bytes_per_photon = double(PhotonMap::bytes_per_photon());
-        info.push_back(s);
+        auto per_medium = [&](std::vector<Photon>&& photons) {
+            std::vector<std::vector<Photon>> per(scene.media.size());
+            for (const Photon& ph : photons) {
+                int m = photon_medium(ph);
+                if (m >= 0 && m < int(per.size())) per[m].push_back(ph);
+            }
+            photons = {};
+            maps.volume.resize(per.size());
+            for (size_t m = 0; m < per.size(); ++m) maps.volume[m].build(std::move(per[m]), threads);
+        };
+        if (!trace_and_build("volume", spec, uint64_t(volume_photons_), per_medium))
+            return empty_render_output(scene, threads, since(t0));
         maps.has_volume = true;
         maps.r2_volume = sqr(volume_radius_ * radius);
     }
