@@ -52,6 +52,17 @@ Color to_color(const py::object& o) {
 
 py::tuple color_tuple(const Color& c) { return py::make_tuple(c.x, c.y, c.z); }
 
+using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+// A per-channel function f(channel, x) (Dipole::sample_r, pdf_a) over an array.
+template <class F>
+py::array_t<double> map_channel(int ch, const DoubleArray& x, F f) {
+    if (ch < 0 || ch > 2) throw py::value_error("channel must be 0, 1 or 2");
+    py::array_t<double> out(x.size());
+    for (py::ssize_t i = 0; i < x.size(); ++i) out.mutable_data()[i] = f(ch, x.data()[i]);
+    return out;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_core, m) {
@@ -154,7 +165,7 @@ PYBIND11_MODULE(_core, m) {
     py::class_<Dipole>(m, "Dipole")
         .def(py::init<const DipoleDesc&>())
         .def("rd",
-             [](const Dipole& d, py::array_t<double, py::array::c_style | py::array::forcecast> r) {
+             [](const Dipole& d, DoubleArray r) {
                  std::vector<float> out(3 * size_t(r.size()));
                  for (py::ssize_t i = 0; i < r.size(); ++i)
                      for (int c = 0; c < 3; ++c) out[3 * i + c] = float(d.rd(c, r.data()[i]));
@@ -163,19 +174,13 @@ PYBIND11_MODULE(_core, m) {
              py::arg("r"), "J01 eq. 4, per unit area, (N, 3)")
         .def_property_readonly("total_rd", [](const Dipole& d) { return color_tuple(d.total_rd()); })
         .def("sample_r",
-             [](const Dipole& d, int ch, py::array_t<double, py::array::c_style | py::array::forcecast> u) {
-                 if (ch < 0 || ch > 2) throw py::value_error("channel must be 0, 1 or 2");
-                 py::array_t<double> out(u.size());
-                 for (py::ssize_t i = 0; i < u.size(); ++i) out.mutable_data()[i] = d.sample_r(ch, u.data()[i]);
-                 return out;
+             [](const Dipole& d, int ch, DoubleArray u) {
+                 return map_channel(ch, u, [&](int c, double x) { return d.sample_r(c, x); });
              },
              py::arg("channel"), py::arg("u"))
         .def("pdf_a",
-             [](const Dipole& d, int ch, py::array_t<double, py::array::c_style | py::array::forcecast> r) {
-                 if (ch < 0 || ch > 2) throw py::value_error("channel must be 0, 1 or 2");
-                 py::array_t<double> out(r.size());
-                 for (py::ssize_t i = 0; i < r.size(); ++i) out.mutable_data()[i] = d.pdf_a(ch, r.data()[i]);
-                 return out;
+             [](const Dipole& d, int ch, DoubleArray r) {
+                 return map_channel(ch, r, [&](int c, double x) { return d.pdf_a(c, x); });
              },
              py::arg("channel"), py::arg("r"), "density per unit area of a point at distance r")
         .def("r_max", &Dipole::r_max)
