@@ -79,6 +79,18 @@ def assert_strategies_estimate_their_depth(runs):
             assert worst < alpha, f"strategies scaled by {scale} went undetected (smallest p {worst:.2e})"
 
 
+def assert_agrees(a, b, power=None, what=""):
+    """Render `a` against render `b` (images with variances), blocked
+    z-test; with `power`, the same test must reject b scaled by it (that
+    it would notice such an error)."""
+    passed, msg = blocked_z(a.image, a.variance, b.image, b.variance)
+    assert passed, f"{what} a / b = {a.image.sum() / b.image.sum():.5f}\n{msg}"
+    if power is None:
+        return
+    passed, msg = blocked_z(a.image, a.variance, b.image * power, b.variance * power ** 2)
+    assert not passed, f"{what}: a {(power - 1) * 100:.0f} % error went undetected:\n{msg}"
+
+
 def assert_clean(res, where=""):
     for name, a in [("image", res.image), ("variance", res.variance)] + list(res.effects.items()):
         a = np.asarray(a)

@@ -31,11 +31,17 @@ ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
 CORNELL = ROOT / "cornell_box" / "scene.xml"
 
 
-def small_scene(light, res=32, extra=None):
-    """Floor, back wall and a diffuse cube under `light`; `extra` adds shapes."""
+def small_room(light, res=32, extra=None, sensor_medium=None):
+    """Floor, back wall and a diffuse cube under `light`; `extra` adds
+    shapes; `sensor_medium` fills the whole scene (test_bdpt_media's
+    fog_room). A scene dict."""
     def rect(m, rho):
         return {"type": "rectangle", "to_world": m, "bsdf": {"type": "diffuse", "reflectance": _rgb(rho)}}
     wall = np.array([[2.0, 0, 0, 0], [0, 0, 1.0, 2.0], [0, -2.0, 0, 2.0], [0, 0, 0, 1.0]])
+    sensor = {"type": "perspective", "fov": 50.0, "to_world": lookat([0.0, -3.2, 2.4], [0, 0, 0.3], (0, 0, 1)),
+              "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}}
+    if sensor_medium is not None:
+        sensor["medium"] = sensor_medium
     d = {"type": "scene",
          "floor": rect(np.diag([2.0, 2.0, 1.0, 1.0]), [0.7, 0.6, 0.5]),
          "wall": rect(wall, [0.5, 0.5, 0.5]),
@@ -43,10 +49,14 @@ def small_scene(light, res=32, extra=None):
                                                          [0, 0, 0, 1.0]]),
                   "bsdf": {"type": "diffuse", "reflectance": _rgb([0.3, 0.5, 0.7])}},
          "light": light,
-         "sensor": {"type": "perspective", "fov": 50.0, "to_world": lookat([0.0, -3.2, 2.4], [0, 0, 0.3], (0, 0, 1)),
-                    "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}}}
+         "sensor": sensor}
     d.update(extra or {})
-    return rm.load_dict(d)
+    return d
+
+
+def small_scene(light, res=32, extra=None):
+    """small_room, loaded."""
+    return rm.load_dict(small_room(light, res, extra))
 
 
 def compare_with_path(scene, spp_path, spp_bd, seed=1, where="", effects=None, **integ):

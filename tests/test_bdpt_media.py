@@ -36,9 +36,10 @@ import numpy as np
 import pytest
 
 import radiometer as rm
-from refcompare import (_rgb, assert_clean, assert_same_bytes_whatever_threads, assert_strategies_estimate_their_depth,
-                        blocked_z, blocked_z_test, lookat, reference_variance_floor)
-from test_media import hot_voxel_grid, slab_dict
+from refcompare import (_rgb, assert_agrees, assert_clean, assert_same_bytes_whatever_threads,
+                        assert_strategies_estimate_their_depth, blocked_z_test, reference_variance_floor)
+from test_bdpt import small_room
+from test_media import hot_voxel_grid, small_light_slab
 
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
 ALPHA = 0.01
@@ -52,10 +53,9 @@ FOG = {"type": "homogeneous", "sigma_t": _rgb([0.25, 0.4, 0.6]), "albedo": _rgb(
 def slab_scene(bsdf=None, medium=CHROMATIC, res=16, light=None):
     """test_media's slab (orthographic view down -z through a medium in a
     2 x 2 x 1 cube onto a backlight), the backlight just wider than the view."""
-    d = slab_dict(medium, res=res)
+    d = small_light_slab(medium, res=res)
     if bsdf is not None:
         d["slab"]["bsdf"] = bsdf
-    d["light"]["to_world"] = np.array([[0.6, 0, 0, 0], [0, 0.6, 0, 0], [0, 0, 1, -1], [0, 0, 0, 1]], float)
     if light is not None:
         d["light"] = light
     return d
@@ -64,9 +64,6 @@ def slab_scene(bsdf=None, medium=CHROMATIC, res=16, light=None):
 def fog_room(res=16, light="area", extra=None, fog=FOG):
     """A floor, a back wall and a diffuse cube, the camera and everything in
     `fog` (the sensor's medium: no medium boundary anywhere)."""
-    def rect(m, rho):
-        return {"type": "rectangle", "to_world": m, "bsdf": {"type": "diffuse", "reflectance": _rgb(rho)}}
-    wall = np.array([[2.0, 0, 0, 0], [0, 0, 1.0, 2.0], [0, -2.0, 0, 2.0], [0, 0, 0, 1.0]])
     lights = {
         "area": {"type": "rectangle", "flip_normals": True,
                  "to_world": np.array([[0.3, 0, 0, 0.6], [0, 0.3, 0, -0.5], [0, 0, -1.0, 1.5], [0, 0, 0, 1.0]]),
@@ -75,18 +72,7 @@ def fog_room(res=16, light="area", extra=None, fog=FOG):
                    "emitter": {"type": "area", "radiance": _rgb([8.0, 7.0, 6.0])}},
         "point": {"type": "point", "position": [0.6, -0.5, 1.5], "intensity": _rgb([3.0, 2.5, 2.0])},
     }
-    d = {"type": "scene",
-         "floor": rect(np.diag([2.0, 2.0, 1.0, 1.0]), [0.7, 0.6, 0.5]),
-         "wall": rect(wall, [0.5, 0.5, 0.5]),
-         "cube": {"type": "cube", "to_world": np.array([[0.3, 0, 0, -0.3], [0, 0.3, 0, 0.2], [0, 0, 0.3, 0.3],
-                                                         [0, 0, 0, 1.0]]),
-                  "bsdf": {"type": "diffuse", "reflectance": _rgb([0.3, 0.5, 0.7])}},
-         "light": lights[light],
-         "sensor": {"type": "perspective", "fov": 50.0, "to_world": lookat([0.0, -3.2, 2.4], [0, 0, 0.3], (0, 0, 1)),
-                    "medium": fog,
-                    "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}}}
-    d.update(extra or {})
-    return d
+    return small_room(lights[light], res, extra, sensor_medium=fog)
 
 
 # A smooth glass ball and a rough one, each holding a dense medium (subsurface
@@ -191,10 +177,7 @@ def _against_volpath(scene, spp_bd, spp_vol, power=1.02, effects=None, seed=1, v
     assert_clean(a, "bdpt")
     media = float(a.effects["volume"].mean() + a.effects["subsurface"].mean())
     assert media > volume_share * float(a.image.mean()), media
-    passed, msg = blocked_z(a.image, a.variance, b.image, b.variance)
-    assert passed, f"bdpt / volpath = {a.image.sum() / b.image.sum():.5f}\n{msg}"
-    passed, msg = blocked_z(a.image, a.variance, b.image * power, b.variance * power ** 2)
-    assert not passed, f"a {(power - 1) * 100:.0f} % error went undetected:\n{msg}"
+    assert_agrees(a, b, power, "bdpt / volpath")
     return a, b
 
 
@@ -245,10 +228,7 @@ def test_grid_medium_matches_homogeneous_volpath(tmp_path):
     b = rm.render(rm.load_dict(slab_scene(medium=hom)), integrator="volpath", spp=1024, seed=2)
     assert_clean(a, "grid")
     assert a.effects["volume"].mean() > 0.05 * a.image.mean()
-    passed, msg = blocked_z(a.image, a.variance, b.image, b.variance)
-    assert passed, msg
-    passed, msg = blocked_z(a.image, a.variance, b.image * 1.02, b.variance * 1.02 ** 2)
-    assert not passed, f"a 2 % error went undetected:\n{msg}"
+    assert_agrees(a, b, 1.02)
 
 
 # -- against Mitsuba 3's references ------------------------------------------------

@@ -66,6 +66,14 @@ def slab_dict(medium, res=8, bsdf="null", sensor_medium=None, integrator="volpat
     return d
 
 
+def small_light_slab(medium, res=16):
+    """slab_dict with the backlight shrunk from 8 x 8 to 1.2 x 1.2, just
+    wider than the view."""
+    d = slab_dict(medium, res=res)
+    d["light"]["to_world"] = np.array([[0.6, 0, 0, 0], [0, 0.6, 0, 0], [0, 0, 1, -1], [0, 0, 0, 1]], float)
+    return d
+
+
 # -- loading ------------------------------------------------------------------
 
 
@@ -336,6 +344,13 @@ def test_single_scattering_point_light_matches_closed_form(g):
     (0, 1, 0): max_depth 2 keeps exactly the single-scattered light (the
     light itself is a delta, never seen). z-test against the integral; a
     1 % error must be rejected."""
+    check_single_scatter_point_light(g, "volpath", 1 << 19)
+
+
+def check_single_scatter_point_light(g, integrator, spp):
+    """The radiance meter of the test above (HG g, or isotropic for None),
+    rendered by `integrator` with max_depth 2: z-test against the closed
+    form, and a 1 % error must be rejected; returns the render."""
     sigma_t, albedo, intensity = 0.5, 0.8, 10.0
     phase = {"type": "isotropic"} if g is None else {"type": "hg", "g": g}
     fog = {"type": "homogeneous", "sigma_t": sigma_t, "albedo": albedo, "phase": phase}
@@ -345,7 +360,7 @@ def test_single_scattering_point_light_matches_closed_form(g):
                    "film": {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"}}},
         "light": {"type": "point", "position": [0, 1, 0], "intensity": _rgb(intensity)},
     }
-    res = rm.render(rm.load_dict(d), integrator={"type": "volpath", "max_depth": 2}, spp=1 << 19, seed=11)
+    res = rm.render(rm.load_dict(d), integrator={"type": integrator, "max_depth": 2}, spp=spp, seed=11)
     exact = _single_scatter_exact(sigma_t, albedo, intensity, 1.0, g)
     v, se = float(res.image[0, 0, 0]), float(np.sqrt(res.variance[0, 0, 0]))
     z = (v - exact) / se
@@ -353,6 +368,7 @@ def test_single_scattering_point_light_matches_closed_form(g):
     z1 = (v - 1.01 * exact) / se
     assert 2 * norm.sf(abs(z1)) < ALPHA, f"a 1 % error went undetected (z {z1:+.2f}, se/exact {se / exact:.4f})"
     assert float(res.effects["volume"][0, 0, 0]) == pytest.approx(v)
+    return res
 
 
 # -- effect classes ----------------------------------------------------------------

@@ -33,15 +33,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.stats import norm
 
 import radiometer as rm
 
 from refcompare import assert_clean, assert_same_bytes_whatever_threads
-from test_media import _rgb, _single_scatter_exact, hot_voxel_grid, slab_dict
+from test_media import check_single_scatter_point_light, hot_voxel_grid, small_light_slab
 
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
-ALPHA = 0.01
 # Budgets that keep each render about a second on one core.
 PM = {"type": "photonmapper", "global_photons": 5000, "caustic_photons": 5000, "direct_samples": 1,
       "gather_rays": 4}
@@ -104,22 +102,8 @@ def test_single_scattering_point_light_matches_closed_form(g):
     an unbiased quadrature). Measured at 4096 spp: relative standard error
     4e-4 (isotropic) / 6e-4 (hg), z +0.8 both; a 1 % error is ~20 standard
     errors."""
-    sigma_t, albedo, intensity = 0.5, 0.8, 10.0
-    phase = {"type": "isotropic"} if g is None else {"type": "hg", "g": g}
-    fog = {"type": "homogeneous", "sigma_t": sigma_t, "albedo": albedo, "phase": phase}
-    d = {"type": "scene",
-         "sensor": {"type": "radiancemeter", "origin": [0, 0, 0], "direction": [1, 0, 0], "medium": fog,
-                    "film": {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"}}},
-         "light": {"type": "point", "position": [0, 1, 0], "intensity": _rgb(intensity)}}
-    res = rm.render(rm.load_dict(d), integrator={"type": "photonmapper", "max_depth": 2}, spp=4096, seed=11)
+    res = check_single_scatter_point_light(g, "photonmapper", 4096)
     assert res.stats["photon_maps"] == {}
-    exact = _single_scatter_exact(sigma_t, albedo, intensity, 1.0, g)
-    v, se = float(res.image[0, 0, 0]), float(np.sqrt(res.variance[0, 0, 0]))
-    z = (v - exact) / se
-    assert 2 * norm.sf(abs(z)) >= ALPHA, f"ours {v:.6f} +- {se:.6f} vs exact {exact:.6f} (z {z:+.2f})"
-    z1 = (v - 1.01 * exact) / se
-    assert 2 * norm.sf(abs(z1)) < ALPHA, f"a 1 % error went undetected (z {z1:+.2f})"
-    assert float(res.effects["volume"][0, 0, 0]) == pytest.approx(v)
 
 
 def test_vandehulst_slab_boundary_bias_shrinks():
@@ -336,15 +320,9 @@ def test_grid_medium_matches_homogeneous_volpath(tmp_path):
     spp): measured image mean -0.3 to -0.7 % per channel, volume class
     -0.1 to -0.7 % (2 seeds at 100 000 photons); held to 2 % / 3 %."""
     het, hom = hot_voxel_grid(tmp_path)
-
-    def scene(med):
-        d = slab_dict(med, res=16)
-        d["light"]["to_world"] = np.array([[0.6, 0, 0, 0], [0, 0.6, 0, 0], [0, 0, 1, -1], [0, 0, 0, 1]], float)
-        return rm.load_dict(d)
-
-    ref = rm.render(scene(hom), integrator="volpath", spp=1024, seed=2)
-    a = rm.render(scene(het), integrator=_pm(volume_photons=100000, global_photons=0, caustic_photons=0), spp=16,
-                  seed=0)
+    ref = rm.render(rm.load_dict(small_light_slab(hom)), integrator="volpath", spp=1024, seed=2)
+    a = rm.render(rm.load_dict(small_light_slab(het)),
+                  integrator=_pm(volume_photons=100000, global_photons=0, caustic_photons=0), spp=16, seed=0)
     assert_clean(a, "grid slab")
     ratio = a.image.mean(axis=(0, 1)) / ref.image.mean(axis=(0, 1))
     assert np.all(np.abs(ratio - 1) < 0.02), ratio
