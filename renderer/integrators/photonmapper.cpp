@@ -785,23 +785,24 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     };
     // Light-path segments a photon may need: at least one camera segment
     // follows it (two with final gathering, for the global map).
-    if (need_caustic) {
+    auto spec_for = [&](uint64_t stream, int camera_segments) {
         PhotonTraceSpec spec;
-        spec.max_depth = max_depth_ < 0 ? -1 : max_depth_ - 1;
+        spec.max_depth = max_depth_ < 0 ? -1 : max_depth_ - camera_segments;
         spec.rr_depth = rr_depth_;
+        spec.stream = stream;
+        return spec;
+    };
+    if (need_caustic) {
+        PhotonTraceSpec spec = spec_for(1, 1);
         spec.caustic_only = true;
-        spec.stream = 1;
         if (!build("caustic", spec, uint64_t(caustic_photons_), maps.caustic))
             return empty_render_output(scene, threads, since(t0));
         maps.has_caustic = true;
         maps.r2_caustic = sqr(caustic_radius_ * radius);
     }
     if (need_global) {
-        PhotonTraceSpec spec;
-        spec.max_depth = max_depth_ < 0 ? -1 : max_depth_ - (final_gather_ ? 2 : 1);
-        spec.rr_depth = rr_depth_;
+        PhotonTraceSpec spec = spec_for(2, final_gather_ ? 2 : 1);
         spec.indirect_only = !final_gather_;
-        spec.stream = 2;
         if (!build("global", spec, uint64_t(global_photons_), maps.global))
             return empty_render_output(scene, threads, since(t0));
         maps.has_global = true;
@@ -818,11 +819,8 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     bool need_volume = lights && f.has_media && scattering_media && volume_photons_ > 0 && long_paths &&
                        (mask[kVolume] || mask[kSubsurface]);
     if (need_volume) {
-        PhotonTraceSpec spec;
-        spec.max_depth = max_depth_ < 0 ? -1 : max_depth_ - 1;
-        spec.rr_depth = rr_depth_;
+        PhotonTraceSpec spec = spec_for(3, 1);
         spec.volume = true;
-        spec.stream = 3;
         // One tree per medium (the photons are in path order, so each
         // tree's input, and hence the tree, depends on the seed alone).
         auto per_medium = [&](std::vector<Photon>&& photons) {
