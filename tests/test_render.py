@@ -146,14 +146,22 @@ def test_keyboard_interrupt_keeps_finished_passes(small_cornell):
     """Ctrl-C (a SIGINT to the main thread) cancels cleanly; the finished
     passes come back on the exception."""
     import _thread
+    import signal
     import time
 
+    # A shell starts background jobs with SIGINT ignored, and Python then
+    # installs no handler (interrupt_main would do nothing): give the main
+    # thread Python's own for the test.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(1.0, _thread.interrupt_main)
-    timer.start()
-    t0 = time.monotonic()
-    with pytest.raises(rm.RenderCancelled) as info:
-        rm.render(small_cornell, spp=1 << 20, seed=0)
-    timer.cancel()
+    try:
+        timer.start()
+        t0 = time.monotonic()
+        with pytest.raises(rm.RenderCancelled) as info:
+            rm.render(small_cornell, spp=1 << 20, seed=0)
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - t0 < 10
     r = info.value.result
     assert 0 < r.spp < 1 << 20
