@@ -37,7 +37,8 @@ floor, at the budgets and block sizes of MEDIA (measured per scene in its
 card.md); their references are also checked for form, and the two with an
 independent answer (Beer-Lambert; the slab's diffuse transmittance) against
 it. `ptracer` against these references: tests/test_ptracer_media.py; `bdpt`:
-tests/test_bdpt_media.py.
+tests/test_bdpt_media.py (van de Hulst's irradiancemeter scenes:
+tests/test_irradiancemeter.py).
 """
 import math
 from pathlib import Path

@@ -210,10 +210,14 @@ def _meter_scene(kind):
     return rm.load_dict(d)
 
 
-@pytest.mark.parametrize("kind", ["radiancemeter", "irradiancemeter"])
-def test_meters_are_refused_clearly(kind):
-    with pytest.raises(ValueError, match=f"ptracer.*{kind}"):
-        rm.render(_meter_scene(kind), integrator="ptracer", spp=4)
+@pytest.mark.parametrize("integrator", ["ptracer", "bdpt"])
+def test_radiancemeter_is_refused_clearly(integrator):
+    """A radiance meter (a delta position and direction) cannot be reached by
+    light paths; an irradiancemeter can (tests/test_irradiancemeter.py)."""
+    with pytest.raises(ValueError, match=f"{integrator}.*radiancemeter"):
+        rm.render(_meter_scene("radiancemeter"), integrator=integrator, spp=4)
+    r = rm.render(_meter_scene("irradiancemeter"), integrator=integrator, spp=4)
+    assert r.image.shape[:2] == (1, 1)
 
 
 def test_orthographic_with_visible_environment_is_refused():

@@ -120,8 +120,9 @@ public:
     void check_scene(const Scene& scene) const override {
         if (!scene.sensor->has_importance())
             throw std::invalid_argument("integrator 'bdpt': sensor '" + scene.sensor_desc.type +
-                                        "' cannot be reached by light subpaths (bdpt connects to cameras with a "
-                                        "film); use integrator 'path' or a perspective or orthographic camera");
+                                        "' cannot be reached by light subpaths (a radiance meter measures at one "
+                                        "point along one direction); use integrator 'path', or a camera or an "
+                                        "irradiancemeter");
         const SensorDesc& sd = scene.sensor_desc;
         filter_ = std::make_unique<FilterSampler>(sd.rfilter, sd.filter_radius, sd.filter_stddev);
     }
@@ -150,6 +151,7 @@ public:
         PathVertex z0;
         z0.type = VType::Camera;
         z0.it.p = sr.ray.o;
+        z0.it.n = sr.n;
         z0.beta = sr.weight;
         z0.pdf_fwd = 1.f;
         int max_cam = max_depth_ < 0 ? INT_MAX : max_depth_ + 1;  // z0 .. z_max_depth
@@ -303,7 +305,7 @@ private:
         pl.assign(k + 1, 1.0);
         for (int i = 1; i <= k; ++i) {
             if (x[i - 1].delta) continue;
-            double p = i == 1 ? camera_pdf_a(scene, x[1]) : pdf_to(scene, x[i - 1], &x[i - 2], x[i]);
+            double p = i == 1 ? camera_pdf_a(scene, x[0], x[1]) : pdf_to(scene, x[i - 1], &x[i - 2], x[i]);
             pc[i] = p != 0.0 ? p : 1.0;
         }
         for (int i = k; i >= 1; --i) {
@@ -510,6 +512,9 @@ private:
             PathVertex z0;
             z0.type = VType::Camera;
             z0.it.p = is.p;
+            // An area sensor's point has a normal (its ray directions'
+            // density about it enters the weights); a pinhole's has none.
+            z0.it.n = is.n;
             z0.pdf_fwd = 1.f;
             PathVertex saved = cam[0];
             cam[0] = z0;

@@ -61,14 +61,20 @@ public:
         const std::string& type = scene.sensor_desc.type;
         if (!scene.sensor->has_importance())
             throw std::invalid_argument("integrator 'ptracer': sensor '" + type +
-                                        "' cannot be reached by light paths (light tracing connects to cameras with "
-                                        "a film; a radiance or irradiance meter measures along a delta direction "
-                                        "or over a shape's surface); use integrator 'path' or a perspective or "
-                                        "orthographic camera");
+                                        "' cannot be reached by light paths (a radiance meter measures at one "
+                                        "point along one direction); use integrator 'path', or a camera or an "
+                                        "irradiancemeter");
         if (!hide_ && !scene.environment.empty() && type == "orthographic")
             throw std::invalid_argument("integrator 'ptracer': an orthographic camera sees an environment emitter "
                                         "along a single direction, which light paths reach with probability 0; set "
                                         "hide_emitters or use a perspective camera or integrator 'path'");
+        // An irradiancemeter sees an environment emitter over its whole
+        // hemisphere; light tracing would need its own strategy for that
+        // (bdpt's s = 0 has it).
+        if (!hide_ && !scene.environment.empty() && scene.sensor->area_sensor())
+            throw std::invalid_argument("integrator 'ptracer': the irradiancemeter sees an environment emitter "
+                                        "directly, which light tracing does not connect; set hide_emitters or use "
+                                        "integrator 'bdpt' or 'path'");
     }
 
     void trace_light_path(const Scene& scene, Sampler& sampler, int, std::vector<Splat>& out,
@@ -174,7 +180,7 @@ private:
         // A delta position is never hit by a camera ray (Mitsuba's point and
         // spot eval() are 0, and `path` never sees them): nothing to connect.
         if (e.is_delta()) return;
-        ImportanceSample is = sensor.sample_direction(es.p);
+        ImportanceSample is = sensor_sample(scene, es.p, sampler);
         if (!is.valid) return;
         Color le = e.emitted_towards(es, is.d);  // Le |cos| / pdf_a
         if (is_black(le)) return;

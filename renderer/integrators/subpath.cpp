@@ -32,7 +32,13 @@ float emitter_pdf_to(const Scene& scene, const PathVertex& v, const PathVertex& 
     return to_area(v.emitter->pdf_emission_w(v.it.n, d), v.it.p, next);
 }
 
-float camera_pdf_a(const Scene& scene, const PathVertex& v) {
+float camera_pdf_a(const Scene& scene, const PathVertex& z0, const PathVertex& v) {
+    if (scene.sensor->area_sensor()) {  // directions drawn at z0 itself (sample_ray), about its normal
+        Vec3 d = v.it.p - z0.it.p;
+        float len = length(d);
+        if (!(len > 0.f)) return 0.f;
+        return to_area(scene.sensor->pdf_ray_direction(z0.it.n, d / len), z0.it.p, v);
+    }
     if (v.infinite) {  // per steradian: the camera's directional importance over the film
         ImportanceSample is = scene.sensor->eval_direction(normalize(-v.it.wi), nullptr);
         if (!is.valid) return 0.f;
@@ -45,7 +51,7 @@ float camera_pdf_a(const Scene& scene, const PathVertex& v) {
 }
 
 float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, const PathVertex& next) {
-    if (v.type == VType::Camera) return camera_pdf_a(scene, next);
+    if (v.type == VType::Camera) return camera_pdf_a(scene, v, next);
     Vec3 d = next.it.p - v.it.p;
     float len = length(d);
     if (!(len > 0.f)) return 0.f;
@@ -114,7 +120,7 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
         const size_t n = path.size();  // index of v
         const PathVertex& prev = path[n - 1];
         if (n == 1) {
-            v.pdf_fwd = prev.type == VType::Camera ? camera_pdf_a(scene, v) : pdf_to(scene, prev, nullptr, v);
+            v.pdf_fwd = prev.type == VType::Camera ? camera_pdf_a(scene, prev, v) : pdf_to(scene, prev, nullptr, v);
         } else if (prev.delta) {
             v.pdf_fwd = 0.f;  // a delta: remap0 in the weights (pbrt-v4)
             path[n - 2].pdf_rev = 0.f;
@@ -307,10 +313,16 @@ Color transmittance_to_sensor(const Scene& scene, const Interaction& from, int m
     return scene.transmittance(from, ds, medium, stats.rays, sampler);
 }
 
+ImportanceSample sensor_sample(const Scene& scene, const Vec3& ref, Sampler& sampler) {
+    if (!scene.sensor->area_sensor()) return scene.sensor->sample_direction(ref);  // no random numbers
+    Vec2 u = sampler.next_2d();
+    return scene.sensor->sample_direction(ref, u, sampler.next_1d());
+}
+
 Color connect_to_sensor(const Scene& scene, const PathVertex& y, ImportanceSample& is, ThreadStats& stats,
                         Sampler& sampler) {
     if ((y.type != VType::Surface && y.type != VType::Medium) || !y.connectible()) return Color(0.f);
-    is = scene.sensor->sample_direction(y.it.p);
+    is = sensor_sample(scene, y.it.p, sampler);
     if (!is.valid) return Color(0.f);
     Color f;
     int medium = y.medium;

@@ -55,9 +55,11 @@ float to_area(float pdf_w, const Vec3& from, const PathVertex& to);
 float emitter_pdf_to(const Scene& scene, const PathVertex& v, const PathVertex& next);
 inline float remap0(float f) { return f != 0.f ? f : 1.f; }
 
-// The camera's area density of sampling the first vertex v: W(v) |cos| / (W H),
-// W the importance of Sensor::sample_direction (bdpt.cpp explains why).
-float camera_pdf_a(const Scene& scene, const PathVertex& v);
+// The camera's area density of sampling the first vertex v from the camera
+// vertex z0: W(v) |cos| / (W H), W the importance of
+// Sensor::sample_direction (bdpt.cpp explains why), for a pinhole; for an
+// area sensor (irradiancemeter) the density of its ray directions at z0.
+float camera_pdf_a(const Scene& scene, const PathVertex& z0, const PathVertex& v);
 // Area density with which vertex v samples `next`, given it was reached
 // from `prev` (pbrt-v4's Vertex::PDF).
 float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, const PathVertex& next);
@@ -105,6 +107,11 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
 bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
                    std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats,
                    const WalkStop* stop = nullptr);
+
+// The sensor end of a connection from `ref`: Sensor::sample_direction, with
+// a point drawn on an area sensor (random numbers only for those, so a
+// camera's streams do not change).
+ImportanceSample sensor_sample(const Scene& scene, const Vec3& ref, Sampler& sampler);
 
 // The t = 1 strategy (light tracing): light vertex y connected to the
 // sensor through its adjoint BSDF, or a medium vertex through its phase

@@ -176,6 +176,14 @@ private:
 // Mitsuba's irradiancemeter: mean irradiance over the shape's front side.
 // Position uniform by area, direction cosine-weighted, so the weight is pi
 // (E = int L cos dw, and cos / pdf = pi).
+//
+// As a target of light paths: the measurement (1 / A) int_A int L cos dw dA
+// has importance W_e = 1 / A per unit area and projected solid angle. A
+// point x drawn on the shape with density p_A(x) and reached from ref along
+// d (distance r) gives ref the importance W_e cos_x / (p_A r^2) per unit of
+// its area (the cosine at ref is the caller's): cos_x / r^2 where the shape
+// is sampled uniformly by area (Veach 1997, eq. 8.7 with the geometry term
+// split between its two ends). Only the front side measures.
 class IrradianceMeter final : public Sensor {
 public:
     IrradianceMeter(const SensorDesc&, const Shape* shape) : shape_(shape) {
@@ -190,7 +198,33 @@ public:
         sr.ray.d = fr.to_world(local);
         sr.ray.o = ps.p + ps.n * ps.eps;
         sr.weight = Color(kPi);
+        sr.n = ps.n;
         return sr;
+    }
+    bool has_importance() const override { return true; }
+    bool area_sensor() const override { return true; }
+    ImportanceSample sample_direction(const Vec3& ref, Vec2 u, float u_extra) const override {
+        ImportanceSample is;
+        PositionSample ps = shape_->sample_position(u, u_extra);
+        Vec3 v = ps.p - ref;
+        float d2 = length_sq(v);
+        if (!(d2 > 0.f) || !(ps.pdf_a > 0.f)) return is;
+        float dist = std::sqrt(d2);
+        Vec3 d = v / dist;
+        float cos_x = -dot(ps.n, d);  // the front side faces ref
+        if (!(cos_x > 0.f)) return is;
+        is.valid = true;
+        is.film = Vec2(0.5f, 0.5f);
+        is.p = ps.p;
+        is.d = d;
+        is.dist = dist;
+        is.n = ps.n;
+        is.weight = cos_x / (ps.pdf_a * shape_->area() * d2);  // W_e = 1 / A
+        is.clip = std::min(ps.eps * 4.f, 0.5f * dist);  // camera rays start ps.eps off the shape
+        return is;
+    }
+    float pdf_ray_direction(const Vec3& n0, const Vec3& w) const override {
+        return std::max(0.f, dot(n0, w)) * kInvPi;  // square_to_cosine_hemisphere
     }
 
 private:

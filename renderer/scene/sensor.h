@@ -16,6 +16,7 @@ class Shape;
 struct SensorRay {
     Ray ray;
     Color weight{1.f};
+    Vec3 n{0.f};  // area sensors (irradiancemeter): the normal at the ray's origin; zero for a pinhole
 };
 
 // The sensor end of a light path (the t = 1 strategy of Veach 1997, sec.
@@ -36,6 +37,7 @@ struct ImportanceSample {
     float dist = 0.f;   // distance from the reference point to p
     float weight = 0.f; // importance as described above; per steradian for eval_direction
     float clip = 0.f;   // distance from p towards the reference point at which camera rays start (near clip)
+    Vec3 n{0.f};        // area sensors: the normal at p; zero for a pinhole
 };
 
 class Sensor {
@@ -50,6 +52,17 @@ public:
     // Connects the point `ref` to the sensor; invalid when it is outside the
     // field of view or the clip range.
     virtual ImportanceSample sample_direction(const Vec3& ref) const { return {}; }
+    // Sensors with an area (irradiancemeter): the point on the sensor is
+    // sampled too, from `u` and `u_extra`; then `weight` above divides by its area density
+    // (the importance of a point of an area sensor, W_e, is per unit area
+    // and projected solid angle; Veach 1997, sec. 8.2 and 10.2).
+    virtual bool area_sensor() const { return false; }
+    virtual ImportanceSample sample_direction(const Vec3& ref, Vec2 u, float u_extra) const {
+        return sample_direction(ref);
+    }
+    // Area sensors: the density per steradian with which sample_ray leaves
+    // a point of normal n0 in direction w (for bidirectional MIS).
+    virtual float pdf_ray_direction(const Vec3& n0, const Vec3& w) const { return 0.f; }
     // Importance per steradian along the camera ray leaving in direction w
     // (emitters at infinity seen directly); `ray` gets that camera ray with
     // its clip range. Invalid for sensors whose directions are a delta.
