@@ -138,7 +138,8 @@ def cmd_refs(a) -> int:
                 m = read_exr(ref).metadata
                 state = (f"{m.get('total_spp', '?')} spp, Mitsuba {m.get('mitsuba_version', '?')} "
                          f"{m.get('variant', '?')}, {m.get('date', '?')}")
-            print(f"{n}: {cfg['runs']} runs x {cfg['spp']} spp, params {cfg['params']} -- {state}")
+            integ = cfg.get("integrator", {}).get("type", "the scene's integrator")
+            print(f"{n}: {cfg['runs']} runs x {cfg['spp']} spp, Mitsuba {integ}, params {cfg['params']} -- {state}")
         return 0
     out_dir = Path(a.out_dir) if a.out_dir else None
     for n in names:
