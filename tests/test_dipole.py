@@ -308,9 +308,12 @@ def test_loader_forms_and_xml(tmp_path):
     sh = rm.load_file(tmp_path / "good.xml").desc.shapes[0]
     assert sh.subsurface.sigma_a == pytest.approx((0.1, 0.2, 0.3)) and sh.bsdf.int_ior == pytest.approx(1.4)
     # Mitsuba 0.6's documented set-up: a plastic without its diffuse part as the boundary.
-    d = rm.load_dict(_with_sub({"type": "dipole", "sigmaA": 1.0, "sigmaS": 2.0, "intIOR": "water", "irrSamples": 64},
+    d = rm.load_dict(_with_sub({"type": "dipole", "sigmaA": 1.0, "sigmaS": 2.0, "intIOR": "water"},
                                bsdf={"type": "plastic", "int_ior": "water", "diffuse_reflectance": 0.0})).desc.shapes[0]
     assert d.bsdf.type == "dielectric" and d.bsdf.int_ior == pytest.approx(1.333)
+    # Mitsuba 0.6's irradiance-cache density sets nothing here: refused, not ignored.
+    with pytest.raises(SceneError, match="irrSamples.*does not apply"):
+        rm.load_dict(_with_sub({"type": "dipole", "sigmaA": 1.0, "sigmaS": 2.0, "irrSamples": 64}))
     (tmp_path / "s.xml").write_text(good + """  <shape type="sphere"><float name="radius" value="0.5"/>
     <subsurface type="dipole"><float name="sigma_a" value="1"/><float name="sigma_s" value="1"/><float name="bogus" value="1"/></subsurface></shape>
 </scene>""")

@@ -97,8 +97,8 @@ subsurface dipole (Mitsuba 0.6's plugin; nested in a shape, which it turns
                [0] in (-1, 1); scale [1] multiplies the coefficients;
                int_ior ['bk7'], ext_ior ['air'] (IORs as for dielectric).
                Mitsuba 0.6's camelCase names (sigmaA, sigmaS, sigmaT, intIOR,
-               extIOR) are accepted as aliases, and irrSamples (its
-               irradiance cache's density) is accepted and ignored: exit
+               extIOR) are accepted as aliases; irrSamples (its
+               irradiance cache's density) is refused, naming why: exit
                points are sampled per path here. Its material presets are
                not supported. The shape may nest no bsdf (a smooth
                dielectric of the dipole's IORs is made), a `dielectric` of
@@ -1434,7 +1434,11 @@ class _Builder:
         if p.has("material"):
             raise p.error("material presets are not supported: give sigma_a + sigma_s (or sigma_t + albedo)",
                           node.props["material"].place)
-        p.int("irrSamples", 16, lo=1)  # Mitsuba 0.6's irradiance cache density: nothing to set here
+        # Mitsuba 0.6's irradiance-cache density: it sets nothing here, and
+        # an unused parameter is an error (DESIGN sec. 3), so it says why.
+        if p.has("irrSamples"):
+            raise p.error("irrSamples (Mitsuba 0.6's irradiance-cache density) does not apply: exit points "
+                          "are sampled per path here; remove it", node.props["irrSamples"].place)
 
         def name_of(name, alias):
             """The parameter given under its name or Mitsuba 0.6's alias."""
