@@ -183,7 +183,12 @@ PYBIND11_MODULE(_core, m) {
                  return map_channel(ch, r, [&](int c, double x) { return d.pdf_a(c, x); });
              },
              py::arg("channel"), py::arg("r"), "density per unit area of a point at distance r")
-        .def("r_max", &Dipole::r_max)
+        .def("r_max",
+             [](const Dipole& d, int ch) {
+                 if (ch < 0 || ch > 2) throw py::value_error("channel must be 0, 1 or 2");
+                 return d.r_max(ch);
+             },
+             py::arg("channel"))
         .def("exit_lobe", [](const Dipole& d) -> const Bsdf& { return d.exit_lobe(); },
              py::return_value_policy::reference_internal, "cos(wo) Sw(wo), the lobe paths leave an exit point by")
         .def_property_readonly("eta", &Dipole::eta)

@@ -87,6 +87,18 @@ def test_profile_integrates_to_total_diffuse_reflectance(eta):
             assert num == pytest.approx(want, rel=1e-4), (alpha_p, g, num, want)
 
 
+def test_bindings_refuse_a_bad_channel():
+    """Channel arguments are checked (r_max once read past its array and
+    crashed the interpreter for a large channel)."""
+    dp = dipole([0.01, 0.3, 3.0], 10.0, eta=1.5)
+    for bad in (-1, 3, 7, 2 ** 30):
+        for call in (lambda c: dp.r_max(c), lambda c: dp.sample_r(c, np.array([0.5])),
+                     lambda c: dp.pdf_a(c, np.array([0.1]))):
+            with pytest.raises(ValueError, match="channel must be 0, 1 or 2"):
+                call(bad)
+    assert all(dp.r_max(c) > 0 for c in range(3))
+
+
 def test_radial_sampler_matches_its_density():
     """r ~ sample_r(ch, u) histogrammed against the integral of 2 pi r pdf_a
     over each bin; the pdf integrates to 1 on [0, r_max]. Three channels of

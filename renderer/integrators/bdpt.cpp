@@ -38,8 +38,9 @@
 // path that leaves the scene ends on a Light vertex at infinity (s = 0);
 // light subpaths start on the disk outside the scene, y1 with the disk's
 // planar density times |cos|, y0 with its direction's light-sampling
-// density (subpath.cpp). Not supported (refused by check_scene): sensors
-// without importance (radiance/irradiance meters).
+// density (subpath.cpp). An irradiancemeter's camera vertex is a point of
+// its shape (sensor.cpp). Not supported (refused by check_scene): sensors
+// without importance (the radiance meter).
 //
 // Participating media (issue 6; Veach 1997 ch. 10 over the volume path
 // measure of Pauly et al. 2000; pbrt-v3 sec. 16.3): both subpaths walk
@@ -479,8 +480,12 @@ private:
         std::vector<PathVertex>& light = light_ref();
         Color L(0.f);
         w = 0.f;
-        // Random numbers for s = 1 are drawn whatever happens, so the stream
-        // of the later strategies does not depend on the mask.
+        // Random numbers for s = 1 are drawn whatever happens, so that with a
+        // pinhole camera and no grid media the stream of the later
+        // strategies does not depend on the mask. (Ratio tracking in grid
+        // media and an irradiancemeter's point are drawn only for the
+        // strategies that are evaluated: an `effects` subset then changes
+        // the bytes of the classes it keeps, not their expectation.)
         float u_pick = 0.f, u_extra = 0.f;
         Vec2 u_l;
         if (s == 1) {

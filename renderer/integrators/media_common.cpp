@@ -50,11 +50,21 @@ FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, S
     return kAbsorbed;
 }
 
-int emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, int it_shape) {
+MediumTracker emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, int it_shape) {
+    // Inside shape `s` (the side against its normal) behind a non-null BSDF:
+    // a subsurface medium (MediumTracker::cross's rule).
+    auto enclosed_in = [&](const Shape& s, int medium) {
+        return medium >= 0 && medium == s.medium_interior && s.bsdf >= 0 &&
+               scene.bsdfs[s.bsdf]->flags() != kNull;
+    };
+    MediumTracker mt;
     if (it_shape >= 0) {
         const Shape& s = *scene.shapes[it_shape];
-        if (s.medium_interior >= 0 || s.medium_exterior >= 0)
-            return dot(ray.d, n) > 0.f ? s.medium_exterior : s.medium_interior;
+        if (s.medium_interior >= 0 || s.medium_exterior >= 0) {
+            mt.medium = dot(ray.d, n) > 0.f ? s.medium_exterior : s.medium_interior;
+            mt.enclosed = dot(ray.d, n) <= 0.f && enclosed_in(s, mt.medium);
+            return mt;
+        }
     }
     Ray r = ray;
     // Each step passes one surface that declares no medium (a bound keeps a
@@ -62,11 +72,22 @@ int emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, int it_sha
     for (int step = 0; step < 1024; ++step) {
         Interaction it;
         if (!scene.intersect(r, it)) break;
-        if (it.medium_inside >= 0 || it.medium_outside >= 0)
-            return Scene::medium_after(it, -r.d, -1);
+        if (it.medium_inside >= 0 || it.medium_outside >= 0) {
+            mt.medium = Scene::medium_after(it, -r.d, -1);
+            mt.enclosed = dot(r.d, it.n) > 0.f && enclosed_in(*scene.shapes[it.shape], mt.medium);
+            return mt;
+        }
         r = it.spawn(r.d);
     }
-    return scene.sensor_desc.medium;
+    mt.medium = scene.sensor_desc.medium;  // not enclosed: as the camera's own paths start (volpath)
+    return mt;
+}
+
+Color transmittance_from_infinity(const Scene& scene, int medium) {
+    if (medium < 0) return Color(1.f);
+    const Medium& m = *scene.media[medium];
+    if (!m.homogeneous) return Color(1.f);
+    return {m.sigma_t.x > 0.f ? 0.f : 1.f, m.sigma_t.y > 0.f ? 0.f : 1.f, m.sigma_t.z > 0.f ? 0.f : 1.f};
 }
 
 }  // namespace rm

@@ -1,5 +1,6 @@
-// Pieces of media transport shared by the camera-path loop (volpath.cpp)
-// and the light subpaths of ptracer (subpath.cpp): the spectral-MIS path
+// Pieces of media transport shared by the camera-path loop (volpath.cpp),
+// the subpaths of ptracer and bdpt (subpath.cpp) and photon tracing
+// (photon_trace.cpp): the spectral-MIS path
 // throughput, the two free-flight samplers, medium tracking across
 // boundaries and the medium an emitter's light starts in; and light
 // sampling through media (volpath.cpp, photonmapper.cpp).
@@ -91,7 +92,19 @@ struct MediumTracker {
 // region connected to infinity is taken to be the camera's, the one
 // assumption of this rule; a camera enclosed by a medium boundary with a
 // light outside it would break it).
-int emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, int it_shape);
+//
+// Returned as a MediumTracker: `enclosed` is set when that medium is the
+// interior of a non-null (dielectric) boundary, so that light paths
+// starting there file their medium vertices as subsurface (B), as a camera
+// path that entered through the boundary does.
+MediumTracker emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, int it_shape);
+
+// The transmittance from infinity to where an emitter at infinity's light
+// ray starts (the disk outside the scene) in medium `medium`: light from
+// infinity through an unbounded homogeneous medium arrives only in
+// channels with sigma_t = 0 (volpath's and Mitsuba's shadow rays towards it
+// see exp(-sigma_t inf)); grid media are vacuum outside their box, so 1.
+Color transmittance_from_infinity(const Scene& scene, int medium);
 
 // NEE at a scattering vertex `it` (surface or medium) through media and
 // index-matched boundaries: `f_of(wo)` is the BSDF value (times cosine) or

@@ -290,10 +290,17 @@ bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int r
     ray.o = es.p + es.n * es.eps;
     ray.d = es.d;
     MediumTracker mt;
-    if (scene.features.has_media) mt.medium = y0.medium = emitter_medium(scene, ray, es.n, emitter_shape(scene, e));
+    Color beta = es.weight / pick;
+    if (scene.features.has_media) {
+        mt = emitter_medium(scene, ray, es.n, emitter_shape(scene, e));
+        y0.medium = mt.medium;
+        y0.enclosed = mt.enclosed;
+        if (y0.infinite) beta *= transmittance_from_infinity(scene, mt.medium);
+    }
     light.push_back(y0);
     if (stop && (*stop)(light)) return true;
-    random_walk(scene, sampler, ray, es.weight / pick, TransportMode::Importance, max_vertices, rr_depth, light, stats,
+    if (is_black(beta)) return true;  // y0 alone: light from infinity that no unbounded medium lets through
+    random_walk(scene, sampler, ray, beta, TransportMode::Importance, max_vertices, rr_depth, light, stats,
                 stop, scene.features.has_media ? &mt : nullptr);
     return true;
 }

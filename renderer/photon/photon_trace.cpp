@@ -81,10 +81,11 @@ void trace_media_path(const Scene& scene, const PhotonTraceSpec& spec, const Emi
     Ray ray;
     ray.o = es.p + es.n * es.eps;
     ray.d = es.d;
-    MediumTracker mt;
-    mt.medium = emitter_medium(scene, ray, es.n, emitter_shape_of(scene, e));
+    MediumTracker mt = emitter_medium(scene, ray, es.n, emitter_shape_of(scene, e));
     // Hero channel of spectral MIS, drawn once per light path (media_common.h).
-    SpectralThroughput th(std::min(int(sampler.next_1d() * 3.f), 2), beta0);
+    SpectralThroughput th(std::min(int(sampler.next_1d() * 3.f), 2),
+                          e.is_infinite() ? beta0 * transmittance_from_infinity(scene, mt.medium) : beta0);
+    if (is_black(th.beta)) return;  // light from infinity that no unbounded medium lets through
     const float b0 = max_component(beta0);
     BsdfContext ctx{TransportMode::Importance};
     int k = 0;                 // scattering vertices before the current one

@@ -215,12 +215,16 @@ public:
         if (!(cos_x > 0.f)) return is;
         is.valid = true;
         is.film = Vec2(0.5f, 0.5f);
-        is.p = ps.p;
+        // The sensor point where sample_ray's rays start (ps.eps off the
+        // shape along its normal), so that bdpt's camera vertex is the same
+        // point in every strategy (its MIS densities are measured from it).
+        is.p = ps.p + ps.n * ps.eps;
         is.d = d;
         is.dist = dist;
         is.n = ps.n;
         is.weight = cos_x / (ps.pdf_a * shape_->area() * d2);  // W_e = 1 / A
-        is.clip = std::min(ps.eps * 4.f, 0.5f * dist);  // camera rays start ps.eps off the shape
+        // Connections end this far short of that point (clear of the shape itself).
+        is.clip = std::min(ps.eps * 4.f, 0.5f * dist);
         return is;
     }
     float pdf_ray_direction(const Vec3& n0, const Vec3& w) const override {
