@@ -79,20 +79,28 @@ void Grid::build_majorants(float scale) {
         }
     }
     mcells_.assign(size_t(mres_[0]) * mres_[1] * mres_[2], Color(0.f));
+    mincells_.assign(mcells_.size(), Color(0.f));
     for (int cz = 0; cz < mres_[2]; ++cz)
         for (int cy = 0; cy < mres_[1]; ++cy)
             for (int cx = 0; cx < mres_[0]; ++cx) {
-                Color m(0.f);
+                Color m(0.f), mn(kInf);
                 for (int z = lo[2][cz]; z <= hi[2][cz]; ++z)
                     for (int y = lo[1][cy]; y <= hi[1][cy]; ++y)
-                        for (int x = lo[0][cx]; x <= hi[0][cx]; ++x) m = vmax(m, voxel(x, y, z));
-                mcells_[(size_t(cz) * mres_[1] + cy) * mres_[0] + cx] = m * scale;
+                        for (int x = lo[0][cx]; x <= hi[0][cx]; ++x) {
+                            Color v = voxel(x, y, z);
+                            m = vmax(m, v);
+                            mn = vmin(mn, v);
+                        }
+                size_t i = (size_t(cz) * mres_[1] + cy) * mres_[0] + cx;
+                mcells_[i] = m * scale * (1.f + 1e-6f);
+                mincells_[i] = mn * scale * (1.f - 1e-6f);
             }
 }
 
 MajorantIterator Grid::majorants(const Vec3& o, const Vec3& d, float t0, float t1) const {
     MajorantIterator it;
     it.cells_ = mcells_.data();
+    it.min_cells_ = mincells_.data();
     Vec3 lo = xf_.inv_point(o), ld = xf_.inv_vector(d);
     const double oo[3] = {lo.x, lo.y, lo.z}, dd[3] = {ld.x, ld.y, ld.z};
     it.t_ = t0;
@@ -228,47 +236,59 @@ Color Medium::segment_transmittance(const Vec3& o, const Vec3& d, float t1, Samp
 }
 
 Color Medium::segment_transmittance_local(const Vec3& o, const Vec3& d, float t1, Sampler& sampler) const {
-    // Ratio tracking as above, per cell of the majorant grid with that
-    // cell's majorant mu (the largest channel's): within a cell the
-    // tentative collisions form a Poisson process of rate mu, and the
-    // process restarts at each cell border (memoryless), so the product of
-    // (1 - sigma_t / mu) over them estimates exp(-int sigma_t) cell by cell.
-    // Cells with mu = 0 hold no medium: no collisions, no random numbers.
-    Color tr(1.f);
+    // Residual ratio tracking (Novak et al. 2014, sec. 4) per cell of the
+    // majorant grid: in a cell whose sigma_t lies in [mnr, maj] (per
+    // channel), exp(-int sigma_t) = exp(-mnr len) exp(-int (sigma_t - mnr)),
+    // the first factor exact, the second ratio-tracked against the residual
+    // majorant mu = max over channels of (maj - mnr): tentative collisions
+    // of rate mu (a Poisson process restarted at each cell border,
+    // memoryless), each weighing 1 - (sigma_t - mnr) / mu. A cell of
+    // constant sigma_t (mu = 0) is exact: no collisions, no random numbers;
+    // so is an empty one. The control keeps the variance of a cell whose
+    // majorant is tight low (plain ratio tracking against mu = sigma_t would
+    // weigh 0 or 1).
     float t0, t_end;
-    if (!extent(o, d, t1, t0, t_end)) return tr;
+    if (!extent(o, d, t1, t0, t_end)) return Color(1.f);
     MajorantIterator cells = majorants(o, d, t0, t_end);
     MajorantSegment seg;
+    double tau[3] = {0.0, 0.0, 0.0};  // the controls' optical depth
+    Color w(1.f);                     // the ratio-tracked residual transmittance
     uint64_t lookups = 0;
     int n = 0;
-    while (cells.next(seg)) {
-        float mu = max_component(seg.maj);
+    bool dead = false;
+    while (!dead && cells.next(seg)) {
+        const float len = seg.t1 - seg.t0;
+        for (int c = 0; c < 3; ++c) tau[c] += double(seg.mnr[c]) * len;
+        const Color res = seg.maj - seg.mnr;
+        const float mu = max_component(res);
         if (!(mu > 0.f)) continue;
         float t = seg.t0;
         for (;;) {
             if (++n > (1 << 20)) {
-                count_lookups(lookups);
-                return Color(0.f);
+                dead = true;
+                break;
             }
             t += -std::log1p(-sampler.next_1d()) / mu;
             if (!(t < seg.t1)) break;
             Color st, ss;
             coefficients(o + d * t, st, ss);
             ++lookups;
-            // The cell's majorant bounds sigma_t up to float rounding
-            // (Grid::build_majorants); the clamp keeps the weight >= 0.
-            tr *= Color(1.f) - vmin(st, seg.maj) / mu;
-            if (max_component(tr) < 0.1f) {
+            // mnr <= sigma_t <= maj up to float rounding (Grid::build_majorants).
+            Color r = vmin(vmax(st - seg.mnr, Color(0.f)), res);
+            w *= Color(1.f) - r / mu;
+            // Russian roulette once the estimate is small (unbiased: survivors x2).
+            if (max_component(w) < 0.1f) {
                 if (sampler.next_1d() < 0.5f) {
-                    count_lookups(lookups);
-                    return Color(0.f);
+                    dead = true;
+                    break;
                 }
-                tr *= 2.f;
+                w *= 2.f;
             }
         }
     }
     count_lookups(lookups);
-    return tr;
+    if (dead) return Color(0.f);
+    return w * Color(float(std::exp(-tau[0])), float(std::exp(-tau[1])), float(std::exp(-tau[2])));
 }
 
 }  // namespace rm

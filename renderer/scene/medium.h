@@ -23,10 +23,11 @@
 
 namespace rm {
 
-// A part [t0, t1] of a ray over which `maj` bounds sigma_t, per channel.
+// A part [t0, t1] of a ray over which sigma_t lies in [mnr, maj], per
+// channel (a minorant and a majorant).
 struct MajorantSegment {
     float t0, t1;
-    Color maj;
+    Color maj, mnr;
 };
 
 // The cells of a majorant grid along a ray, in order, as MajorantSegments:
@@ -42,7 +43,9 @@ public:
         double exit = std::min(t_max_, std::max(t_, next_[a]));
         seg.t0 = float(t_);
         seg.t1 = float(exit);
-        seg.maj = cells_[(size_t(cell_[2]) * res_[1] + cell_[1]) * res_[0] + cell_[0]];
+        size_t i = (size_t(cell_[2]) * res_[1] + cell_[1]) * res_[0] + cell_[0];
+        seg.maj = cells_[i];
+        seg.mnr = min_cells_[i];
         t_ = exit;
         cell_[a] += step_[a];
         if (cell_[a] < 0 || cell_[a] >= res_[a]) t_ = t_max_;
@@ -53,6 +56,7 @@ public:
 private:
     friend class Grid;
     const Color* cells_ = nullptr;
+    const Color* min_cells_ = nullptr;
     int res_[3] = {0, 0, 0}, cell_[3] = {0, 0, 0}, step_[3] = {0, 0, 0};
     double t_ = 0.0, t_max_ = 0.0, next_[3] = {0, 0, 0}, delta_[3] = {0, 0, 0};
 };
@@ -72,7 +76,10 @@ public:
     // the largest value times `scale` of every voxel that the trilinear
     // lookup at a point of the cell can weigh (its neighbours across the
     // cell's borders included), so that scale * eval(p) <= the cell's value
-    // for every p in the cell. Built once (Medium's constructor).
+    // for every p in the cell (a convex combination of those voxels); padded
+    // by 1e-6 relative against float rounding in eval(). With it the
+    // smallest such value (padded down): a minorant, the control of
+    // residual ratio tracking. Built once (Medium's constructor).
     void build_majorants(float scale);
     bool has_majorants() const { return !mcells_.empty(); }
     // The cells along o + d t, t in [t0, t1] (a part of ray_interval's).
@@ -87,7 +94,7 @@ private:
     Transform xf_;
     Color max_;
     int mres_[3] = {0, 0, 0};
-    std::vector<Color> mcells_;
+    std::vector<Color> mcells_, mincells_;
 };
 
 class Medium {
