@@ -16,7 +16,8 @@ tracking; `accel` of a gridvolume, false keeping one global majorant).
 - volpath, ptracer and bdpt on a sparse grid scene with the majorant grid
   against the same scene with accel = false (the global majorant: the code
   path of the renderer before the majorant grid, bytes unchanged), blocked
-  z-tests; volpath with a 2 % power check.
+  z-tests with power checks (2 % volpath, 3 % ptracer and bdpt), and the
+  sigma_t lookups of tracking (tentative collisions) at most half.
 
 Every z-test is two-sided at ALPHA = 0.01 (Bonferroni over rays and
 channels where there are several), fixed seeds.
@@ -204,7 +205,7 @@ def test_ratio_tracking_matches_exact_transmittance(tmp_path):
             t1 = 20.0
         rays.append((o, d, t1))
     exact = np.array([np.exp(-_exact_optical_depth(g.astype(np.float64), m, o, d, t1)) for o, d, t1 in rays])
-    assert np.all(exact.min(axis=1) < 0.9) and exact.max() > 0.05, exact  # the rays see the spikes, not all black
+    assert np.sum(exact.min(axis=1) < 0.8) >= 4 and exact.max() > 0.05, exact  # some rays see spikes; not all black
     n = 20000
     for accel in (True, False):
         core = _core_with(_medium(tmp_path / "g.vol", m, accel=accel))
@@ -246,11 +247,19 @@ def _sparse_slab(tmp_path, accel):
     return rm.load_dict(d)
 
 
-@pytest.mark.parametrize("estimator,spp,power", [("volpath", 512, 1.02), ("ptracer", 512, None),
-                                                 ("bdpt", 128, None)])
+@pytest.mark.parametrize("estimator,spp,power", [("volpath", 512, 1.02), ("ptracer", 512, 1.03),
+                                                 ("bdpt", 128, 1.03)])
 def test_estimators_agree_with_global_majorant(tmp_path, estimator, spp, power):
+    from radiometer import _core
+
+    _core.reset_medium_tracking_lookups()
     a = rm.render(_sparse_slab(tmp_path, True), integrator=estimator, spp=spp, seed=1)
+    n_grid = _core.medium_tracking_lookups()
+    _core.reset_medium_tracking_lookups()
     b = rm.render(_sparse_slab(tmp_path, False), integrator=estimator, spp=spp, seed=2)
+    n_global = _core.medium_tracking_lookups()
+    # What the grid is for: far fewer tentative collisions (counts, not time).
+    assert 0 < n_grid < 0.5 * n_global, (n_grid, n_global)
     assert_clean(a, estimator)
     assert a.stats["nan_samples"] == 0 and a.image.min() >= 0
     assert_agrees(a, b, power, estimator)
