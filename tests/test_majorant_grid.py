@@ -76,7 +76,7 @@ def _sparse(rng, shape, channels, spikes, spike=100.0, base=0.0):
 GRIDS = {
     # (nz, ny, nx), channels, spikes, base
     "stress_like_8": ((8, 8, 8), 3, 12, 0.0),
-    "odd_37x5x20": ((20, 5, 37), 3, 9, 0.05),  # 37 / 16 and 20 / 16 voxels per cell: cells cut voxels
+    "odd_37x5x20": ((20, 5, 37), 3, 9, 0.05),  # 37 / 16, 5 / 16 and 20 / 16 voxels per cell: cells cut voxels
     "mono_40": ((40, 40, 40), 1, 30, 0.0),
     "thin_1x3x50": ((50, 3, 1), 3, 4, 0.5),
 }
@@ -92,7 +92,7 @@ def test_majorant_grid_bounds_sigma_t(tmp_path, name):
     core = _core_with(_medium(tmp_path / "g.vol", m, scale=1.7))
     assert core.medium_has_majorant_grid(0)
     nz, ny, nx = shape
-    res = np.minimum(np.array([nx, ny, nz]), 16)
+    res = np.where(np.array([nx, ny, nz]) == 1, 1, 16)
     # Uniform points in the unit cube, and points within 1e-5 of a cell
     # border (on either side) along a random axis.
     u = rng.uniform(0, 1, (200000, 3))

@@ -66,7 +66,10 @@ void Grid::build_majorants(float scale) {
     const int n[3] = {nx_, ny_, nz_};
     int lo[3][16], hi[3][16];
     for (int k = 0; k < 3; ++k) {
-        mres_[k] = std::min(n[k], 16);
+        // 16 cells per axis (pbrt-v4's 16^3), finer than the voxels of a
+        // small grid: a cell then meets 2 voxels' trilinear support per axis
+        // instead of the 3 of a voxel-sized cell. One cell for a flat axis.
+        mres_[k] = n[k] == 1 ? 1 : 16;
         for (int i = 0; i < mres_[k]; ++i) {
             // eval() at local coordinate u weighs voxels floor(f) and
             // floor(f) + 1, f = u n - 0.5 (clamped to [-1, n]); over the

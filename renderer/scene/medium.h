@@ -72,7 +72,7 @@ public:
     // The part [t0, t1] of the ray o + d t, t in [0, t_max], inside the
     // grid's box (its local unit cube); false when the ray misses it.
     bool ray_interval(const Vec3& o, const Vec3& d, float t_max, float& t0, float& t1) const;
-    // The majorant grid: min(n, 16) cells per axis over the unit cube, each
+    // The majorant grid: 16 cells per axis over the unit cube (1 where n = 1), each
     // the largest value times `scale` of every voxel that the trilinear
     // lookup at a point of the cell can weigh (its neighbours across the
     // cell's borders included), so that scale * eval(p) <= the cell's value
