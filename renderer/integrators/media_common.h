@@ -55,7 +55,8 @@ FlightEvent free_flight_homogeneous(const Medium& med, float t_hit, Sampler& sam
 // majorant[hero]; absorb, scatter or pass on (null) with probabilities
 // sigma_a, sigma_s and sigma_n = majorant - sigma_t over the majorant (the
 // hero's). Per-channel densities: sigma_s Tm, sigma_n Tm (Tm the majorant's
-// transmittance).
+// transmittance). A medium with a majorant grid (Medium::has_majorant_grid)
+// goes to free_flight_tracking_local: the same with the cells' majorants.
 FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, Sampler& sampler,
                                  SpectralThroughput& th, float& t);
 // The same over [t_start, t_end] (the medium's extent) with the local

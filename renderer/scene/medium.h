@@ -6,7 +6,9 @@
 // so along a ray through a homogeneous medium the transmittance is
 // Tr(t) = exp(-sigma_t t) (Beer-Lambert) per colour channel, and in a
 // heterogeneous one exp(-int sigma_t), estimated by ratio tracking against a
-// majorant (Novak et al. 2014, "Residual ratio tracking").
+// majorant (Novak et al. 2014, "Residual ratio tracking"): per cell of a
+// majorant grid (local majorants and minorants, residual ratio tracking)
+// for a sigma_t grid with `accel` (the default), else one global majorant.
 #pragma once
 #include <algorithm>
 #include <cmath>
