@@ -6,12 +6,21 @@
 namespace rm {
 
 namespace {
+// Counting is off until a measurement asks for it (reset_tracking_lookups):
+// a render otherwise only reads the flag, so its threads never contend for
+// the counter's cache line.
+std::atomic<bool> g_counting{false};
 std::atomic<uint64_t> g_tracking_lookups{0};
 }  // namespace
 
 uint64_t Medium::tracking_lookups() { return g_tracking_lookups.load(std::memory_order_relaxed); }
-void Medium::reset_tracking_lookups() { g_tracking_lookups.store(0, std::memory_order_relaxed); }
-void Medium::count_lookups(uint64_t n) { g_tracking_lookups.fetch_add(n, std::memory_order_relaxed); }
+void Medium::reset_tracking_lookups() {
+    g_tracking_lookups.store(0, std::memory_order_relaxed);
+    g_counting.store(true, std::memory_order_relaxed);
+}
+void Medium::count_lookups(uint64_t n) {
+    if (g_counting.load(std::memory_order_relaxed)) g_tracking_lookups.fetch_add(n, std::memory_order_relaxed);
+}
 
 Grid::Grid(const GridDesc& d, const std::string& who) : nx_(d.nx), ny_(d.ny), nz_(d.nz), ch_(d.channels) {
     if (nx_ < 1 || ny_ < 1 || nz_ < 1 || (ch_ != 1 && ch_ != 3))

@@ -146,7 +146,7 @@ public:
 
     // Measurement (benchmarks/majorant_grid.py): the number of sigma_t
     // lookups made by delta and ratio tracking in grid media, over all
-    // threads since the last reset.
+    // threads since the last reset (counting starts with the first reset).
     static uint64_t tracking_lookups();
     static void reset_tracking_lookups();
     static void count_lookups(uint64_t n);
