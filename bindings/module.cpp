@@ -52,6 +52,11 @@ Color to_color(const py::object& o) {
 
 py::tuple color_tuple(const Color& c) { return py::make_tuple(c.x, c.y, c.z); }
 
+const Medium& medium_at(const Scene& s, int m) {
+    if (m < 0 || size_t(m) >= s.media.size()) throw py::index_error("no medium " + std::to_string(m));
+    return *s.media[size_t(m)];
+}
+
 using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
 // A per-channel function f(channel, x) (Dipole::sample_r, pdf_a) over an array.
@@ -124,12 +129,18 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("shape", &SensorDesc::shape)
         .def_readwrite("medium", &SensorDesc::medium);
 
+    // Measurement (benchmarks/majorant_grid.py): sigma_t lookups by delta and
+    // ratio tracking in grid media since the last reset, all threads.
+    m.def("medium_tracking_lookups", &Medium::tracking_lookups);
+    m.def("reset_medium_tracking_lookups", &Medium::reset_tracking_lookups);
+
     py::class_<GridDesc>(m, "GridDesc")
         .def(py::init<>())
         .def_readwrite("nx", &GridDesc::nx)
         .def_readwrite("ny", &GridDesc::ny)
         .def_readwrite("nz", &GridDesc::nz)
         .def_readwrite("channels", &GridDesc::channels)
+        .def_readwrite("accel", &GridDesc::accel)
         .def_property("data", [](const GridDesc& d) { return d.data; },
                       [](GridDesc& d, py::object v) { d.data = flat<float>(v, 1, "grid data"); })
         .def_property("to_world", [](const GridDesc& d) { return d.to_world; },
@@ -254,6 +265,51 @@ PYBIND11_MODULE(_core, m) {
         .def("set_shape_media", &Scene::set_shape_media, py::arg("shape"), py::arg("interior"), py::arg("exterior"))
         .def("add_dipole", &Scene::add_dipole, py::arg("shape"), py::arg("desc"))
         .def_property_readonly("medium_count", [](const Scene& s) { return s.media.size(); })
+        // Tests of the majorant grid (tests/test_majorant_grid.py): sigma_t
+        // and the local majorant at N x 3 world points, N x 3 arrays.
+        .def("medium_sigma_t",
+             [](const Scene& s, int m, py::array_t<double, py::array::c_style | py::array::forcecast> pts) {
+                 const Medium& med = medium_at(s, m);
+                 py::array_t<float> out({pts.shape(0), py::ssize_t(3)});
+                 auto p = pts.unchecked<2>();
+                 auto o = out.mutable_unchecked<2>();
+                 for (py::ssize_t i = 0; i < pts.shape(0); ++i) {
+                     Color st, ss;
+                     med.coefficients(Vec3(float(p(i, 0)), float(p(i, 1)), float(p(i, 2))), st, ss);
+                     for (int c = 0; c < 3; ++c) o(i, c) = st[c];
+                 }
+                 return out;
+             })
+        .def("medium_majorant",
+             [](const Scene& s, int m, py::array_t<double, py::array::c_style | py::array::forcecast> pts) {
+                 const Medium& med = medium_at(s, m);
+                 py::array_t<float> out({pts.shape(0), py::ssize_t(3)});
+                 auto p = pts.unchecked<2>();
+                 auto o = out.mutable_unchecked<2>();
+                 for (py::ssize_t i = 0; i < pts.shape(0); ++i) {
+                     Color mj = med.majorant_at(Vec3(float(p(i, 0)), float(p(i, 1)), float(p(i, 2))));
+                     for (int c = 0; c < 3; ++c) o(i, c) = mj[c];
+                 }
+                 return out;
+             })
+        .def("medium_has_majorant_grid", [](const Scene& s, int m) { return medium_at(s, m).has_majorant_grid(); })
+        // `n` ratio-tracking estimates of the transmittance of o + d t, t in
+        // [0, t1) (Medium::segment_transmittance), seeded: an n x 3 array.
+        .def("medium_transmittance_samples",
+             [](const Scene& s, int m, py::object o, py::object d, float t1, int n, uint64_t seed) {
+                 const Medium& med = medium_at(s, m);
+                 Color oc = to_color(o), dc = to_color(d);
+                 Vec3 ov(oc.x, oc.y, oc.z), dv = normalize(Vec3(dc.x, dc.y, dc.z));
+                 py::array_t<float> out({py::ssize_t(n), py::ssize_t(3)});
+                 auto w = out.mutable_unchecked<2>();
+                 for (int i = 0; i < n; ++i) {
+                     Sampler sampler(seed, 0, uint64_t(i));
+                     Color tr = med.segment_transmittance(ov, dv, t1, sampler);
+                     for (int c = 0; c < 3; ++c) w(i, c) = tr[c];
+                 }
+                 return out;
+             },
+             py::arg("medium"), py::arg("o"), py::arg("d"), py::arg("t1"), py::arg("n"), py::arg("seed") = 0)
         .def("add_area_emitter", &Scene::add_area_emitter)
         .def("add_emitter", &Scene::add_emitter)
         .def("set_sensor", &Scene::set_sensor)

@@ -58,6 +58,7 @@ def _medium_index(scene, media, m, source):
                 cg.nz, cg.ny, cg.nx, cg.channels = (int(v) for v in g.data.shape)
                 cg.data = np.ascontiguousarray(g.data, np.float32).reshape(-1, 1)
                 cg.to_world = np.asarray(g.to_world, np.float64)
+                cg.accel = bool(g.accel)
                 setattr(c, name, cg)
         try:
             media[id(m)] = scene.add_medium(c)

@@ -81,12 +81,14 @@ medium     homogeneous: sigma_t [1] + albedo [0.75] (Mitsuba 3), or sigma_a +
                `medium`; declared at the top level for refs.
            heterogeneous: as homogeneous, but sigma_t and albedo may each be
                a nested volume of that name; has_spectral_extinction
-               accepted. The renderer tracks it with a global majorant
-               (delta tracking; ratio tracking for shadow rays).
+               accepted. The renderer tracks it against a majorant grid of
+               a sigma_t gridvolume (its `accel`; delta tracking, ratio
+               tracking for shadow rays), else one global majorant.
 volume     gridvolume: filename (Mitsuba's .vol, version 3, float32, 1 or 3
                channels), to_world (maps the unit cube), use_grid_bbox
                [false], filter_type ['trilinear'], wrap_mode ['clamp'], raw,
-               accel (accepted); constvolume: value [1].
+               accel [true] (as sigma_t: a majorant grid for tracking; false:
+               one global majorant); constvolume: value [1].
 phase      isotropic; hg: g [0.8] in (-1, 1).
 subsurface dipole (Mitsuba 0.6's plugin; nested in a shape, which it turns
                into a smooth dielectric boundary over a dipole BSSRDF, Jensen
@@ -1294,9 +1296,12 @@ class _Builder:
         p.string("filter_type", "trilinear", ("trilinear",))
         p.string("wrap_mode", "clamp", ("clamp",))
         p.bool("raw", False)  # linear RGB values either way (no spectral upsampling here)
-        p.bool("accel", True)  # Mitsuba's majorant grid; ours is one global majorant
+        # Mitsuba's majorant grid: true, a coarse grid of local majorants
+        # for delta / ratio tracking through a sigma_t grid (Medium in
+        # renderer/scene/medium.h); false, one global majorant per channel.
+        accel = p.bool("accel", True)
         p.done()
-        return GridDesc(data=data, to_world=m)
+        return GridDesc(data=data, to_world=m, accel=bool(accel))
 
     def _media_of(self, p):
         """(interior, exterior) MediumDescs nested in or referenced by a shape."""

@@ -66,6 +66,7 @@ class GridDesc:
     of its local space, mapped to the world by to_world."""
     data: np.ndarray = field(default_factory=lambda: np.zeros((1, 1, 1, 1), np.float32))
     to_world: np.ndarray = field(default_factory=_eye)
+    accel: bool = True  # a majorant grid for tracking (False: one global majorant)
 
 
 @dataclass

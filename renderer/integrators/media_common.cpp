@@ -27,27 +27,107 @@ FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, S
     // the medium is vacuum (Medium::extent), so the flight passes there.
     float t_end;
     if (!med.extent(r.o, r.d, t_hit, t, t_end)) return kPassed;
+    if (med.has_majorant_grid()) return free_flight_tracking_local(med, r, t, t_end, sampler, th, t);
+    uint64_t lookups = 0;
+    FlightEvent ev = kAbsorbed;
     for (int i = 0; i < (1 << 20); ++i) {
         float u_t = sampler.next_1d(), u_e = sampler.next_1d();
         float dt = m > 0.f ? -std::log1p(-u_t) / m : kInf;
         if (!(t + dt < t_end)) {
             Color tm = Medium::exp_neg(maj, t_end - t);
-            return tm[h] > 0.f && th.rescale(tm / tm[h]) ? kPassed : kAbsorbed;
+            ev = tm[h] > 0.f && th.rescale(tm / tm[h]) ? kPassed : kAbsorbed;
+            break;
         }
         t += dt;
         Color st, ss;
         med.coefficients(r.o + r.d * t, st, ss);
+        ++lookups;
         Color tm = Medium::exp_neg(maj, dt);
         float p_absorb = (st[h] - ss[h]) / m, p_scatter = ss[h] / m;
-        if (u_e < p_absorb) return kAbsorbed;
+        if (u_e < p_absorb) break;  // kAbsorbed
         if (u_e < p_absorb + p_scatter) {
             Color p = ss * tm;
-            return th.rescale(p / p[h]) ? kScattered : kAbsorbed;
+            ev = th.rescale(p / p[h]) ? kScattered : kAbsorbed;
+            break;
         }
         Color p = (maj - st) * tm;
-        if (!(p[h] > 0.f) || !th.rescale(p / p[h])) return kAbsorbed;
+        if (!(p[h] > 0.f) || !th.rescale(p / p[h])) break;  // kAbsorbed
     }
-    return kAbsorbed;
+    Medium::count_lookups(lookups);
+    return ev;
+}
+
+// The same with local majorants (Medium::majorants): the flight crosses the
+// cells of the majorant grid along [t, t_end] in order, each with its own
+// majorant maj (per channel) and rate maj[hero]. The tentative-collision
+// process of a piecewise-constant rate is sampled piecewise (exponential
+// steps restarted at each cell border, memoryless), so its density is
+// maj(t) exp(-int_0^t maj) with the local majorant, for the hero and, for
+// the MIS bookkeeping, for every channel: as in free_flight_tracking, each
+// event's per-channel density is its coefficient (sigma_s, or sigma_n =
+// maj - sigma_t with the cell's maj) times the majorant transmittance Tm =
+// exp(-tau) since the last tentative collision, tau the majorant's optical
+// depth summed over the cells crossed. A cell where maj[hero] = 0 holds no
+// medium for the hero (sigma_t <= maj): no collisions and no random
+// numbers there, only its optical depth for the other channels.
+FlightEvent free_flight_tracking_local(const Medium& med, const Ray& r, float t_start, float t_end, Sampler& sampler,
+                                       SpectralThroughput& th, float& t) {
+    const int h = th.hero;
+    MajorantIterator cells = med.majorants(r.o, r.d, t_start, t_end);
+    MajorantSegment seg;
+    Color tau(0.f);  // the majorant's optical depth since the last tentative collision
+    uint64_t lookups = 0;
+    FlightEvent ev = kAbsorbed;
+    int n = 0;
+    while (cells.next(seg)) {
+        const Color& maj = seg.maj;
+        const float m = maj[h];
+        float ts = seg.t0;  // where the optical depth not yet in tau starts
+        if (m > 0.f) {
+            for (;;) {
+                if (++n > (1 << 20)) {
+                    Medium::count_lookups(lookups);
+                    return kAbsorbed;
+                }
+                float u_t = sampler.next_1d(), u_e = sampler.next_1d();
+                float tc = ts + -std::log1p(-u_t) / m;
+                if (!(tc < seg.t1)) break;
+                t = tc;
+                Color st, ss;
+                med.coefficients(r.o + r.d * t, st, ss);
+                ++lookups;
+                // The cell's majorant bounds sigma_t up to float rounding
+                // (Grid::build_majorants); the clamp keeps sigma_n >= 0.
+                st = vmin(st, maj);
+                ss = vmin(ss, st);
+                tau += maj * (t - ts);
+                ts = t;
+                Color tm{std::exp(-tau.x), std::exp(-tau.y), std::exp(-tau.z)};
+                tau = Color(0.f);
+                float p_absorb = (st[h] - ss[h]) / m, p_scatter = ss[h] / m;
+                if (u_e < p_absorb) {
+                    Medium::count_lookups(lookups);
+                    return kAbsorbed;
+                }
+                if (u_e < p_absorb + p_scatter) {
+                    Color p = ss * tm;
+                    ev = th.rescale(p / p[h]) ? kScattered : kAbsorbed;
+                    Medium::count_lookups(lookups);
+                    return ev;
+                }
+                Color p = (maj - st) * tm;
+                if (!(p[h] > 0.f) || !th.rescale(p / p[h])) {
+                    Medium::count_lookups(lookups);
+                    return kAbsorbed;
+                }
+            }
+        }
+        tau += maj * (seg.t1 - ts);
+    }
+    Medium::count_lookups(lookups);
+    t = t_end;
+    Color tm{std::exp(-tau.x), std::exp(-tau.y), std::exp(-tau.z)};
+    return tm[h] > 0.f && th.rescale(tm / tm[h]) ? kPassed : kAbsorbed;
 }
 
 MediumTracker emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, int it_shape) {

@@ -56,9 +56,14 @@ FlightEvent free_flight_homogeneous(const Medium& med, float t_hit, Sampler& sam
 // majorant[hero]; absorb, scatter or pass on (null) with probabilities
 // sigma_a, sigma_s and sigma_n = majorant - sigma_t over the majorant (the
 // hero's). Per-channel densities: sigma_s Tm, sigma_n Tm (Tm the majorant's
-// transmittance).
+// transmittance). A medium with a majorant grid (Medium::has_majorant_grid)
+// goes to free_flight_tracking_local: the same with the cells' majorants.
 FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, Sampler& sampler,
                                  SpectralThroughput& th, float& t);
+// The same over [t_start, t_end] (the medium's extent) with the local
+// majorants of the medium's majorant grid (Medium::has_majorant_grid).
+FlightEvent free_flight_tracking_local(const Medium& med, const Ray& r, float t_start, float t_end, Sampler& sampler,
+                                       SpectralThroughput& th, float& t);
 
 // Either of the two above, for the medium's kind.
 inline FlightEvent free_flight(const Medium& med, const Ray& r, float t_hit, Sampler& sampler, SpectralThroughput& th,

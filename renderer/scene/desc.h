@@ -63,6 +63,9 @@ struct GridDesc {
     int nx = 0, ny = 0, nz = 0, channels = 1;
     std::vector<float> data;
     Matrix4 to_world = identity4();
+    // Mitsuba's `accel`: a majorant grid for the tracking of a sigma_t grid
+    // (Medium); false: one global majorant per channel.
+    bool accel = true;
 };
 
 struct MediumDesc {
