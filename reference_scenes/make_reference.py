@@ -56,9 +56,9 @@ SCENES = {
         "params": {"res": 64, "max_depth": 10},
         # Mitsuba's light tracer, not its path tracer: the near room is lit
         # only by a narrow strip the lamp throws through the door's gap, which
-        # a camera path finds by BSDF sampling about 1 time in 100 per
-        # bounce, while most of the lamp's light paths that leave the far
-        # room land on it. All surfaces are diffuse, so light tracing sees
+        # a camera path finds by BSDF sampling less than 1 time in 100 per
+        # bounce, while every light path that leaves the far room lands on
+        # it first. All surfaces are diffuse, so light tracing sees
         # every path (card.md: its cross-check against Mitsuba's path).
         "integrator": {"type": "ptracer", "max_depth": 10},
         "runs": 32,
