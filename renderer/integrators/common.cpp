@@ -41,6 +41,25 @@ bool trace_counting_emission(const Scene& scene, const Ray& ray, Interaction& it
     return true;
 }
 
+void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* it, const Color& beta, int cls,
+                         int depth, bool prev_delta, const Vec3& prev_p, float prev_pdf_w, EffectRadiance& out) {
+    const bool weighted = !(depth == 0 || prev_delta);
+    if (!it) {
+        for (const Emitter* e : scene.environment) {
+            float w = weighted ? mis_emission_hit(scene, *e, prev_p, nullptr, prev_pdf_w) : 1.f;
+            out.add(cls, beta * e->eval_environment(ray.d) * w);
+        }
+        return;
+    }
+    const Shape& shape = *scene.shapes[it->shape];
+    if (shape.emitter < 0) return;
+    const Emitter& e = *scene.emitters[shape.emitter];
+    Color le = e.eval(*it, it->wi);
+    if (is_black(le)) return;
+    float w = weighted ? mis_emission_hit(scene, e, prev_p, it, prev_pdf_w) : 1.f;
+    out.add(cls, beta * le * w);
+}
+
 float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
                        float bsdf_pdf_w, float light_frac, float bsdf_frac) {
     float light_pdf = it ? e.pdf_direct(prev_p, it->p, it->n) : e.pdf_direct(prev_p, Vec3(0.f), Vec3(0.f));

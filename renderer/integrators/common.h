@@ -25,6 +25,15 @@ Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsd
 float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
                        float bsdf_pdf_w, float light_frac = 1.f, float bsdf_frac = 1.f);
 
+// Emission a camera path's last sample reached (path.cpp, volpath.cpp):
+// what the environment shows along `ray` when the ray left the scene (`it`
+// null), else the hit shape's area emitter, times `beta`, under class
+// `cls`; weighted by the power heuristic against next event estimation
+// (mis_emission_hit) unless the sample came from the camera (depth 0) or a
+// delta lobe.
+void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* it, const Color& beta, int cls,
+                         int depth, bool prev_delta, const Vec3& prev_p, float prev_pdf_w, EffectRadiance& out);
+
 // One step of a camera path for estimators that take emission found along
 // it without an MIS weight (photonmapper, sppm: their only other route to
 // the emitters is light sampling at non-specular vertices): intersects

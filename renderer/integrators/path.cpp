@@ -55,23 +55,11 @@ public:
 
             // 2. Emission reached by the previous BSDF sample (or the camera ray),
             //    weighted against next event estimation unless that sample was delta.
-            if (!hit) {
-                if (count_emission && mask[cls])
-                    for (const Emitter* e : scene.environment) {
-                        float w = (depth == 0 || prev_delta) ? 1.f : mis_emission_hit(scene, *e, prev_p, nullptr, prev_pdf_w);
-                        out.add(cls, beta * e->eval_environment(ray.d) * w);
-                    }
-                break;
-            }
+            if (count_emission && mask[cls])
+                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_p, prev_pdf_w,
+                                    out);
+            if (!hit) break;
             const Shape& shape = *scene.shapes[it.shape];
-            if (shape.emitter >= 0 && count_emission && mask[cls]) {
-                const Emitter& e = *scene.emitters[shape.emitter];
-                Color le = e.eval(it, it.wi);
-                if (!is_black(le)) {
-                    float w = (depth == 0 || prev_delta) ? 1.f : mis_emission_hit(scene, e, prev_p, &it, prev_pdf_w);
-                    out.add(cls, beta * le * w);
-                }
-            }
 
             // 3. Stop at max_depth (Mitsuba's meaning: depth + 1 segments so far),
             //    or when no requested effect class is reachable any more.
