@@ -52,6 +52,17 @@ Color to_color(const py::object& o) {
 
 py::tuple color_tuple(const Color& c) { return py::make_tuple(c.x, c.y, c.z); }
 
+// A desc struct's Color member as a Python property: read as an (r, g, b)
+// tuple, set from anything to_color takes.
+template <class T>
+auto color_get(Color T::*m) {
+    return [m](const T& d) { return color_tuple(d.*m); };
+}
+template <class T>
+auto color_set(Color T::*m) {
+    return [m](T& d, py::object v) { d.*m = to_color(v); };
+}
+
 const Medium& medium_at(const Scene& s, int m) {
     if (m < 0 || size_t(m) >= s.media.size()) throw py::index_error("no medium " + std::to_string(m));
     return *s.media[size_t(m)];
@@ -77,18 +88,15 @@ PYBIND11_MODULE(_core, m) {
         .def(py::init<>())
         .def_readwrite("type", &BsdfDesc::type)
         .def_readwrite("id", &BsdfDesc::id)
-        .def_property("reflectance", [](const BsdfDesc& d) { return color_tuple(d.reflectance); },
-                      [](BsdfDesc& d, py::object v) { d.reflectance = to_color(v); })
-        .def_property("diffuse_reflectance", [](const BsdfDesc& d) { return color_tuple(d.diffuse_reflectance); },
-                      [](BsdfDesc& d, py::object v) { d.diffuse_reflectance = to_color(v); })
-        .def_property("specular_reflectance", [](const BsdfDesc& d) { return color_tuple(d.specular_reflectance); },
-                      [](BsdfDesc& d, py::object v) { d.specular_reflectance = to_color(v); })
-        .def_property("specular_transmittance", [](const BsdfDesc& d) { return color_tuple(d.specular_transmittance); },
-                      [](BsdfDesc& d, py::object v) { d.specular_transmittance = to_color(v); })
-        .def_property("eta", [](const BsdfDesc& d) { return color_tuple(d.eta); },
-                      [](BsdfDesc& d, py::object v) { d.eta = to_color(v); })
-        .def_property("k", [](const BsdfDesc& d) { return color_tuple(d.k); },
-                      [](BsdfDesc& d, py::object v) { d.k = to_color(v); })
+        .def_property("reflectance", color_get(&BsdfDesc::reflectance), color_set(&BsdfDesc::reflectance))
+        .def_property("diffuse_reflectance", color_get(&BsdfDesc::diffuse_reflectance),
+                      color_set(&BsdfDesc::diffuse_reflectance))
+        .def_property("specular_reflectance", color_get(&BsdfDesc::specular_reflectance),
+                      color_set(&BsdfDesc::specular_reflectance))
+        .def_property("specular_transmittance", color_get(&BsdfDesc::specular_transmittance),
+                      color_set(&BsdfDesc::specular_transmittance))
+        .def_property("eta", color_get(&BsdfDesc::eta), color_set(&BsdfDesc::eta))
+        .def_property("k", color_get(&BsdfDesc::k), color_set(&BsdfDesc::k))
         .def_readwrite("int_ior", &BsdfDesc::int_ior)
         .def_readwrite("ext_ior", &BsdfDesc::ext_ior)
         .def_readwrite("alpha_u", &BsdfDesc::alpha_u)
@@ -102,12 +110,9 @@ PYBIND11_MODULE(_core, m) {
         .def(py::init<>())
         .def_readwrite("type", &EmitterDesc::type)
         .def_readwrite("id", &EmitterDesc::id)
-        .def_property("radiance", [](const EmitterDesc& d) { return color_tuple(d.radiance); },
-                      [](EmitterDesc& d, py::object v) { d.radiance = to_color(v); })
-        .def_property("intensity", [](const EmitterDesc& d) { return color_tuple(d.intensity); },
-                      [](EmitterDesc& d, py::object v) { d.intensity = to_color(v); })
-        .def_property("irradiance", [](const EmitterDesc& d) { return color_tuple(d.irradiance); },
-                      [](EmitterDesc& d, py::object v) { d.irradiance = to_color(v); })
+        .def_property("radiance", color_get(&EmitterDesc::radiance), color_set(&EmitterDesc::radiance))
+        .def_property("intensity", color_get(&EmitterDesc::intensity), color_set(&EmitterDesc::intensity))
+        .def_property("irradiance", color_get(&EmitterDesc::irradiance), color_set(&EmitterDesc::irradiance))
         .def_property("to_world", [](const EmitterDesc& d) { return d.to_world; },
                       [](EmitterDesc& d, py::object v) { d.to_world = to_matrix(v); })
         .def_readwrite("cutoff_angle", &EmitterDesc::cutoff_angle)
@@ -150,10 +155,8 @@ PYBIND11_MODULE(_core, m) {
         .def(py::init<>())
         .def_readwrite("type", &MediumDesc::type)
         .def_readwrite("id", &MediumDesc::id)
-        .def_property("sigma_t", [](const MediumDesc& d) { return color_tuple(d.sigma_t); },
-                      [](MediumDesc& d, py::object v) { d.sigma_t = to_color(v); })
-        .def_property("albedo", [](const MediumDesc& d) { return color_tuple(d.albedo); },
-                      [](MediumDesc& d, py::object v) { d.albedo = to_color(v); })
+        .def_property("sigma_t", color_get(&MediumDesc::sigma_t), color_set(&MediumDesc::sigma_t))
+        .def_property("albedo", color_get(&MediumDesc::albedo), color_set(&MediumDesc::albedo))
         .def_readwrite("sigma_t_grid", &MediumDesc::sigma_t_grid)
         .def_readwrite("albedo_grid", &MediumDesc::albedo_grid)
         .def_readwrite("scale", &MediumDesc::scale)
@@ -163,10 +166,8 @@ PYBIND11_MODULE(_core, m) {
     py::class_<DipoleDesc>(m, "DipoleDesc")
         .def(py::init<>())
         .def_readwrite("id", &DipoleDesc::id)
-        .def_property("sigma_a", [](const DipoleDesc& d) { return color_tuple(d.sigma_a); },
-                      [](DipoleDesc& d, py::object v) { d.sigma_a = to_color(v); })
-        .def_property("sigma_s", [](const DipoleDesc& d) { return color_tuple(d.sigma_s); },
-                      [](DipoleDesc& d, py::object v) { d.sigma_s = to_color(v); })
+        .def_property("sigma_a", color_get(&DipoleDesc::sigma_a), color_set(&DipoleDesc::sigma_a))
+        .def_property("sigma_s", color_get(&DipoleDesc::sigma_s), color_set(&DipoleDesc::sigma_s))
         .def_readwrite("g", &DipoleDesc::g)
         .def_readwrite("int_ior", &DipoleDesc::int_ior)
         .def_readwrite("ext_ior", &DipoleDesc::ext_ior);
