@@ -8,9 +8,9 @@
 #include <pybind11/stl.h>
 
 #include "film/film.h"
-#include "integrators/render.h"
+#include "render/render.h"
 #include "photon/photon_map.h"
-#include "photon/photon_trace.h"
+#include "transport/photon_trace.h"
 #include "scene/phase.h"
 #include "scene/scene.h"
 

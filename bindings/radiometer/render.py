@@ -33,7 +33,7 @@ INTEGRATOR_PARAMS = {
     # 0 = the densest channel's mean free path, at most 1/16 of the scene's radius);
     # volume_boundary_rays K > 0 (ours) corrects the estimate's sphere volume for the part of it
     # behind the medium's boundary, measured with K rays (0: the seed's 4/3 pi r^3).
-    # Radii are relative to the scene's bounding-sphere radius. See renderer/integrators/photonmapper.cpp.
+    # Radii are relative to the scene's bounding-sphere radius. See renderer/estimators/photonmapper.cpp.
     "photonmapper": dict(_COMMON, direct_samples=(int, 16), global_photons=(int, 250000),
                          caustic_photons=(int, 250000), global_lookup_radius=(float, 0.05),
                          caustic_lookup_radius=(float, 0.0125), lookup_size=(int, 120), gather_rays=(int, 32),
@@ -42,7 +42,7 @@ INTEGRATOR_PARAMS = {
                          step_size=(float, 0.0), volume_boundary_rays=(int, 0), granularity=(int, None)),
     # Stochastic progressive photon mapping (Hachisuka & Jensen 2009): Mitsuba 0.6's photonCount,
     # initialRadius (0 = automatic), alpha, maxDepth, rrDepth; granularity accepted and ignored.
-    # One pass per spp. See renderer/integrators/sppm.cpp.
+    # One pass per spp. See renderer/estimators/sppm.cpp.
     "sppm": dict(_COMMON, photon_count=(int, 250000), initial_radius=(float, 0.0), alpha=(float, 0.7),
                  granularity=(int, None)),
 }
@@ -293,7 +293,7 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
     if spec["type"] == "sppm":
         mixed = _mixed_bsdfs(scene.desc)
         if mixed:
-            # A known limit (renderer/integrators/sppm.cpp): the visible point is
+            # A known limit (renderer/estimators/sppm.cpp): the visible point is
             # the first vertex with a smooth lobe, so a BSDF that also has a
             # delta lobe (plastic's coat) never passes the camera path on: its
             # reflections (the `specular` class there) are missing at any budget.

@@ -39,7 +39,7 @@
 
 #include <climits>
 
-#include "integrators/subpath.h"
+#include "transport/subpath.h"
 
 namespace rm {
 

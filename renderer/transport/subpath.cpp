@@ -1,5 +1,5 @@
 // The subpath machinery of subpath.h, shared by ptracer.cpp and bdpt.cpp.
-#include "integrators/subpath.h"
+#include "transport/subpath.h"
 
 #include <algorithm>
 #include <stdexcept>

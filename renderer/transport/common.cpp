@@ -1,4 +1,4 @@
-#include "integrators/common.h"
+#include "transport/common.h"
 
 namespace rm {
 

@@ -8,7 +8,7 @@
 #include <cstddef>
 #include <type_traits>
 
-#include "integrators/common.h"
+#include "transport/common.h"
 
 namespace rm {
 

@@ -72,11 +72,11 @@
 #include <stdexcept>
 #include <thread>
 
-#include "integrators/common.h"
-#include "integrators/media_common.h"
+#include "transport/common.h"
+#include "transport/media_common.h"
 #include "core/warp.h"
-#include "integrators/render.h"
-#include "photon/photon_trace.h"
+#include "render/render.h"
+#include "transport/photon_trace.h"
 
 namespace rm {
 

@@ -40,8 +40,8 @@
 #include <stdexcept>
 #include <thread>
 
-#include "integrators/parallel.h"
-#include "integrators/render.h"
+#include "render/parallel.h"
+#include "render/render.h"
 
 namespace rm {
 

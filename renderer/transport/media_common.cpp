@@ -1,5 +1,5 @@
 // Media transport shared by volpath.cpp and subpath.cpp (media_common.h).
-#include "integrators/media_common.h"
+#include "transport/media_common.h"
 
 namespace rm {
 

@@ -1,4 +1,4 @@
-#include "integrators/render.h"
+#include "render/render.h"
 
 #include <algorithm>
 #include <atomic>

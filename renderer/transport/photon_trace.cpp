@@ -1,10 +1,10 @@
-#include "photon/photon_trace.h"
+#include "transport/photon_trace.h"
 
 #include <chrono>
 
-#include "integrators/common.h"
-#include "integrators/media_common.h"
-#include "integrators/parallel.h"
+#include "transport/common.h"
+#include "transport/media_common.h"
+#include "render/parallel.h"
 
 namespace rm {
 

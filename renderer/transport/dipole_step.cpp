@@ -19,7 +19,7 @@
 //    hits on the chosen probe. The estimate Rd(|xi - xo|) / pdf is unbiased
 //    for the part of the surface within r_max of xo (PBR3 sec. 15.4 and the
 //    text around it).
-#include "integrators/dipole_step.h"
+#include "transport/dipole_step.h"
 
 #include "scene/fresnel.h"
 

@@ -1,7 +1,7 @@
 // Pieces shared by the surface estimators: emitter selection, next event
 // estimation with MIS, emission found by BSDF sampling.
 #pragma once
-#include "integrators/integrator.h"
+#include "render/integrator.h"
 
 namespace rm {
 

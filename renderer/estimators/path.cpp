@@ -15,9 +15,9 @@
 // A shape with a dipole BSSRDF (scene/dipole.h) is handled by
 // dipole_step (specular reflection or a sampled exit point, the path going
 // on from there with the exit lobe as its BSDF): step 4a.
-#include "integrators/common.h"
-#include "integrators/dipole_step.h"
-#include "integrators/volpath.h"
+#include "transport/common.h"
+#include "transport/dipole_step.h"
+#include "estimators/volpath.h"
 
 namespace rm {
 

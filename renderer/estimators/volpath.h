@@ -1,6 +1,6 @@
 // The media-aware camera-ray loop shared by `path` and `volpath` (volpath.cpp).
 #pragma once
-#include "integrators/integrator.h"
+#include "render/integrator.h"
 
 namespace rm {
 

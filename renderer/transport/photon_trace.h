@@ -12,7 +12,7 @@
 #include <functional>
 #include <vector>
 
-#include "integrators/integrator.h"
+#include "render/integrator.h"
 #include "photon/photon_map.h"
 
 namespace rm {

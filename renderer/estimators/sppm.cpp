@@ -44,10 +44,10 @@
 #include <stdexcept>
 #include <thread>
 
-#include "integrators/common.h"
-#include "integrators/parallel.h"
-#include "integrators/render.h"
-#include "photon/photon_trace.h"
+#include "transport/common.h"
+#include "render/parallel.h"
+#include "render/render.h"
+#include "transport/photon_trace.h"
 
 namespace rm {
 

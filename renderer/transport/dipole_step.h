@@ -1,7 +1,7 @@
 // The camera-path step at a shape with a dipole BSSRDF (scene/dipole.h),
 // shared by the surface loop (path.cpp) and the media loop (volpath.cpp).
 #pragma once
-#include "integrators/integrator.h"
+#include "render/integrator.h"
 
 namespace rm {
 

@@ -5,7 +5,7 @@
 //   emitter_samples  light samples per camera sample (default 1)
 //   bsdf_samples     BSDF samples per camera sample (default 1)
 //   hide_emitters    directly visible emitters appear black
-#include "integrators/common.h"
+#include "transport/common.h"
 
 #include <stdexcept>
 

@@ -87,7 +87,7 @@
 #include <stdexcept>
 
 #include "film/film.h"
-#include "integrators/subpath.h"
+#include "transport/subpath.h"
 
 namespace rm {
 

@@ -9,8 +9,8 @@
 #include <functional>
 #include <vector>
 
-#include "integrators/common.h"
-#include "integrators/media_common.h"
+#include "transport/common.h"
+#include "transport/media_common.h"
 
 namespace rm {
 

@@ -36,10 +36,10 @@
 //    an interior or exterior medium (Mitsuba 3's rule: target_medium(d) is
 //    the exterior when d . n > 0, else the interior); the camera starts in
 //    the sensor's medium.
-#include "integrators/common.h"
-#include "integrators/dipole_step.h"
-#include "integrators/media_common.h"
-#include "integrators/volpath.h"
+#include "transport/common.h"
+#include "transport/dipole_step.h"
+#include "transport/media_common.h"
+#include "estimators/volpath.h"
 
 namespace rm {
 
