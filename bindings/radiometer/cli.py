@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 from . import EFFECTS, RenderCancelled, SceneError, load_file, render, write_exr
+from .exr import check_output
 
 
 def _scene_path(name: str) -> Path:
@@ -83,6 +84,8 @@ def cmd_render(a) -> int:
     out = Path(a.output)
     if not out.parent.exists():
         out.parent.mkdir(parents=True, exist_ok=True)
+    # Before the render: an output that cannot be written must not cost a render.
+    check_output(out, "-o")
     bar = _Progress(f"render {Path(a.scene).stem}")
     try:
         res = render(scene, integrator=integrator, spp=a.spp, seconds=a.seconds, seed=a.seed, threads=a.threads,
@@ -352,7 +355,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     try:
         return a.func(a)
-    except (SceneError, ValueError, FileNotFoundError, KeyError) as e:
+    except (SceneError, ValueError, FileNotFoundError, PermissionError, KeyError) as e:
         if isinstance(e, KeyError):
             e = e.args[0] if e.args else e
         print(f"radiometer {a.cmd}: error: {e}", file=sys.stderr)

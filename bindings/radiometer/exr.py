@@ -40,6 +40,29 @@ def _split(name, a):
     return {f"{name}.{c}": np.ascontiguousarray(a[..., i]) for i, c in enumerate("RGB")}
 
 
+def check_output(path, who: str = "output") -> Path:
+    """The file an EXR written to `path` lands in, checked before any work
+    is spent on it: its folder exists and is writable, and it is a regular
+    file or not there yet. A symbolic link is written through (the file it
+    points to is replaced, the link stays); a device, a FIFO, a socket or a
+    folder is refused, since the atomic rename write_exr uses would replace
+    the special file itself (`-o /dev/null` as root would replace /dev/null)."""
+    path = Path(path)
+    if path.is_symlink():
+        path = Path(os.path.realpath(path))
+    if path.exists() and not path.is_file():
+        kind = "a folder" if path.is_dir() else "not a regular file (a device, FIFO or socket)"
+        raise ValueError(f"{who}: {path} is {kind}; give the path of an .exr file")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{who}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise PermissionError(f"{who}: folder {folder} is not writable")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise PermissionError(f"{who}: {path} is not writable")
+    return path
+
+
 def write_exr(path, result=None, *, image=None, variance=None, effects=None, layers=None, **metadata):
     """Writes `result` (a RenderResult) or explicit arrays to `path`.
     Keyword metadata values (str, int, float, or JSON-able) become header
@@ -85,9 +108,7 @@ def write_exr(path, result=None, *, image=None, variance=None, effects=None, lay
         if not isinstance(v, (str, int)):
             v = json.dumps(v)
         header[_META_PREFIX + k] = v
-    path = Path(path)
-    if path.parent and not path.parent.exists():
-        raise FileNotFoundError(f"write_exr: folder {path.parent} does not exist")
+    path = check_output(path, "write_exr")
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.exr")
     try:
         with OpenEXR.File(header, channels) as f:
