@@ -138,7 +138,32 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
         raise SceneError(f"{desc.source}: sensor 'irradiancemeter' must be nested in a shape")
     try:
         scene.set_sensor(c)
+    except ValueError as e:
+        msg = str(e).removeprefix("sensor: ")
+        raise SceneError(f"{desc.source}: sensor: {msg}") from None
+    try:
         scene.commit()
     except ValueError as e:
-        raise SceneError(f"{desc.source}: sensor: {e}") from None
+        raise SceneError(f"{desc.source}: {e}") from None
+    _warn_beyond_far_clip(scene, sd, desc.source)
     return scene
+
+
+def _warn_beyond_far_clip(scene, sd, source):
+    """A camera whose far_clip ends before every shape renders black with the
+    camera estimators, while light tracing (which the clip does not bound)
+    still finds the camera: a scene scaled up without its clip planes. Valid
+    (Mitsuba renders it the same way), so a warning, not an error."""
+    if sd.type not in ("perspective", "orthographic") or scene.shape_count == 0:
+        return
+    lo, hi = (np.asarray(b, np.float64) for b in scene.bbox)
+    eye = np.asarray(sd.to_world, np.float64).reshape(4, 4)[:3, 3]
+    nearest = float(np.linalg.norm(eye - np.clip(eye, lo, hi)))
+    if nearest > sd.far_clip:
+        import warnings
+
+        from .loader import SceneWarning
+
+        warnings.warn(f"{source}: sensor: every shape lies beyond its far_clip ({sd.far_clip:g}; the nearest is "
+                      f"{nearest:g} away): camera paths reach no geometry, light paths still do; raise far_clip",
+                      SceneWarning, stacklevel=3)

@@ -184,12 +184,19 @@ RenderOutput render(const Scene& scene, const Integrator& requested, const Rende
         std::condition_variable cv;
         std::atomic<int> running{threads};
         auto pass_t0 = Clock::now();
+        std::exception_ptr error;
         auto worker = [&](int t) {
             ThreadStats local;  // thread-local: shared counters would ping-pong cache lines
-            for (;;) {
-                int tile = job.next_tile.fetch_add(1);
-                if (tile >= n_tiles || cancel.load()) break;
-                render_tile(job, tile, local);
+            try {
+                for (;;) {
+                    int tile = job.next_tile.fetch_add(1);
+                    if (tile >= n_tiles || cancel.load()) break;
+                    render_tile(job, tile, local);
+                }
+            } catch (...) {  // rethrown by the calling thread (an exception may not leave a thread)
+                std::lock_guard<std::mutex> lk(mu);
+                if (!error) error = std::current_exception();
+                cancel = true;
             }
             job.stats[t] = local;
             if (running.fetch_sub(1) == 1) {
@@ -198,7 +205,6 @@ RenderOutput render(const Scene& scene, const Integrator& requested, const Rende
             }
         };
         std::vector<std::thread> pool;
-        std::exception_ptr error;
         try {
             for (int t = 0; t < threads; ++t) pool.emplace_back(worker, t);
         } catch (...) {
@@ -216,7 +222,8 @@ RenderOutput render(const Scene& scene, const Integrator& requested, const Rende
                 try {
                     go_on = !poll || poll(done_before + job.done.load(), total);
                 } catch (...) {
-                    error = std::current_exception();
+                    std::lock_guard<std::mutex> elk(mu);
+                    if (!error) error = std::current_exception();
                     go_on = false;
                 }
                 if (!go_on) cancel = true;

@@ -1,5 +1,7 @@
 #include "scene/dipole.h"
 
+#include <cstdio>
+
 #include <cmath>
 #include <stdexcept>
 
@@ -130,6 +132,17 @@ Dipole::Dipole(const DipoleDesc& d) {
         }
         r_max_[c] = hi;
         if (!std::isfinite(hi) || !(hi > 0.0)) ok_[c] = false;
+        // Probe rays span the profile's radius: beyond Embree's float range
+        // (1.8e18) they cannot be traced, and long before it they lose all
+        // precision. Refused here rather than when the first probe ray fails.
+        if (ok_[c] && hi > 1e15) {
+            char buf[200];
+            std::snprintf(buf, sizeof buf,
+                          "sigma_a and sigma_s (scale applied) give channel %d a scattering radius of %g, beyond "
+                          "what float32 ray tracing represents (at most 1e15 here)",
+                          c, hi);
+            throw bad(buf);
+        }
     }
     exit_ = std::make_unique<DipoleExitLobe>(eta_, c_);
 }

@@ -1,7 +1,11 @@
 #include "scene/scene.h"
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <stdexcept>
+#include <string>
 
 namespace rm {
 
@@ -157,12 +161,35 @@ int Scene::add_dipole(int shape, const DipoleDesc& desc) {
     return shapes[shape]->dipole;
 }
 
+// Embree's single-ray queries require finite rays whose origin and direction
+// components lie within +-1.844e18 (its FLT_LARGE; RayK::valid() in
+// kernels/common/ray.h) and assert otherwise, which aborts the process. A
+// ray outside that range has lost all float32 precision anyway, so it is an
+// error that names the limit, raised as an exception (never an abort).
+constexpr float kEmbreeRayLimit = 1.844e18f;
+
 void Scene::commit() {
     if (!sensor) throw std::invalid_argument("scene has no sensor");
     if (sensor_desc.medium < -1 || sensor_desc.medium >= int(media.size()))
         throw std::invalid_argument("sensor: medium index out of range");
     rtcCommitScene(scene_);
     check_embree();
+    // Refuse what float32 ray tracing cannot represent (check_ray below) before
+    // any render starts: the sensor's position and the geometry's extent.
+    const Matrix4& m = sensor_desc.to_world;
+    double far_coord = std::max({std::fabs(m[3]), std::fabs(m[7]), std::fabs(m[11])});
+    if (!(far_coord <= kEmbreeRayLimit))
+        throw std::invalid_argument("sensor: its position (|coordinate| " + std::to_string(far_coord) +
+                                    ") is beyond what float32 ray tracing represents (Embree's limit 1.8e18)");
+    if (!shapes.empty()) {
+        RTCBounds b;
+        rtcGetSceneBounds(scene_, &b);
+        double ext = std::max({std::fabs(b.lower_x), std::fabs(b.lower_y), std::fabs(b.lower_z), std::fabs(b.upper_x),
+                               std::fabs(b.upper_y), std::fabs(b.upper_z)});
+        if (!(ext <= kEmbreeRayLimit))
+            throw std::invalid_argument("scene: its geometry reaches |coordinate| " + std::to_string(ext) +
+                                        ", beyond what float32 ray tracing represents (Embree's limit 1.8e18)");
+    }
     for (const auto& s : shapes) {
         uint32_t f = bsdfs[s->bsdf]->flags();
         if (f & (kDeltaReflection | kDeltaTransmission)) features.has_delta_bsdf = true;
@@ -174,7 +201,24 @@ void Scene::commit() {
     committed_ = true;
 }
 
+
+static void check_ray(const Ray& ray) {
+    auto ok = [](const Vec3& v) {
+        return std::fabs(v.x) <= kEmbreeRayLimit && std::fabs(v.y) <= kEmbreeRayLimit &&
+               std::fabs(v.z) <= kEmbreeRayLimit;
+    };
+    if (ok(ray.o) && ok(ray.d) && !std::isnan(ray.tmin) && !std::isnan(ray.tmax)) return;
+    char buf[320];
+    std::snprintf(buf, sizeof buf,
+                  "a ray left what float32 ray tracing can represent (origin (%g, %g, %g), direction (%g, %g, %g); "
+                  "Embree's limit is |x| <= 1.8e18 and finite): the scene, the sensor or a medium's mean free path "
+                  "is beyond the renderer's range",
+                  ray.o.x, ray.o.y, ray.o.z, ray.d.x, ray.d.y, ray.d.z);
+    throw std::domain_error(buf);
+}
+
 bool Scene::intersect(const Ray& ray, Interaction& it) const {
+    check_ray(ray);
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRayHit rh;
@@ -207,6 +251,7 @@ bool Scene::intersect(const Ray& ray, Interaction& it) const {
 }
 
 bool Scene::occluded(const Ray& ray) const {
+    check_ray(ray);
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRay r;

@@ -1,5 +1,7 @@
 #include "scene/sensor.h"
 
+#include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 #include "core/warp.h"
@@ -13,6 +15,20 @@ class ProjectiveCamera : public Sensor {
 public:
     ProjectiveCamera(const SensorDesc& d) {
         if (!xf_.set(d.to_world.data())) throw std::invalid_argument("sensor: to_world is singular");
+        // Directions are normalised in float32, whose squared lengths under-
+        // or overflow beyond about 1e+-19: refuse axis scales outside 1e+-18.
+        for (int c = 0; c < 3; ++c) {
+            const double* m = d.to_world.data();
+            double len = std::sqrt(m[c] * m[c] + m[4 + c] * m[4 + c] + m[8 + c] * m[8 + c]);
+            if (!(len >= 1e-18 && len <= 1e18)) {
+                char buf[160];
+                std::snprintf(buf, sizeof buf,
+                              "sensor: to_world scales axis %c by %g, outside what float32 ray directions "
+                              "represent (1e-18 to 1e18)",
+                              char('x' + c), len);
+                throw std::invalid_argument(buf);
+            }
+        }
         width = d.width;
         height = d.height;
         aspect_ = float(width) / float(height);
