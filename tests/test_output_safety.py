@@ -75,3 +75,15 @@ def test_cli_still_renders_to_a_plain_path(tmp_path, monkeypatch):
     with pytest.raises(SystemExit):
         cli.main(["render", "cornell-box", "--spp", "1", "-o", str(tmp_path / "fine.exr")])
     assert calls == [1]
+
+
+def test_truncated_exr_names_the_file(tmp_path):
+    p = tmp_path / "whole.exr"
+    rng = np.random.default_rng(1)
+    rm.write_exr(p, None, image=rng.random((64, 64, 3), dtype=np.float32))
+    data = p.read_bytes()
+    cut = tmp_path / "cut.exr"
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match="cut.exr is truncated or corrupt"):
+        rm.read_exr(cut)
+    assert rm.read_exr(p).image.shape == (64, 64, 3)

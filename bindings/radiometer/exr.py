@@ -132,8 +132,11 @@ def read_exr(path) -> ExrImage:
     except Exception as e:  # the package raises bare exceptions for bad files
         raise ValueError(f"read_exr: {path} is not a readable EXR file ({e})") from None
     with f:
-        chans = {k: np.asarray(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
-        header = dict(f.header())
+        try:  # a truncated file opens, then fails on its pixels with the package's bare message
+            chans = {k: np.asarray(v.pixels, dtype=np.float32) for k, v in f.channels().items()}
+            header = dict(f.header())
+        except Exception as e:
+            raise ValueError(f"read_exr: {path} is truncated or corrupt ({e})") from None
     groups: dict = {}
     for name, a in chans.items():
         base, _, c = name.rpartition(".")
