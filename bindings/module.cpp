@@ -732,6 +732,12 @@ PYBIND11_MODULE(_core, m) {
                     try {
                         progress(done, total);
                     } catch (py::error_already_set& e) {
+                        // Ctrl-C that lands inside the callback is a cancel like any
+                        // other: the finished passes come back in RenderCancelled.
+                        if (e.matches(PyExc_KeyboardInterrupt)) {
+                            interrupted = true;
+                            return false;
+                        }
                         callback_error = std::make_unique<py::error_already_set>(std::move(e));
                         return false;
                     }
