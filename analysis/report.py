@@ -309,17 +309,16 @@ def scene_view(desc, out: Path, size=(420, 320), photons=None):
 # -- the page -------------------------------------------------------------------
 
 
-def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
-    from radiometer.benchmarks import scenes as S
-    from radiometer.benchmarks.store import Store
+def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print) -> Path:
+    """Writes the report of one run (its store row `run` and job records
+    `recs`, renders under `root`) into the folder `out`; `source` names
+    where they came from. Returns index.html's path. The harness reads
+    the store and calls this (radiometer.benchmarks.report)."""
+    from radiometer.reference_scenes import references as R
+    from radiometer.reference_scenes import registry as S
 
-    store_path = Path(store_path)
-    root = store_path.parent
-    with Store(store_path) as st:
-        rid = st.resolve_run(run_id)
-        run = st.run(rid)
-        recs = st.jobs(rid)
-    out = Path(out_dir) if out_dir else root / "reports" / rid
+    root, out = Path(root), Path(out)
+    rid = run["run_id"]
     out.mkdir(parents=True, exist_ok=True)
     rows = T.aggregate(recs)
     n = {s: sum(1 for r in recs if r["status"] == s) for s in ("ok", "unsupported", "failed")}
@@ -376,7 +375,7 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
         ref = None
         try:
             eff_ref = next((r.get("effect_ref") for r in brecs if r.get("effect_ref")), None)
-            ref = S.reference(scene, params, eff_ref) if spec else None
+            ref = R.reference(scene, params, eff_ref) if spec else None
         except Exception as e:
             parts.append(f"<p class='note'>no reference image: {esc(str(e))}</p>")
         png = f"{scene}-images.png"
@@ -419,7 +418,7 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
     if views_note:
         log(f"report: 3D views unavailable: {views_note}")
     parts.append(f"<p class='note'>written {_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')} "
-                 f"from {esc(str(store_path))}</p>")
+                 f"from {esc(str(source))}</p>")
     parts.append(f"<script>{SELF_CHECK}</script></body></html>")
     index = out / "index.html"
     index.write_text("\n".join(parts))
@@ -427,7 +426,7 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
 
 
 def _bias_table(recs, root: Path) -> str:
-    from radiometer.benchmarks import scenes as S
+    from radiometer.reference_scenes import references as R
 
     from .metrics import RELMSE_EPS
     from .stats import bias_variance
@@ -444,7 +443,7 @@ def _bias_table(recs, root: Path) -> str:
         if len(imgs) < 2:
             continue
         try:
-            ref = S.reference(scene, rs[0]["scene_params"], rs[0].get("effect_ref"))
+            ref = R.reference(scene, rs[0]["scene_params"], rs[0].get("effect_ref"))
             bv = bias_variance(imgs, ref.image, ref.variance)
         except Exception:
             continue

@@ -26,9 +26,11 @@ import uuid
 from pathlib import Path
 from typing import Optional
 
+from radiometer.reference_scenes import references as _references
+from radiometer.reference_scenes import registry as _scenes
+
 from . import effect_refs as _effect_refs
 from . import matrix as _matrix
-from . import scenes as _scenes
 from .store import Store
 
 REPO = Path(__file__).resolve().parents[1]
@@ -110,7 +112,7 @@ def _run_job(job, rec, root: Path, run_id: str):
     rec["_stage"] = "metrics"
     rec["spp"], rec["seconds"] = int(res.spp), float(res.seconds)
     rec["stats"] = {k: v for k, v in res.stats.items() if isinstance(v, (int, float, str, bool))}
-    ref = _scenes.reference(job["scene"], job["scene_params"], job.get("effect_ref"))
+    ref = _references.reference(job["scene"], job["scene_params"], job.get("effect_ref"))
     rec["reference"] = {"kind": ref.kind, "effects": job.get("effect_note") or ref.effects_kind, "spp": ref.spp}
     if ref.image.shape != res.image.shape:
         raise ValueError(f"reference shape {ref.image.shape} differs from the render's {res.image.shape}")

@@ -30,16 +30,11 @@ def furnace_exact(le, rho, max_depth):
     return le * sum(rho ** k for k in range(max_depth))
 
 
-def cornell_dict(res=32, max_depth=8, spp=16):
-    """Mitsuba 3's Cornell box without Mitsuba: loaded from the canonical XML."""
-    return {"res": res, "max_depth": max_depth, "spp": spp}
-
-
 @pytest.fixture(scope="session")
 def cornell_path():
-    from pathlib import Path
+    from radiometer.reference_scenes import registry
 
-    return Path(__file__).resolve().parents[1] / "reference_scenes" / "cornell_box" / "scene.xml"
+    return registry.get("cornell_box").xml
 
 
 @pytest.fixture(scope="session")
