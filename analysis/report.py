@@ -51,7 +51,9 @@ th { background: #f3f3f3; } td:nth-child(-n+3) { text-align: left; }
 SELF_CHECK = """
 window.addEventListener('load', function () {
   var imgs = document.querySelectorAll('img'), ok = 0, bad = [];
-  imgs.forEach(function (im) { if (im.complete && im.naturalWidth > 0) { ok++; } else { bad.push(im.getAttribute('src')); } });
+  imgs.forEach(function (im) {
+    if (im.complete && im.naturalWidth > 0) { ok++; } else { bad.push(im.getAttribute('src')); }
+  });
   document.body.setAttribute('data-images-ok', String(ok));
   document.body.setAttribute('data-images-total', String(imgs.length));
   document.getElementById('selfcheck').textContent =
@@ -92,7 +94,7 @@ def convergence_plot(scene, recs, out: Path) -> bool:
     for i, (est, rs) in enumerate(sorted(by_est.items())):
         c = colours[i % len(colours)]
         ts, es = [], []
-        for j, r in enumerate(rs):
+        for r in rs:
             t = [p[1] for p in r["curve"]]
             e = [p[2] for p in r["curve"]]
             ax.plot(t, e, "-", color=c, alpha=0.35, lw=1)
@@ -329,18 +331,22 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print) 
              "<table class='meta'>",
              f"<tr><th>run</th><td>{esc(rid)}</td></tr>",
              f"<tr><th>commit</th><td>{esc(str(run.get('commit_id')))}</td></tr>",
-             f"<tr><th>machine</th><td>{esc(m.get('host', '?'))}: {esc(m.get('cpu', '?'))}, {esc(str(m.get('cores', '?')))} cores, "
+             f"<tr><th>machine</th><td>{esc(m.get('host', '?'))}: {esc(m.get('cpu', '?'))}, "
+             f"{esc(str(m.get('cores', '?')))} cores, "
              f"{esc(m.get('system', ''))} {esc(m.get('release', ''))}, Python {esc(m.get('python', ''))}</td></tr>",
              f"<tr><th>matrix</th><td>{esc(str(run.get('matrix_path')))}</td></tr>",
-             f"<tr><th>started / finished</th><td>{esc(str(run.get('started')))} / {esc(str(run.get('finished')))}</td></tr>",
-             f"<tr><th>jobs</th><td>{len(recs)}: {n['ok']} ok, {n['unsupported']} unsupported, {n['failed']} failed</td></tr>",
+             f"<tr><th>started / finished</th><td>{esc(str(run.get('started')))} / "
+             f"{esc(str(run.get('finished')))}</td></tr>",
+             f"<tr><th>jobs</th><td>{len(recs)}: {n['ok']} ok, {n['unsupported']} unsupported, "
+             f"{n['failed']} failed</td></tr>",
              "</table>",
              "<p id='selfcheck'>(image check runs on load)</p>",
              "<h2>Per-effect error</h2>",
              "<p class='note'>relMSE (eps 1e-2) of each effect class against its per-effect reference, mean over "
              "seeds; total: the whole image against the scene's reference (analytic, or Mitsuba 3's). Per-effect "
              "references: exact for analytic scenes; for the others a long run of our unbiased path tracer whose "
-             "total passed the z-test against Mitsuba (listed below the table). Bold: the lowest total error of the scene.</p>",
+             "total passed the z-test against Mitsuba (listed below the table). Bold: the lowest total error of the "
+             "scene.</p>",
              T.effect_table_html(rows),
              "<h2>All metrics (total image)</h2>", _metrics_table(rows),
              "<h2>Bias and variance over seeds</h2>",
@@ -348,8 +354,8 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print) 
              "bias_variance): the bias of the image mean relative to the reference's mean, its z (the bias over its "
              "standard error, with the reference's variance; |z| &gt; 3 is a bias the seeds resolve), and the "
              "relative variance of one render, mean(var / (ref<sup>2</sup> + 0.01)), which is what relMSE would be "
-             "without bias. Read z with care: with a few seeds at a small budget a heavy-tailed estimator misses its rare "
-             "paths in every seed and underestimates its variance there (tests/test_canonical_mitsuba.py measures "
+             "without bias. Read z with care: with a few seeds at a small budget a heavy-tailed estimator misses its "
+             "rare paths in every seed and underestimates its variance there (tests/test_canonical_mitsuba.py measures "
              "this), so a moderate |z| is a hint; a large one with a large bias is a finding (direct lighting's "
              "truncation, light tracing's missing L...S E paths). A zero-variance render's z measures float32 "
              "rounding.</p>", _bias_table(recs, root)]

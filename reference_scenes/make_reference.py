@@ -38,7 +38,8 @@ def _set_variant(mi, variant: str):
         if variant == "scalar_rgb":
             raise
         mi.set_variant("scalar_rgb")
-        return "scalar_rgb", f"requested variant {variant} unavailable ({type(e).__name__}: {e}); fell back to scalar_rgb"
+        return "scalar_rgb", (f"requested variant {variant} unavailable ({type(e).__name__}: {e}); "
+                              f"fell back to scalar_rgb")
 
 
 def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 1024, variant: str = "llvm_ad_rgb",

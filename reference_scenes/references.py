@@ -70,13 +70,14 @@ def _cached(name: str, params_key: tuple, effect_ref: Optional[str]):
     if not path.exists():
         raise FileNotFoundError(f"{path}: Mitsuba reference missing (radiometer refs {name})")
     ref = read_exr(path)
-    effects = effects_var = None
+    effects = None
     why = "no per-effect reference"
     if effect_ref:
         e = read_exr(effect_ref)
         effects = {k: np.asarray(v, np.float64) for k, v in (e.effects or {}).items()}
         why = e.metadata.get("effects_kind", "ours")
-    return Reference(np.asarray(ref.image, np.float64), np.asarray(ref.variance, np.float64), effects, None, "mitsuba", why, int(ref.metadata.get("total_spp", 0)))
+    return Reference(np.asarray(ref.image, np.float64), np.asarray(ref.variance, np.float64), effects, None, "mitsuba",
+                     why, int(ref.metadata.get("total_spp", 0)))
 
 
 def reference(name: str, params: dict, effect_ref: Optional[str] = None) -> Reference:

@@ -159,7 +159,8 @@ def scene_params(spec: SceneSpec, overrides: Optional[dict] = None) -> dict:
     defaults = xml_defaults(spec)
     for k in overrides:
         if k not in defaults:
-            raise ValueError(f"parameter '{k}': not a <default> of {spec.xml.name} (known: {', '.join(sorted(defaults))})")
+            raise ValueError(f"parameter '{k}': not a <default> of {spec.xml.name} "
+                             f"(known: {', '.join(sorted(defaults))})")
     return overrides
 
 

@@ -1,6 +1,5 @@
 """Shared scene builders for the tests (scenes as dicts, the way Mitsuba 3's
 own render tests write them)."""
-import numpy as np
 import pytest
 
 import radiometer as rm

@@ -1,4 +1,4 @@
-"""`bdpt` through participating media (issue 6, point 3: medium vertices).
+"""`bdpt` through participating media (medium vertices in both subpaths).
 
 Both subpaths walk through media (free flights with the hero channel's
 extinction, spectral MIS over the three channels, phase-function sampling,

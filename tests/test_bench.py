@@ -2,7 +2,6 @@
 matrix checking, the local pool and Dask runners, the store (atomic jobs,
 SIGKILL, --resume, merge), per-effect metrics and the HTML report in
 headless Chromium. Tiny scenes and budgets; no timing is asserted."""
-import json
 import os
 import re
 import shutil

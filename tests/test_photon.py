@@ -1,4 +1,4 @@
-"""photonmapper and sppm (issue 5): the four-way split and its effect
+"""photonmapper and sppm (photon mapping): the four-way split and its effect
 classes, the maps a scene calls for, determinism, parameter errors, the
 photon map's bias shrinking with the photon count, and SPPM's consistency.
 

@@ -1,4 +1,4 @@
-"""`ptracer` (light tracing) through participating media (issue 6, point 3).
+"""`ptracer` (light tracing) through participating media.
 
 Light subpaths sample free flights in the medium they are in (the hero
 channel's extinction, spectral MIS over the three channels as volpath),
@@ -109,9 +109,9 @@ def test_single_scattering_camera_in_chromatic_fog_matches_closed_form(g):
     phase = {"type": "isotropic"} if g is None else {"type": "hg", "g": g}
     fog = {"type": "homogeneous", "sigma_t": _rgb(SS_SIGMA_T), "albedo": _rgb(SS_ALBEDO), "phase": phase}
     d = {"type": "scene",
-         "sensor": {"type": "perspective", "fov": SS_FOV, "near_clip": SS_NEAR, "to_world": lookat((0, 0, 0), (1, 0, 0)),
-                    "medium": fog, "film": {"type": "hdrfilm", "width": SS_RES, "height": SS_RES,
-                                            "rfilter": {"type": "box"}}},
+         "sensor": {"type": "perspective", "fov": SS_FOV, "near_clip": SS_NEAR,
+                    "to_world": lookat((0, 0, 0), (1, 0, 0)), "medium": fog,
+                    "film": {"type": "hdrfilm", "width": SS_RES, "height": SS_RES, "rfilter": {"type": "box"}}},
          "light": {"type": "point", "position": SS_LIGHT.tolist(), "intensity": _rgb(SS_I)}}
     res = rm.render(rm.load_dict(d), integrator={"type": "ptracer", "max_depth": 2}, spp=1 << 17, seed=3)
     exact = _single_scatter_image(g)

@@ -1,4 +1,5 @@
-"""Efficiency benchmark of the bidirectional estimators (not a test): error against wall-clock time, equal time for every contender.
+"""Efficiency benchmark of the bidirectional estimators (not a test): error
+against wall-clock time, equal time for every contender.
 
 Part `scenes`: `path`, `bdpt` and `ptracer` on the scenes bidirectional
 transport is for, glass_sphere_caustic (caustics seen on a diffuse floor)
@@ -125,7 +126,8 @@ def run(part, budgets, seeds, threads, progress=True, clock="wall", only=None):
                        "floor": floor, "floor_region": floor_r, "seeds": seeds}
                 rows.append(row)
                 if progress:
-                    print(f"  {name:22s} {label:20s} {row['time']:5.2f} s  {row['spp']:7.0f} spp  relMSE {row['relmse']:.3e}"
+                    print(f"  {name:22s} {label:20s} {row['time']:5.2f} s  {row['spp']:7.0f} spp  "
+                          f"relMSE {row['relmse']:.3e}"
                           f"  region {row['relmse_region']:.3e}", flush=True)
     return rows
 

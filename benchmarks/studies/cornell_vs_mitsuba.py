@@ -152,12 +152,14 @@ def main(argv=None):
     ap.add_argument("--rfilter", default="gaussian", choices=["gaussian", "box", "tent"],
                     help="reconstruction filter for every renderer (box: both estimators are the same per "
                          "pixel; gaussian: Mitsuba splats, ours importance-samples the filter)")
-    ap.add_argument("-o", "--out", type=Path, help="results JSON (default: benchmarks/results/cornell_vs_mitsuba[_FILTER].json)")
+    ap.add_argument("-o", "--out", type=Path,
+                    help="results JSON (default: benchmarks/results/cornell_vs_mitsuba[_FILTER].json)")
     ap.add_argument("--worker", help=argparse.SUPPRESS)  # internal: one Mitsuba variant, JSON row on stdout
     ap.add_argument("--worker-ref", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.out is None:
-        args.out = RESULTS if args.rfilter == "gaussian" else RESULTS.with_name(f"cornell_vs_mitsuba_{args.rfilter}.json")
+        args.out = (RESULTS if args.rfilter == "gaussian"
+                    else RESULTS.with_name(f"cornell_vs_mitsuba_{args.rfilter}.json"))
 
     if args.worker:
         import radiometer as rm

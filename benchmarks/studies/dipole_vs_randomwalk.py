@@ -25,8 +25,9 @@ translucent_slab's medium under a uniform environment, seen along the
 normal (8 x 8 pixels of its centre): dipole and random walk (both ours,
 --half-space-spp each) and the dipole's analytic value Fr(0) + Ft(0) R_d.
 Writes benchmarks/results/dipole_vs_randomwalk.json (the studies' layout,
-studies/record.py) and a PNG beside it, one row per scene: dipole (converged) / random walk (reference) / relative difference
-(dipole - reference) / reference, at one exposure per scene.
+studies/record.py) and a PNG beside it, one row per scene: dipole
+(converged) / random walk (reference) / relative difference (dipole -
+reference) / reference, at one exposure per scene.
 """
 from __future__ import annotations
 
@@ -58,7 +59,9 @@ def region_mean(img, box):
 
 def half_space(kind):
     """The calibration scene: `kind` 'dipole' or 'random_walk'."""
-    rgb = lambda v: {"type": "rgb", "value": [float(x) for x in np.broadcast_to(v, 3)]}
+    def rgb(v):
+        return {"type": "rgb", "value": [float(x) for x in np.broadcast_to(v, 3)]}
+
     st, albedo = 20.0, np.array([0.99, 0.95, 0.8])  # translucent_slab's medium
     block = {"type": "cube", "to_world": np.array([[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 1.5, -1.5], [0, 0, 0, 1]], float)}
     if kind == "dipole":
@@ -156,7 +159,8 @@ def main(argv=None):
     cal = calibrate(args.half_space_spp)
     q = cal["dipole_over_random_walk"]
     print(f"half space: dipole {np.round(cal['dipole']['mean'], 4).tolist()} (analytic "
-          f"{np.round(cal['dipole_analytic'], 4).tolist()}), random walk {np.round(cal['random_walk']['mean'], 4).tolist()}"
+          f"{np.round(cal['dipole_analytic'], 4).tolist()}), "
+          f"random walk {np.round(cal['random_walk']['mean'], 4).tolist()}"
           f" +- {np.round(cal['random_walk']['standard_error'], 4).tolist()}: ratio {q[0]:.3f} {q[1]:.3f} {q[2]:.3f}")
     out = {"threads": THREADS,
            "reference": "each scene's reference.exr (Mitsuba 3.9.1 volpath, see its card.md)",
@@ -178,7 +182,10 @@ def save_png(panels, path):
     fig, axes = plt.subplots(len(panels), 3, figsize=(9, 3.1 * len(panels)), squeeze=False)
     for row, (name, dip, ref) in zip(axes, panels):
         ev = display_exposure(ref)
-        lum = lambda a: 0.2126 * a[..., 0] + 0.7152 * a[..., 1] + 0.0722 * a[..., 2]
+
+        def lum(a):
+            return 0.2126 * a[..., 0] + 0.7152 * a[..., 1] + 0.0722 * a[..., 2]
+
         rel = (lum(dip) - lum(ref)) / np.maximum(lum(ref), 1e-3)
         row[0].imshow(to_srgb(dip, ev))
         row[0].set_title(f"{name}\ndipole (path)", fontsize=9)

@@ -94,8 +94,8 @@ def main(argv=None):
         curves[f"photonmapper N={n_photons}"] = [(c[1], rel_mse(c[2], ref)) for c in r.checkpoints]
 
     cps = [1 << k for k in range(0, 9)]
-    r = rm.render(scene, integrator={"type": "sppm", "max_depth": MAX_DEPTH, "photon_count": 50000}, spp=cps[-1], seed=1,
-                  threads=args.threads, checkpoints=cps)
+    r = rm.render(scene, integrator={"type": "sppm", "max_depth": MAX_DEPTH, "photon_count": 50000}, spp=cps[-1],
+                  seed=1, threads=args.threads, checkpoints=cps)
     curves["sppm"] = [(c[1], rel_mse(c[2], ref)) for c in r.checkpoints]
 
     times = {}

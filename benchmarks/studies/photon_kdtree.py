@@ -17,13 +17,8 @@ benchmarks/results/photon_kdtree.json (the studies' layout, studies/record.py).
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
-import os
-import platform
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
 

@@ -14,13 +14,8 @@ layout, studies/record.py).
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
-import os
-import platform
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -60,7 +55,6 @@ def main(argv=None):
             print(f"{name}: seed {s} done in {secs[-1]:.1f} s", flush=True)
         for i, p in enumerate(cps):
             imgs = [run[i][2] for run in runs]
-            mean = np.mean(imgs, 0)
             rmse = float(np.mean([np.sqrt(((im - R) ** 2).mean()) for im in imgs]) / R.mean())
             row = {"scene": name, "passes": p, "seconds": float(np.mean([run[i][1] for run in runs])),
                    "rel_rmse_single": rmse, "regions": {}}

@@ -33,12 +33,7 @@ studies' layout, studies/record.py). About a minute on two cores.
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
-import os
-import platform
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -120,7 +115,8 @@ def main(argv=None):
                              "seed_spread": float(got.std(ddof=1) / want), "seconds_per_render": sec,
                              "volume_map_seconds": float(np.median(trace)), "spp": spp,
                              "volpath_same_time_rel_se": float(same_time)})
-                print(f"{name:<18}{n_photons:>8}{k_rays:>4}  {reg:<19}{100 * bias:>+8.2f}{100 * se / want:>6.2f}{sec:>9.2f}"
+                print(f"{name:<18}{n_photons:>8}{k_rays:>4}  {reg:<19}{100 * bias:>+8.2f}{100 * se / want:>6.2f}"
+                      f"{sec:>9.2f}"
                       f"{float(np.median(trace)):>8.2f}{100 * same_time:>23.2f}"
                       f"{100 * (vp_reg[reg] / want - 1):>+14.2f}", flush=True)
     out = {"references": refs_info, "rows": rows}

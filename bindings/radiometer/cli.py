@@ -111,8 +111,8 @@ def cmd_render(a) -> int:
             strategy_pyramid(res, png, weighted=weighted)
             print(f"  per-strategy images ({'MIS-weighted' if weighted else 'unweighted'}): {png}")
     means = ", ".join(f"{k} {float(v.mean()):.4g}" for k, v in res.effects.items() if float(abs(v).max()) > 0)
-    print(f"  mean radiance {float(res.image.mean()):.5g} (std. error {float(res.variance.mean()) ** 0.5 / res.image[..., 0].size ** 0.5:.2g}); "
-          f"by effect: {means}")
+    std_error = float(res.variance.mean()) ** 0.5 / res.image[..., 0].size ** 0.5
+    print(f"  mean radiance {float(res.image.mean()):.5g} (std. error {std_error:.2g}); by effect: {means}")
     return 0
 
 
