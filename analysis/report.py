@@ -51,7 +51,9 @@ th { background: #f3f3f3; } td:nth-child(-n+3) { text-align: left; }
 SELF_CHECK = """
 window.addEventListener('load', function () {
   var imgs = document.querySelectorAll('img'), ok = 0, bad = [];
-  imgs.forEach(function (im) { if (im.complete && im.naturalWidth > 0) { ok++; } else { bad.push(im.getAttribute('src')); } });
+  imgs.forEach(function (im) {
+    if (im.complete && im.naturalWidth > 0) { ok++; } else { bad.push(im.getAttribute('src')); }
+  });
   document.body.setAttribute('data-images-ok', String(ok));
   document.body.setAttribute('data-images-total', String(imgs.length));
   document.getElementById('selfcheck').textContent =
@@ -92,7 +94,7 @@ def convergence_plot(scene, recs, out: Path) -> bool:
     for i, (est, rs) in enumerate(sorted(by_est.items())):
         c = colours[i % len(colours)]
         ts, es = [], []
-        for j, r in enumerate(rs):
+        for r in rs:
             t = [p[1] for p in r["curve"]]
             e = [p[2] for p in r["curve"]]
             ax.plot(t, e, "-", color=c, alpha=0.35, lw=1)
@@ -309,17 +311,16 @@ def scene_view(desc, out: Path, size=(420, 320), photons=None):
 # -- the page -------------------------------------------------------------------
 
 
-def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
-    from radiometer.benchmarks import scenes as S
-    from radiometer.benchmarks.store import Store
+def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print) -> Path:
+    """Writes the report of one run (its store row `run` and job records
+    `recs`, renders under `root`) into the folder `out`; `source` names
+    where they came from. Returns index.html's path. The harness reads
+    the store and calls this (radiometer.benchmarks.report)."""
+    from radiometer.reference_scenes import references as R
+    from radiometer.reference_scenes import registry as S
 
-    store_path = Path(store_path)
-    root = store_path.parent
-    with Store(store_path) as st:
-        rid = st.resolve_run(run_id)
-        run = st.run(rid)
-        recs = st.jobs(rid)
-    out = Path(out_dir) if out_dir else root / "reports" / rid
+    root, out = Path(root), Path(out)
+    rid = run["run_id"]
     out.mkdir(parents=True, exist_ok=True)
     rows = T.aggregate(recs)
     n = {s: sum(1 for r in recs if r["status"] == s) for s in ("ok", "unsupported", "failed")}
@@ -330,18 +331,22 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
              "<table class='meta'>",
              f"<tr><th>run</th><td>{esc(rid)}</td></tr>",
              f"<tr><th>commit</th><td>{esc(str(run.get('commit_id')))}</td></tr>",
-             f"<tr><th>machine</th><td>{esc(m.get('host', '?'))}: {esc(m.get('cpu', '?'))}, {esc(str(m.get('cores', '?')))} cores, "
+             f"<tr><th>machine</th><td>{esc(m.get('host', '?'))}: {esc(m.get('cpu', '?'))}, "
+             f"{esc(str(m.get('cores', '?')))} cores, "
              f"{esc(m.get('system', ''))} {esc(m.get('release', ''))}, Python {esc(m.get('python', ''))}</td></tr>",
              f"<tr><th>matrix</th><td>{esc(str(run.get('matrix_path')))}</td></tr>",
-             f"<tr><th>started / finished</th><td>{esc(str(run.get('started')))} / {esc(str(run.get('finished')))}</td></tr>",
-             f"<tr><th>jobs</th><td>{len(recs)}: {n['ok']} ok, {n['unsupported']} unsupported, {n['failed']} failed</td></tr>",
+             f"<tr><th>started / finished</th><td>{esc(str(run.get('started')))} / "
+             f"{esc(str(run.get('finished')))}</td></tr>",
+             f"<tr><th>jobs</th><td>{len(recs)}: {n['ok']} ok, {n['unsupported']} unsupported, "
+             f"{n['failed']} failed</td></tr>",
              "</table>",
              "<p id='selfcheck'>(image check runs on load)</p>",
              "<h2>Per-effect error</h2>",
              "<p class='note'>relMSE (eps 1e-2) of each effect class against its per-effect reference, mean over "
              "seeds; total: the whole image against the scene's reference (analytic, or Mitsuba 3's). Per-effect "
              "references: exact for analytic scenes; for the others a long run of our unbiased path tracer whose "
-             "total passed the z-test against Mitsuba (listed below the table). Bold: the lowest total error of the scene.</p>",
+             "total passed the z-test against Mitsuba (listed below the table). Bold: the lowest total error of the "
+             "scene.</p>",
              T.effect_table_html(rows),
              "<h2>All metrics (total image)</h2>", _metrics_table(rows),
              "<h2>Bias and variance over seeds</h2>",
@@ -349,8 +354,8 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
              "bias_variance): the bias of the image mean relative to the reference's mean, its z (the bias over its "
              "standard error, with the reference's variance; |z| &gt; 3 is a bias the seeds resolve), and the "
              "relative variance of one render, mean(var / (ref<sup>2</sup> + 0.01)), which is what relMSE would be "
-             "without bias. Read z with care: with a few seeds at a small budget a heavy-tailed estimator misses its rare "
-             "paths in every seed and underestimates its variance there (tests/test_canonical_mitsuba.py measures "
+             "without bias. Read z with care: with a few seeds at a small budget a heavy-tailed estimator misses its "
+             "rare paths in every seed and underestimates its variance there (tests/test_canonical_mitsuba.py measures "
              "this), so a moderate |z| is a hint; a large one with a large bias is a finding (direct lighting's "
              "truncation, light tracing's missing L...S E paths). A zero-variance render's z measures float32 "
              "rounding.</p>", _bias_table(recs, root)]
@@ -376,7 +381,7 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
         ref = None
         try:
             eff_ref = next((r.get("effect_ref") for r in brecs if r.get("effect_ref")), None)
-            ref = S.reference(scene, params, eff_ref) if spec else None
+            ref = R.reference(scene, params, eff_ref) if spec else None
         except Exception as e:
             parts.append(f"<p class='note'>no reference image: {esc(str(e))}</p>")
         png = f"{scene}-images.png"
@@ -419,7 +424,7 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
     if views_note:
         log(f"report: 3D views unavailable: {views_note}")
     parts.append(f"<p class='note'>written {_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')} "
-                 f"from {esc(str(store_path))}</p>")
+                 f"from {esc(str(source))}</p>")
     parts.append(f"<script>{SELF_CHECK}</script></body></html>")
     index = out / "index.html"
     index.write_text("\n".join(parts))
@@ -427,7 +432,7 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
 
 
 def _bias_table(recs, root: Path) -> str:
-    from radiometer.benchmarks import scenes as S
+    from radiometer.reference_scenes import references as R
 
     from .metrics import RELMSE_EPS
     from .stats import bias_variance
@@ -444,7 +449,7 @@ def _bias_table(recs, root: Path) -> str:
         if len(imgs) < 2:
             continue
         try:
-            ref = S.reference(scene, rs[0]["scene_params"], rs[0].get("effect_ref"))
+            ref = R.reference(scene, rs[0]["scene_params"], rs[0].get("effect_ref"))
             bv = bias_variance(imgs, ref.image, ref.variance)
         except Exception:
             continue

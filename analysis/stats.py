@@ -94,7 +94,8 @@ def z_test(a, var_a, b, var_b=None, alpha: float = 0.01, pixel_level: float = 0.
     # Zero variance on both sides: equal values agree; different values are
     # an infinite z (a deterministic disagreement).
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.where(var > 0, diff / np.sqrt(np.where(var > 0, var, 1.0)), np.where(diff == 0, 0.0, np.inf * np.sign(diff)))
+        z = np.where(var > 0, diff / np.sqrt(np.where(var > 0, var, 1.0)),
+                     np.where(diff == 0, 0.0, np.inf * np.sign(diff)))
     zs = z[sel]
     n = int(zs.size)
     if n == 0:

@@ -80,7 +80,7 @@ def collapse_unsupported(rows) -> list:
     out, by_scene = [], {}
     for r in rows:
         by_scene.setdefault(r["scene"], []).append(r)
-    for scene, rs in by_scene.items():
+    for rs in by_scene.values():
         reasons = {short_reason(r["error"]) for r in rs}
         if len(rs) > 1 and all(r["status"] == "unsupported" for r in rs) and len(reasons) == 1:
             budgets = sorted({r["budget"] for r in rs})

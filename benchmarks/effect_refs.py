@@ -24,7 +24,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import scenes as _scenes
+from radiometer.reference_scenes import registry as _scenes
 
 SEED = 987654321
 

@@ -6,7 +6,7 @@
     budgets = [{ seconds = 4.0 }] # each { spp = N } or { seconds = S } (required)
     target_relmse = 0.05          # for time-to-error (optional)
 
-    [scenes.cornell_box]          # a scene of benchmarks/scenes.py
+    [scenes.cornell_box]          # a scene of reference_scenes/registry.py
     [scenes.furnace]
     params = { res = 8 }          # XML parameters (analytic scenes only)
     estimators = ["path"]         # optional: only these estimators of the matrix
@@ -34,7 +34,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Optional
 
-from . import scenes as _scenes
+from radiometer.reference_scenes import registry as _scenes
 
 HERE = Path(__file__).resolve().parent
 TOP_KEYS = {"name", "description", "seeds", "threads", "budgets", "target_relmse", "scenes", "estimators",

@@ -14,7 +14,6 @@ only the jobs it was running (each retried once) and the rest go on.
 from __future__ import annotations
 
 import datetime as _dt
-import json
 import os
 import platform
 import socket
@@ -26,9 +25,11 @@ import uuid
 from pathlib import Path
 from typing import Optional
 
+from radiometer.reference_scenes import references as _references
+from radiometer.reference_scenes import registry as _scenes
+
 from . import effect_refs as _effect_refs
 from . import matrix as _matrix
-from . import scenes as _scenes
 from .store import Store
 
 REPO = Path(__file__).resolve().parents[1]
@@ -106,11 +107,12 @@ def _run_job(job, rec, root: Path, run_id: str):
     rec["_stage"] = "render"
     b = job["budget"]
     res = rm.render(scene, integrator=job["integrator"], spp=b.get("spp"), seconds=b.get("seconds"),
-                    seed=job["seed"], threads=job["threads"], checkpoints=True if job.get("checkpoints", True) else None)
+                    seed=job["seed"], threads=job["threads"],
+                    checkpoints=True if job.get("checkpoints", True) else None)
     rec["_stage"] = "metrics"
     rec["spp"], rec["seconds"] = int(res.spp), float(res.seconds)
     rec["stats"] = {k: v for k, v in res.stats.items() if isinstance(v, (int, float, str, bool))}
-    ref = _scenes.reference(job["scene"], job["scene_params"], job.get("effect_ref"))
+    ref = _references.reference(job["scene"], job["scene_params"], job.get("effect_ref"))
     rec["reference"] = {"kind": ref.kind, "effects": job.get("effect_note") or ref.effects_kind, "spp": ref.spp}
     if ref.image.shape != res.image.shape:
         raise ValueError(f"reference shape {ref.image.shape} differs from the render's {res.image.shape}")
@@ -251,13 +253,14 @@ def run(matrix_arg: Optional[str] = None, root=DEFAULT_ROOT, scheduler: Optional
         unloadable = sorted(s for s, n in notes.items() if "does not load" in n)
         if unloadable:
             log(f"  scenes our loader refuses (their jobs are recorded as unsupported): {', '.join(unloadable)}")
-    pool = _DaskPool(scheduler) if scheduler else _LocalPool(workers or max(1, (os.cpu_count() or 1) // max(1, mat.threads or (os.cpu_count() or 1))))
+    cores = os.cpu_count() or 1
+    pool = _DaskPool(scheduler) if scheduler else _LocalPool(workers or max(1, cores // max(1, mat.threads or cores)))
     if scheduler:
         log(f"Dask scheduler {scheduler}: {pool.workers} worker threads")
     from tqdm import tqdm
 
-    bar = tqdm(total=len(todo), desc=f"bench {mat.name}", unit="job", file=sys.stderr, disable=None if progress else True,
-               dynamic_ncols=True)
+    bar = tqdm(total=len(todo), desc=f"bench {mat.name}", unit="job", file=sys.stderr,
+               disable=None if progress else True, dynamic_ncols=True)
     counts = {"ok": 0, "failed": 0, "unsupported": 0}
     queue = [j.to_dict() for j in todo]
     queue.reverse()

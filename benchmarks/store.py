@@ -107,7 +107,8 @@ class Store:
         return d
 
     def latest_run(self, matrix: Optional[str] = None) -> Optional[str]:
-        q = "SELECT run_id FROM runs" + (" WHERE matrix = ?" if matrix else "") + " ORDER BY started DESC, run_id DESC LIMIT 1"
+        q = ("SELECT run_id FROM runs" + (" WHERE matrix = ?" if matrix else "")
+             + " ORDER BY started DESC, run_id DESC LIMIT 1")
         r = self.conn.execute(q, (matrix,) if matrix else ()).fetchone()
         return None if r is None else r["run_id"]
 

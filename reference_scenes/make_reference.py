@@ -11,7 +11,8 @@ ratio estimator); only the per-pixel variance is used by the z-test.
     python -m radiometer.reference_scenes.make_reference cornell_box
 
 regenerates reference_scenes/cornell_box/reference.exr (64 x 64, small enough
-to commit).
+to commit) with the parameters and budget that reference_scenes/registry.py
+gives it.
 """
 from __future__ import annotations
 
@@ -25,83 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-
-# Per scene: XML parameters and budget of the committed reference. Committed
-# files stay small: at most 256 px a side (64 x 64 keeps the EXR ~100 KB).
-SCENES = {
-    "cornell_box": {
-        "params": {"res": 64, "max_depth": 8},
-        # 32 x 2048 = 65536 spp in total: the reference's variance is 1/256 of
-        # a 256 spp test render's, so it barely widens the z-test. About
-        # 3-4 minutes with llvm_ad_rgb on 2 cores.
-        "runs": 32,
-        "spp": 2048,
-    },
-    # The canonical scenes of issue 3 (card.md in each folder says what they
-    # isolate). Box-filtered, so a sample lands in one pixel and Mitsuba's
-    # pixels are independent (its box filter splats nowhere else). Budgets
-    # and times: llvm_ad_rgb on 2 shared cores.
-    "glass_sphere_caustic": {
-        "params": {"res": 64, "max_depth": 12},
-        "runs": 32,
-        "spp": 16384,  # 524288 spp in all, ~2.5 min
-    },
-    "veach_mis": {
-        "params": {"res": 64, "max_depth": 8},
-        "runs": 32,
-        "spp": 8192,  # 262144 spp, ~3 min
-    },
-    "ajar_door": {
-        "params": {"res": 64, "max_depth": 10},
-        # Mitsuba's light tracer, not its path tracer: the near room is lit
-        # only by a narrow strip the lamp throws through the door's gap, which
-        # a camera path finds by BSDF sampling less than 1 time in 100 per
-        # bounce, while every light path that leaves the far room lands on
-        # it first. All surfaces are diffuse, so light tracing sees
-        # every path (card.md: its cross-check against Mitsuba's path).
-        "integrator": {"type": "ptracer", "max_depth": 10},
-        "runs": 32,
-        "spp": 4096,
-    },
-    # Media and subsurface scenes: Mitsuba's volpath only; our loader rejects
-    # <medium> until issue 6, and their tests are skipped until then.
-    "homogeneous_slab": {
-        "params": {"res": 64, "max_depth": 8},
-        "runs": 32,
-        "spp": 4096,
-    },
-    "fog_room": {
-        "params": {"res": 64, "max_depth": 16},
-        "runs": 32,
-        "spp": 1024,
-    },
-    "vandehulst_slab": {
-        "params": {"max_depth": 256},  # a 1 x 1 irradiancemeter film
-        "runs": 32,
-        "spp": 524288,
-    },
-    "vandehulst_slab_reflectance": {
-        "params": {"max_depth": 256},  # a 1 x 1 irradiancemeter film
-        "runs": 32,
-        "spp": 524288,
-    },
-    "translucent_slab": {
-        "params": {"res": 64, "max_depth": 1024},
-        "runs": 32,
-        "spp": 256,
-    },
-    "translucent_object": {
-        "params": {"res": 64, "max_depth": 512},
-        "runs": 32,
-        "spp": 1024,
-    },
-    "volumetric_caustic": {
-        "params": {"res": 64, "max_depth": 12},
-        "runs": 32,
-        "spp": 2048,
-    },
-}
+from .registry import mitsuba_scenes
 
 
 def _set_variant(mi, variant: str):
@@ -113,7 +38,8 @@ def _set_variant(mi, variant: str):
         if variant == "scalar_rgb":
             raise
         mi.set_variant("scalar_rgb")
-        return "scalar_rgb", f"requested variant {variant} unavailable ({type(e).__name__}: {e}); fell back to scalar_rgb"
+        return "scalar_rgb", (f"requested variant {variant} unavailable ({type(e).__name__}: {e}); "
+                              f"fell back to scalar_rgb")
 
 
 def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 1024, variant: str = "llvm_ad_rgb",
@@ -180,23 +106,23 @@ def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 102
 
 
 def main(argv=None):
+    scenes = mitsuba_scenes()
     ap = argparse.ArgumentParser(prog="python -m radiometer.reference_scenes.make_reference",
                                  description="Regenerates the committed Mitsuba 3 reference of a canonical scene.")
-    ap.add_argument("scene", choices=sorted(SCENES), help="scene folder under reference_scenes/")
+    ap.add_argument("scene", choices=sorted(scenes), help="scene folder under reference_scenes/")
     ap.add_argument("--runs", type=int, help="independent Mitsuba renders (default: the scene's)")
     ap.add_argument("--spp", type=int, help="samples per pixel per run (default: the scene's)")
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument("-o", "--out", help="output EXR (default: reference_scenes/SCENE/reference.exr)")
     args = ap.parse_args(argv)
-    cfg = SCENES[args.scene]
-    runs = args.runs or cfg["runs"]
-    spp = args.spp or cfg["spp"]
-    out = Path(args.out) if args.out else HERE / args.scene / "reference.exr"
-    print(f"{args.scene}: {runs} runs x {spp} spp, params {cfg['params']}, variant {args.variant} -> {out}",
+    spec = scenes[args.scene]
+    runs = args.runs or spec.runs
+    spp = args.spp or spec.spp
+    out = Path(args.out) if args.out else spec.reference_exr
+    print(f"{args.scene}: {runs} runs x {spp} spp, params {spec.fixed_params}, variant {args.variant} -> {out}",
           file=sys.stderr)
-    _, var_mean, meta = make_mitsuba_reference(HERE / args.scene / "scene.xml", out, runs=runs, spp=spp,
-                                               variant=args.variant, integrator=cfg.get("integrator"),
-                                               **cfg["params"])
+    _, var_mean, meta = make_mitsuba_reference(spec.xml, out, runs=runs, spp=spp, variant=args.variant,
+                                               integrator=spec.mitsuba_integrator, **spec.fixed_params)
     print(f"wrote {out} ({out.stat().st_size / 1024:.0f} KB) in {meta['seconds']:.0f} s with {meta['variant']}; "
           f"mean variance of the mean {var_mean.mean():.3g}", file=sys.stderr)
 

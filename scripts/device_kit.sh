@@ -5,7 +5,7 @@
 # headers and library, TBB, pybind11's headers, and wheels of the Python
 # packages it lacks, into out/devkit (ignored by git). Then, there:
 #   bash scripts/device_build.sh   # builds out/devbuild/radiometer
-#   PYTHONPATH=out/devbuild python3 -m radiometer.benchmarks.bdpt_efficiency
+#   PYTHONPATH=out/devbuild python3 -m radiometer.benchmarks.studies.bdpt_efficiency
 # Usage: bash scripts/device_kit.sh [PYTHON_VERSION (default 3.12)]
 set -euo pipefail
 cd "$(dirname "$0")/.."

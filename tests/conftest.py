@@ -1,6 +1,5 @@
 """Shared scene builders for the tests (scenes as dicts, the way Mitsuba 3's
 own render tests write them)."""
-import numpy as np
 import pytest
 
 import radiometer as rm
@@ -30,16 +29,11 @@ def furnace_exact(le, rho, max_depth):
     return le * sum(rho ** k for k in range(max_depth))
 
 
-def cornell_dict(res=32, max_depth=8, spp=16):
-    """Mitsuba 3's Cornell box without Mitsuba: loaded from the canonical XML."""
-    return {"res": res, "max_depth": max_depth, "spp": spp}
-
-
 @pytest.fixture(scope="session")
 def cornell_path():
-    from pathlib import Path
+    from radiometer.reference_scenes import registry
 
-    return Path(__file__).resolve().parents[1] / "reference_scenes" / "cornell_box" / "scene.xml"
+    return registry.get("cornell_box").xml
 
 
 @pytest.fixture(scope="session")

@@ -22,7 +22,7 @@ import pytest
 import radiometer as rm
 from radiometer.reference_scenes.mirror_caustic import analytic as mirror
 from refcompare import (_rgb, assert_clean, assert_same_bytes_whatever_threads, assert_strategies_estimate_their_depth,
-                        block_mean, blocked_z, check_mirror_caustic, lookat)
+                        blocked_z, check_mirror_caustic, lookat)
 
 from conftest import furnace_dict, furnace_exact
 
@@ -293,7 +293,7 @@ def test_stress_scenes_finite_nonnegative(path):
     assert_clean(res, path.stem)
 
 
-# -- per-strategy images (issue 4, point 4) -----------------------------------
+# -- per-strategy images -----------------------------------------------------
 
 
 def _strategy_render(estimator, seed, spp=32, depth=3, res=16):

@@ -2,7 +2,6 @@
 matrix checking, the local pool and Dask runners, the store (atomic jobs,
 SIGKILL, --resume, merge), per-effect metrics and the HTML report in
 headless Chromium. Tiny scenes and budgets; no timing is asserted."""
-import json
 import os
 import re
 import shutil
@@ -49,7 +48,7 @@ def test_shipped_matrices_parse():
     default = MX.load("default")
     scenes = {j.scene for j in default.jobs}
     # Every canonical scene of the registry takes part in the main job.
-    from radiometer.benchmarks.scenes import SCENES
+    from radiometer.reference_scenes.registry import SCENES
 
     assert scenes == set(SCENES)
     assert {j.estimator for j in default.jobs} >= {"path", "direct", "ptracer", "bdpt"}
@@ -286,7 +285,7 @@ def chromium_check(index: Path):
 
 def test_report_renders_in_chromium_without_errors(smoke):
     root, run_id, recs = smoke
-    from radiometer.analysis import report
+    from radiometer.benchmarks import report
 
     index = report.write(root / runner.STORE_NAME, run_id, log=lambda *a: None)
     html = index.read_text()
@@ -332,7 +331,8 @@ def test_effect_reference_is_used_only_when_its_total_passes(tmp_path, smoke):
     import numpy as np
 
     import radiometer as rm
-    from radiometer.benchmarks import effect_refs, scenes
+    from radiometer.benchmarks import effect_refs
+    from radiometer.reference_scenes import registry as scenes
 
     spec = scenes.get("glass_sphere_caustic")
     out = tmp_path / "glass.exr"

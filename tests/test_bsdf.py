@@ -169,7 +169,8 @@ for th in (0, 45, 75):
     for inside in (False, True):
         wi = direction(th, 15, inside)
         DELTA_CASES.append(pytest.param("dielectric", {"int_ior": 1.5, "ext_ior": 1.0}, wi, DELTA_R,
-                                        fresnel_dielectric(wi[2], 1.5), id=f"dielectric-{th}-{'in' if inside else 'out'}"))
+                                        fresnel_dielectric(wi[2], 1.5),
+                                        id=f"dielectric-{th}-{'in' if inside else 'out'}"))
         R = fresnel_dielectric(abs(wi[2]), 1.5)
         DELTA_CASES.append(pytest.param("thindielectric", {"int_ior": 1.5, "ext_ior": 1.0}, wi, DELTA_R,
                                         2 * R / (1 + R), id=f"thindielectric-{th}-{'in' if inside else 'out'}"))
@@ -192,7 +193,8 @@ for dist in ("beckmann", "ggx"):
                     ENERGY_CASES.append(pytest.param(
                         "roughdielectric", {"distribution": dist, "alpha": a, "int_ior": 1.5, "ext_ior": 1.0},
                         direction(th, 5, inside), adjoint,
-                        id=f"roughdielectric-{dist}-a{a}-{th}-{'in' if inside else 'out'}-{'adj' if adjoint else 'rad'}"))
+                        id=(f"roughdielectric-{dist}-a{a}-{th}-{'in' if inside else 'out'}-"
+                            f"{'adj' if adjoint else 'rad'}")))
     for a in (0.3, 1.0):  # Walter's widened D cos sampling
         for th in (0, 60):
             ENERGY_CASES.append(pytest.param("roughconductor", {"distribution": dist, "alpha": a,
@@ -203,7 +205,8 @@ for dist in ("beckmann", "ggx"):
                                                                  "ext_ior": 1.0}, direction(th, 5), True,
                                              id=f"roughdielectric-{dist}-a{a}-{th}-allnormals-adj"))
 for th in (0, 60):
-    ENERGY_CASES.append(pytest.param("twosided", {"nested": [("roughconductor", {"distribution": "ggx", "alpha": 0.3})]},
+    ENERGY_CASES.append(pytest.param("twosided",
+                                     {"nested": [("roughconductor", {"distribution": "ggx", "alpha": 0.3})]},
                                      direction(th, 5, inside=True), False, id=f"twosided-roughconductor-back-{th}"))
 for th in (0, 60, 85):
     for nonlinear in (False, True):
@@ -613,8 +616,8 @@ def test_harness_p_values_are_uniform_under_h0():
     """Forty independent runs of a correct sampler: their p-values must look
     uniform (Kolmogorov-Smirnov), i.e. the pooling, dof and integration do not
     bias the test (a systematically small p would reject good BSDFs)."""
-    ps = [chi2_test(_cosine_sampler, _cosine_pdf, n_samples=20_000, grid=SphereGrid(16, 32, "cos_theta"), seed=s).p_value
-          for s in range(40)]
+    ps = [chi2_test(_cosine_sampler, _cosine_pdf, n_samples=20_000, grid=SphereGrid(16, 32, "cos_theta"),
+                    seed=s).p_value for s in range(40)]
     assert _st.kstest(ps, "uniform").pvalue > 1e-3, ps
     assert min(ps) > 1e-4
 

@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 
 import radiometer as rm
-from radiometer.analysis.blocks import BLOCK, block_mean, blocked_z_test
+from radiometer.analysis.blocks import block_mean, blocked_z_test
 from radiometer.analysis.stats import z_test
 from radiometer.reference_scenes.area_lights import analytic as area
 from radiometer.reference_scenes.furnace import analytic as furnace
@@ -140,7 +140,7 @@ AREA_INTEGRATORS = {
     "direct": ({"type": "direct"}, 256),
     "direct-emitter-only": ({"type": "direct", "emitter_samples": 1, "bsdf_samples": 0}, 256),
     "direct-bsdf-only": ({"type": "direct", "emitter_samples": 0, "bsdf_samples": 1}, 2048),
-    # The bidirectional estimators (issue 4): light tracing splats every
+    # The bidirectional estimators: light tracing splats every
     # light path onto the film; bdpt weighs all its strategies.
     "ptracer": ({"type": "ptracer", "max_depth": 2}, 256),
     "bdpt": ({"type": "bdpt", "max_depth": 2}, 128),

@@ -1,7 +1,8 @@
-"""The canonical scenes of issue 3 against their committed Mitsuba 3
-references (reference_scenes/<name>/reference.exr, 64 x 64, mean of 32
-independent llvm_ad_rgb runs and the variance of that mean; budgets in
-reference_scenes/make_reference.py, what each scene isolates in its card.md).
+"""The canonical scenes against their committed Mitsuba 3 references
+(reference_scenes/<name>/reference.exr, 64 x 64, mean of 32 independent
+llvm_ad_rgb runs and the variance of that mean; parameters, budgets and
+known exclusions in reference_scenes/registry.py, what each scene isolates
+in its card.md).
 
 Surface scenes (glass_sphere_caustic, veach_mis, ajar_door): our `path` at
 a CI budget (about 2-4 s each on 2 shared cores) against the reference, with the
@@ -41,37 +42,34 @@ tests/test_bdpt_media.py (van de Hulst's irradiancemeter scenes:
 tests/test_irradiancemeter.py).
 """
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import radiometer as rm
 from radiometer.analysis.stats import z_test
+from radiometer.reference_scenes import registry
 
 from refcompare import blocked_z_test, reference_variance_floor, region_mask, scale_region
 
-ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
 RES = 64
 ALPHA = 0.01
 
-# Per surface scene: our CI budget, the scene's max_depth (as its reference
-# was made), and the power check. Regions are card.md's pixel boxes
-# (x0, y0, x1, y1), half-open, at 64 x 64.
+# Per surface scene: our CI budget and the power check; every scene renders
+# with its reference's parameters (res, max_depth: the registry). Regions
+# are card.md's pixel boxes (x0, y0, x1, y1), half-open, at 64 x 64.
 AJAR_DOORWAY = (28, 15, 40, 41)  # the view through the doorway into the lit room
 AJAR_BEAM = (54, 18, 64, 40)  # the lamp's strip through the gap on the near room's right wall
 SURFACE = {
-    "glass_sphere_caustic": {"spp": 1024, "max_depth": 12, "power": None},
-    "veach_mis": {"spp": 512, "max_depth": 8, "power": None},
+    "glass_sphere_caustic": {"spp": 1024, "power": None},
+    "veach_mis": {"spp": 512, "power": None},
     # At 512 spp a 1 % overall bias is near the mean z's noise here
     # (measured: rejected for 1 of seeds 1-3), so the check scales the region
     # the scene is about, the near room lit only through the gap (every
     # pixel outside the doorway and the lamp's strip), by 5 % (rejected for
     # 3 of 3; the unscaled reference passed 3 of 3).
-    "ajar_door": {"spp": 512, "max_depth": 10, "power": ("near room, indirect only", 1.05)},
+    "ajar_door": {"spp": 512, "power": ("near room, indirect only", 1.05)},
 }
-MEDIA = ["homogeneous_slab", "fog_room", "vandehulst_slab", "translucent_slab", "translucent_object",
-         "volumetric_caustic"]
 # Our volpath's budget per media scene, the block size of the comparison and
 # the bias its power check must reject (the reference scaled by it). Budgets:
 # the block test's mean z is biased negative for a heavy-tailed estimator
@@ -87,15 +85,27 @@ MEDIA = ["homogeneous_slab", "fog_room", "vandehulst_slab", "translucent_slab", 
 MEDIA_CI = {
     "homogeneous_slab": {"spp": 512, "k": 4, "power": 1.01},
     "fog_room": {"spp": 1024, "k": 4, "power": 1.01},
+    "vandehulst_slab": {"spp": 1 << 18, "k": 1, "power": 1.02},
     "translucent_slab": {"spp": 512, "k": 4, "power": 1.01},
     "translucent_object": {"spp": 512, "k": 4, "power": 1.01},
     "volumetric_caustic": {"spp": 1024, "k": 16, "power": 1.02},
-    "vandehulst_slab": {"spp": 1 << 18, "k": 1, "power": 1.02},
 }
+MEDIA = list(MEDIA_CI)
+
+
+def _load(name):
+    """The scene with its reference's XML parameters."""
+    spec = registry.get(name)
+    return rm.load_file(spec.xml, **spec.fixed_params)
+
+
+def _max_depth(name):
+    """The max_depth the scene's reference was made with."""
+    return registry.max_depth(registry.get(name))
 
 
 def _reference(name, shape=(RES, RES, 3), min_spp=16384):
-    path = ROOT / name / "reference.exr"
+    path = registry.get(name).reference_exr
     assert path.exists(), (f"{path} is missing: regenerate it with "
                            f"python -m radiometer.reference_scenes.make_reference {name}")
     ref = rm.read_exr(path)
@@ -121,8 +131,8 @@ def _render_ours(name):
     power check use the same render)."""
     if name not in _ours:
         cfg = SURFACE[name]
-        scene = rm.load_file(ROOT / name / "scene.xml", res=RES)
-        _ours[name] = rm.render(scene, integrator={"type": "path", "max_depth": cfg["max_depth"]},
+        scene = _load(name)
+        _ours[name] = rm.render(scene, integrator={"type": "path", "max_depth": _max_depth(name)},
                                 spp=cfg["spp"], seed=1)
     return _ours[name]
 
@@ -178,8 +188,7 @@ def test_volpath_matches_mitsuba_reference(name):
     shape = (1, 1, 3) if name == "vandehulst_slab" else (RES, RES, 3)
     ref = _reference(name, shape=shape, min_spp=8192)
     total = int(ref.metadata["total_spp"])
-    params = {} if name == "vandehulst_slab" else {"res": RES}
-    scene = rm.load_file(ROOT / name / "scene.xml", **params)
+    scene = _load(name)
     res = rm.render(scene, integrator="volpath", spp=cfg["spp"], seed=1)
     assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, res.stats
     floor = reference_variance_floor(ref.variance, total, res.spp)
@@ -317,7 +326,7 @@ def test_vandehulst_reflectance_reference_matches_published():
 def test_volpath_matches_vandehulst_reflectance():
     """Our volpath against the published reflectance (tests/test_media.py
     also holds it, and T_d, to Mitsuba's references)."""
-    scene = rm.load_file(ROOT / "vandehulst_slab_reflectance" / "scene.xml")
+    scene = _load("vandehulst_slab_reflectance")
     res = rm.render(scene, integrator="volpath", spp=1 << 16, seed=1)
     v, se = float(res.image[0, 0, 0]), float(np.sqrt(res.variance[0, 0, 0]) + VDH_R_SE)
     from scipy.stats import norm
@@ -330,7 +339,8 @@ def test_volpath_matches_vandehulst_reflectance():
 # (same budget and comparison as `path`).
 #
 # `ptracer` (light tracing) is held to each scene except the pixels where it
-# cannot work, left out of the test (every 4 x 4 block touching them):
+# cannot work (the registry's known exclusions), left out of the test
+# (every 4 x 4 block touching them):
 # - glass_sphere_caustic: the sphere itself (card.md box (16, 14, 41, 39)).
 #   The camera sees it through a delta BSDF (L ... S E); a light path can
 #   never connect to a pinhole through a delta vertex, so ptracer renders
@@ -352,11 +362,7 @@ def test_volpath_matches_vandehulst_reflectance():
 # ajar_door is tested whole (seeds 2 and 3 at 1024 spp passed, the near
 # room's mean at 0.9975 and 0.9999 of the reference; every surface there is
 # diffuse, and Mitsuba's reference is itself a light tracer's, card.md).
-PTRACER_EXCLUDE = {
-    "glass_sphere_caustic": [(16, 14, 41, 39)],
-    "veach_mis": [(0, 28, 64, 34), (0, 34, 64, 39)],
-    "ajar_door": [],
-}
+PTRACER_EXCLUDE = {name: registry.get(name).exclusions.get("ptracer", []) for name in SURFACE}
 PTRACER_SPP = 1024
 
 
@@ -365,9 +371,9 @@ PTRACER_SPP = 1024
 def test_other_estimators_match_mitsuba_reference(estimator, name):
     ref = _reference(name)
     cfg = SURFACE[name]
-    scene = rm.load_file(ROOT / name / "scene.xml", res=RES)
+    scene = _load(name)
     spp = PTRACER_SPP if estimator == "ptracer" else cfg["spp"]
-    res = rm.render(scene, integrator={"type": estimator, "max_depth": cfg["max_depth"]}, spp=spp, seed=2)
+    res = rm.render(scene, integrator={"type": estimator, "max_depth": _max_depth(name)}, spp=spp, seed=2)
     assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, res.stats
     exclude = PTRACER_EXCLUDE[name] if estimator == "ptracer" else ()
     floor = reference_variance_floor(ref.variance, int(ref.metadata["total_spp"]), res.spp)

@@ -32,18 +32,18 @@ How the images are compared, and why (measured on this scene, 64 x 64):
   Cauchy-Schwarz bound (mean of the pixel standard deviations)^2, which is
   conservative and at most a few percent of ours.
 """
-from pathlib import Path
-
 import pytest
 
 import radiometer as rm
+from radiometer.reference_scenes import registry
 from refcompare import blocked_z_test  # block means per channel; why: this module's docstring
 
-ROOT = Path(__file__).resolve().parents[1]
-SCENE = ROOT / "reference_scenes" / "cornell_box" / "scene.xml"
-REFERENCE = ROOT / "reference_scenes" / "cornell_box" / "reference.exr"
+SPEC = registry.get("cornell_box")
+SCENE = SPEC.xml
+REFERENCE = SPEC.reference_exr
 
-RES = 64
+RES = SPEC.fixed_params["res"]  # 64, as the reference was made
+MAX_DEPTH = registry.max_depth(SPEC)  # 8
 SPP = 512  # about 3 s on 2 cores
 ALPHA = 0.01
 
@@ -62,7 +62,7 @@ def reference():
 @pytest.fixture(scope="module")
 def ours():
     scene = rm.load_file(SCENE, res=RES)
-    return rm.render(scene, integrator={"type": "path", "max_depth": 8}, spp=SPP, seed=1)
+    return rm.render(scene, integrator={"type": "path", "max_depth": MAX_DEPTH}, spp=SPP, seed=1)
 
 
 def test_path_matches_mitsuba_reference(ours, reference):
@@ -94,7 +94,7 @@ def test_direct_equals_path_at_depth_2():
     assert not passed, f"a 1 % bias between direct and path went undetected:\n{msg}"
 
 
-# The bidirectional estimators (issue 4) against the same reference. Their
+# The bidirectional estimators against the same reference. Their
 # light-path splats are spread over the gaussian filter's footprint, so our
 # pixels are correlated too: both sides' block variances use the
 # Cauchy-Schwarz bound (conservative: measured at 512 / 256 spp, 3 seeds
@@ -106,7 +106,7 @@ BIDIR_SPP = {"ptracer": 256, "bdpt": 128}
 @pytest.mark.parametrize("estimator", sorted(BIDIR_SPP))
 def test_bidirectional_estimators_match_mitsuba_reference(estimator, reference):
     scene = rm.load_file(SCENE, res=RES)
-    r = rm.render(scene, integrator={"type": estimator, "max_depth": 8}, spp=BIDIR_SPP[estimator], seed=2)
+    r = rm.render(scene, integrator={"type": estimator, "max_depth": MAX_DEPTH}, spp=BIDIR_SPP[estimator], seed=2)
     assert r.stats["nan_samples"] == 0 and r.stats["inf_samples"] == 0, r.stats
     passed, msg = blocked_z_test(r.image, r.variance, reference.image, reference.variance, b_splatted=True,
                                  a_correlated=True)

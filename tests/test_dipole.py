@@ -1,4 +1,4 @@
-"""The dipole BSSRDF (issue 6, point 4; renderer/scene/dipole.h): Jensen,
+"""The dipole BSSRDF (renderer/scene/dipole.h): Jensen,
 Marschner, Levoy and Hanrahan 2001 ("J01"), "A Practical Model for
 Subsurface Light Transport", as Mitsuba 0.6's `dipole` subsurface plugin,
 rendered by `path` / `volpath`.
@@ -82,7 +82,9 @@ def test_profile_integrates_to_total_diffuse_reflectance(eta):
             for r in (0.0, 0.01, 0.1, 1.0):
                 assert dp.rd(np.array([r]))[0, 0] == pytest.approx(rd(r), rel=1e-5)
             # The renderer's profile integrated numerically over the plane.
-            f = lambda r: 2 * math.pi * r * dp.rd(np.array([r]))[0, 0]
+            def f(r):
+                return 2 * math.pi * r * dp.rd(np.array([r]))[0, 0]
+
             num = sum(quad(f, a, b, limit=400, epsabs=0)[0] for a, b in ((0, zr), (zr, 10 * zv), (10 * zv, np.inf)))
             assert num == pytest.approx(want, rel=1e-4), (alpha_p, g, num, want)
 
@@ -112,7 +114,9 @@ def test_radial_sampler_matches_its_density():
             rmax = dp.r_max(ch)
             # Bins finer near 0, where the profile peaks.
             edges = rmax * np.linspace(0, 1, bins + 1) ** 3
-            dens = lambda r: 2 * math.pi * r * dp.pdf_a(ch, np.array([r]))[0]
+            def dens(r):
+                return 2 * math.pi * r * dp.pdf_a(ch, np.array([r]))[0]
+
             cell = np.array([quad(dens, a, b, limit=200, epsabs=0)[0] for a, b in zip(edges[:-1], edges[1:])])
             assert cell.sum() == pytest.approx(1.0, rel=1e-6)
             r = dp.sample_r(ch, rng.random(n))
@@ -176,7 +180,8 @@ def plane_scene(integrator="path", medium_below=False, res=8, underlay=False):
             [[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, -0.05], [0, 0, 0, 0]]), "flip_normals": True,
             "bsdf": {"type": "diffuse", "reflectance": 0.0}}
     if medium_below:  # a scene with media (volpath's loop), the medium out of every path's way
-        d["fog"] = {"type": "cube", "to_world": np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -5], [0, 0, 0, 1]], float),
+        d["fog"] = {"type": "cube",
+                    "to_world": np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -5], [0, 0, 0, 1]], float),
                     "bsdf": {"type": "null"}, "interior": {"type": "homogeneous", "sigma_t": 1.0, "albedo": 0.5}}
     return d
 
@@ -273,7 +278,8 @@ def _with_sub(sub, **shape):
 
 @pytest.mark.parametrize("sub,shape,match", [
     ({"type": "dipole", "sigma_a": -1.0, "sigma_s": 1.0}, {}, "subsurface 'dipole'.*negative value"),
-    ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "sigmaa": 2.0}, {}, "subsurface 'dipole'.*unknown parameter 'sigmaa'"),
+    ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "sigmaa": 2.0}, {},
+     "subsurface 'dipole'.*unknown parameter 'sigmaa'"),
     ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "sigmaA": 2.0}, {}, "'sigma_a' given twice"),
     ({"type": "dipole", "sigma_a": 1.0, "sigma_t": 1.0}, {}, "either sigma_a \\+ sigma_s or sigma_t"),
     ({"type": "dipole"}, {}, "needs sigma_a \\+ sigma_s"),
@@ -282,7 +288,8 @@ def _with_sub(sub, **shape):
     ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "g": 1.0}, {}, "'g' must lie in"),
     ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "scale": -2.0}, {}, "'scale' must be > 0"),
     ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "int_ior": "unobtainium"}, {}, "unknown IOR name"),
-    ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0}, {"bsdf": {"type": "diffuse"}}, "no bsdf, a smooth 'dielectric'"),
+    ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0}, {"bsdf": {"type": "diffuse"}},
+     "no bsdf, a smooth 'dielectric'"),
     ({"type": "dipole", "sigma_a": 1.0, "sigma_s": 1.0, "int_ior": 1.49},
      {"bsdf": {"type": "plastic"}}, "'plastic' with a diffuse part"),
     ({"type": "dipole", "material": "skin1"}, {}, "material presets are not supported"),
@@ -328,7 +335,7 @@ def test_loader_forms_and_xml(tmp_path):
         rm.load_dict(_with_sub({"type": "dipole", "sigmaA": 1.0, "sigmaS": 2.0, "irrSamples": 64}))
     (tmp_path / "s.xml").write_text(good + """  <shape type="sphere"><float name="radius" value="0.5"/>
     <subsurface type="dipole"><float name="sigma_a" value="1"/><float name="sigma_s" value="1"/><float name="bogus" value="1"/></subsurface></shape>
-</scene>""")
+</scene>""")  # noqa: E501
     with pytest.raises(SceneError, match=r"s\.xml:6: subsurface 'dipole': unknown parameter 'bogus'"):
         rm.load_file(tmp_path / "s.xml")
 

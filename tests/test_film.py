@@ -16,7 +16,10 @@ def _chi2_against_filter(kind, radius, stddev, lo, hi, n=200_000, bins=40, seed=
     a, b = max(lo, -radius), min(hi, radius)
     assert x.min() >= a - 1e-6 and x.max() <= b + 1e-6
     edges = np.linspace(a, b, bins + 1)
-    f = lambda t: _core.filter_eval(kind, radius, stddev, t)
+
+    def f(t):
+        return _core.filter_eval(kind, radius, stddev, t)
+
     mass = np.array([integrate.quad(f, edges[i], edges[i + 1])[0] for i in range(bins)])
     expected = n * mass / mass.sum()
     observed, _ = np.histogram(x, edges)
@@ -45,7 +48,10 @@ def test_chi_square_can_fail():
 def test_filters_match_mitsuba_shapes():
     # Mitsuba 3's gaussian reaches exactly 0 at its radius (4 stddev) and is
     # shifted down by exp(-8) everywhere.
-    g = lambda x: _core.filter_eval("gaussian", 2.0, 0.5, x)
+
+    def g(x):
+        return _core.filter_eval("gaussian", 2.0, 0.5, x)
+
     assert g(2.0) == 0.0 and g(0.0) == pytest.approx(1 - np.exp(-8), rel=1e-6)
     assert _core.filter_eval("tent", 1.0, 0.5, 0.25) == pytest.approx(0.75)
     with pytest.raises(ValueError, match="unknown type"):

@@ -14,7 +14,7 @@ against an answer off by the stated amount must fail):
   `ptracer` and `bdpt` against `path` on the indirect light;
 - van de Hulst's slab (reference_scenes/vandehulst_slab*, tau 2, albedo
   0.9, g 0.75): `bdpt`'s diffuse transmittance and reflectance against the
-  published values and against Mitsuba's references (issue 6's media
+  published values and against Mitsuba's references (the media
   scenes, now for every unbiased estimator that can reach the meter;
   `ptracer` can too, but starts its light paths on a disk 140 units wide
   for a 1 x 1 meter: about 1e10 paths for 0.5 %, so it is checked on the
@@ -57,7 +57,8 @@ def _room(meter_half=0.1):
     light_xf = np.array([[LIGHT_R, 0, 0, 0], [0, 0, -LIGHT_R, LIGHT_H], [0, LIGHT_R, 0, 0], [0, 0, 0, 1]], float)
     return {
         "type": "scene",
-        "floor": {"type": "rectangle", "to_world": _xf(3.0, ty=-0.001), "bsdf": {"type": "diffuse", "reflectance": _rgb(0.5)}},
+        "floor": {"type": "rectangle", "to_world": _xf(3.0, ty=-0.001),
+                  "bsdf": {"type": "diffuse", "reflectance": _rgb(0.5)}},
         "ball": {"type": "sphere", "center": [0.5, 0.3, 0.0], "radius": 0.25,
                  "bsdf": {"type": "diffuse", "reflectance": _rgb(0.8)}},
         "light": {"type": "disk", "to_world": light_xf, "emitter": {"type": "area", "radiance": _rgb(LE)}},

@@ -28,7 +28,7 @@ from scipy.stats import norm
 
 import radiometer as rm
 from radiometer.loader import write_vol
-from refcompare import assert_agrees, assert_clean, blocked_z
+from refcompare import assert_agrees, assert_clean
 from test_media import _rgb, small_light_slab
 
 ALPHA = 0.01

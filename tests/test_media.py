@@ -1,4 +1,4 @@
-"""Participating media (issue 6, first part): loading homogeneous media and
+"""Participating media: loading homogeneous media and
 `volpath` (= `path` on a scene with media) against analytic answers.
 
 - Loading: Mitsuba 3's `homogeneous` (sigma_t + albedo, or Mitsuba 0.6's

@@ -1,4 +1,4 @@
-"""photonmapper and sppm (issue 5): the four-way split and its effect
+"""photonmapper and sppm (photon mapping): the four-way split and its effect
 classes, the maps a scene calls for, determinism, parameter errors, the
 photon map's bias shrinking with the photon count, and SPPM's consistency.
 
@@ -7,7 +7,7 @@ or a one-sided normal test, stated at each). Photon mapping is biased by
 construction, so tests of photonmapper against an exact answer test the
 unbiased parts (direct light by ray tracing) with z-tests and the
 density-estimated parts against a stated bias bound; the bias itself is
-measured (benchmarks/photon_bias.py) and shown to shrink.
+measured (benchmarks/studies/photon_bias.py) and shown to shrink.
 """
 import os
 from pathlib import Path
@@ -18,6 +18,7 @@ from scipy import stats as st
 
 import radiometer as rm
 from radiometer.analysis.stats import z_test
+from radiometer.reference_scenes import registry
 from radiometer.reference_scenes.mirror_caustic import analytic as mirror
 
 from conftest import furnace_dict, furnace_exact
@@ -244,8 +245,8 @@ CORNELL_REGIONS = {"red wall": (0, 12, 8, 52), "green wall": (56, 12, 64, 52), "
                    "floor": (4, 56, 32, 64), "ceiling": (4, 0, 60, 3), "tall box": (32, 28, 44, 44)}
 
 
-@pytest.mark.parametrize("name,max_depth,photon_count", [("cornell_box", 8, 10000), ("glass_sphere_caustic", 12, 20000)])
-def test_sppm_error_and_bias_fall_along_the_curve(name, max_depth, photon_count):
+@pytest.mark.parametrize("name,photon_count", [("cornell_box", 10000), ("glass_sphere_caustic", 20000)])
+def test_sppm_error_and_bias_fall_along_the_curve(name, photon_count):
     """SPPM at 4, 16, 64 passes (checkpoints of one render per seed, 3 seeds,
     32 x 32 for the Cornell box and 64 x 64 for the caustic scene, against
     Mitsuba's reference, downsampled 2x2 where needed with the box filter
@@ -254,12 +255,14 @@ def test_sppm_error_and_bias_fall_along_the_curve(name, max_depth, photon_count)
     renders falls strictly at each step, and the bias (the seeds' mean
     image against the reference, RMS over 8x8 blocks) falls from 4 to 64
     passes."""
+    spec = registry.get(name)
+    max_depth = registry.max_depth(spec)
     res_px = 32 if name == "cornell_box" else 64
-    scene = rm.load_file(ROOT / name / "scene.xml", res=res_px)
+    scene = rm.load_file(spec.xml, res=res_px)
     if name == "cornell_box":
-        ref = rm.render(scene, integrator={"type": "path", "max_depth": 8}, spp=1024, seed=100).image
+        ref = rm.render(scene, integrator={"type": "path", "max_depth": max_depth}, spp=1024, seed=100).image
     else:
-        ref = rm.read_exr(ROOT / name / "reference.exr").image
+        ref = rm.read_exr(spec.reference_exr).image
     ref = np.asarray(ref, np.float64)
     cps = [4, 16, 64]
     runs = []
@@ -275,18 +278,19 @@ def test_sppm_error_and_bias_fall_along_the_curve(name, max_depth, photon_count)
 
 
 @pytest.mark.skipif(not os.environ.get("RADIOMETER_SLOW"), reason="minutes of CPU; set RADIOMETER_SLOW=1 "
-                    "(figures: benchmarks/photon_sppm.py and its results JSON)")
-@pytest.mark.parametrize("name,max_depth,regions,passes", [("cornell_box", 8, CORNELL_REGIONS, 4096),
-                                                           ("glass_sphere_caustic", 12, GLASS_REGIONS, 1024)])
-def test_sppm_mean_within_one_percent_per_region(name, max_depth, regions, passes):
+                    "(figures: benchmarks/studies/photon_sppm.py and its results JSON)")
+@pytest.mark.parametrize("name,regions,passes", [("cornell_box", CORNELL_REGIONS, 4096),
+                                                 ("glass_sphere_caustic", GLASS_REGIONS, 1024)])
+def test_sppm_mean_within_one_percent_per_region(name, regions, passes):
     """The largest budget run: 4 seeds x `passes` passes of 20000 photon
     paths at 64 x 64; the mean over seeds lies within 1 % of Mitsuba's
     reference in every effect region of the scene's card. (At 1024 passes
     the Cornell box's ceiling, lit only by photons, was still -1.09 %, se
     0.76 %: benchmarks/results/photon_sppm.json.)"""
-    scene = rm.load_file(ROOT / name / "scene.xml", res=64)
-    ref = rm.read_exr(ROOT / name / "reference.exr").image
-    imgs = [rm.render(scene, integrator={"type": "sppm", "max_depth": max_depth, "photon_count": 20000},
+    spec = registry.get(name)
+    scene = rm.load_file(spec.xml, **spec.fixed_params)
+    ref = rm.read_exr(spec.reference_exr).image
+    imgs = [rm.render(scene, integrator={"type": "sppm", "max_depth": registry.max_depth(spec), "photon_count": 20000},
                       spp=passes, seed=s).image for s in range(4)]
     got, want = _region_means(np.mean(imgs, 0), regions), _region_means(ref, regions)
     bad = {k: got[k] / want[k] - 1 for k in regions if abs(got[k] / want[k] - 1) > 0.01}

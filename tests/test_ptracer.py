@@ -15,7 +15,6 @@ Light tracing cannot produce the `specular` class (a specular vertex next to
 the camera) nor see delta-position emitters, so the scenes here have no
 specular surface in view and no point or spot light in view.
 """
-import math
 from pathlib import Path
 
 import numpy as np

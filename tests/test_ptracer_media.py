@@ -1,4 +1,4 @@
-"""`ptracer` (light tracing) through participating media (issue 6, point 3).
+"""`ptracer` (light tracing) through participating media.
 
 Light subpaths sample free flights in the medium they are in (the hero
 channel's extinction, spectral MIS over the three channels as volpath),
@@ -39,6 +39,7 @@ import pytest
 from scipy.integrate import quad
 
 import radiometer as rm
+from radiometer.reference_scenes import registry
 
 from refcompare import assert_agrees, blocked_z, blocked_z_test, lookat, reference_variance_floor
 from test_media import hot_voxel_grid, slab_dict, small_light_slab
@@ -108,9 +109,9 @@ def test_single_scattering_camera_in_chromatic_fog_matches_closed_form(g):
     phase = {"type": "isotropic"} if g is None else {"type": "hg", "g": g}
     fog = {"type": "homogeneous", "sigma_t": _rgb(SS_SIGMA_T), "albedo": _rgb(SS_ALBEDO), "phase": phase}
     d = {"type": "scene",
-         "sensor": {"type": "perspective", "fov": SS_FOV, "near_clip": SS_NEAR, "to_world": lookat((0, 0, 0), (1, 0, 0)),
-                    "medium": fog, "film": {"type": "hdrfilm", "width": SS_RES, "height": SS_RES,
-                                            "rfilter": {"type": "box"}}},
+         "sensor": {"type": "perspective", "fov": SS_FOV, "near_clip": SS_NEAR,
+                    "to_world": lookat((0, 0, 0), (1, 0, 0)), "medium": fog,
+                    "film": {"type": "hdrfilm", "width": SS_RES, "height": SS_RES, "rfilter": {"type": "box"}}},
          "light": {"type": "point", "position": SS_LIGHT.tolist(), "intensity": _rgb(SS_I)}}
     res = rm.render(rm.load_dict(d), integrator={"type": "ptracer", "max_depth": 2}, spp=1 << 17, seed=3)
     exact = _single_scatter_image(g)
@@ -178,35 +179,37 @@ def test_grid_medium_matches_homogeneous_volpath(tmp_path):
 
 # -- against Mitsuba 3's references ------------------------------------------------
 
-# Per scene: spp, block size, power scale, pixel boxes left out (card.md's
-# boxes at 64 x 64) and why.
+# Per scene: spp, block size, power scale; pixel boxes left out (card.md's
+# boxes at 64 x 64: the registry's known exclusions for ptracer) and why.
 # - translucent_object: the torus (12, 6, 53, 48) is seen through its smooth
 #   dielectric boundary only (L ... S E): what stays is the floor, lit
 #   directly and through the torus (subsurface paths that leave it).
 # - volumetric_caustic: the glass sphere (23, 24, 41, 41), seen through
 #   itself. Its reference has ~10 % relative noise per pixel (card.md): the
 #   power check can only reject 5 % at this budget (2 % gives mean z -2.4).
-# max_depth: the reference's (card.md).
+# max_depth and the scene's parameters: the reference's (reference_scenes/registry.py).
 MITSUBA = {
-    "fog_room": {"spp": 512, "k": 4, "power": 1.02, "exclude": [], "max_depth": 16},
-    "homogeneous_slab": {"spp": 256, "k": 4, "power": 1.01, "exclude": [], "max_depth": 8},
-    "translucent_object": {"spp": 1024, "k": 4, "power": 1.02, "exclude": [(12, 6, 53, 48)], "max_depth": 512},
-    "volumetric_caustic": {"spp": 1024, "k": 8, "power": 1.05, "exclude": [(23, 24, 41, 41)], "max_depth": 12},
+    "fog_room": {"spp": 512, "k": 4, "power": 1.02},
+    "homogeneous_slab": {"spp": 256, "k": 4, "power": 1.01},
+    "translucent_object": {"spp": 1024, "k": 4, "power": 1.02},
+    "volumetric_caustic": {"spp": 1024, "k": 8, "power": 1.05},
 }
 
 
 @pytest.mark.parametrize("name", sorted(MITSUBA))
 def test_ptracer_matches_mitsuba_media_reference(name):
-    cfg = MITSUBA[name]
-    ref = rm.read_exr(ROOT / name / "reference.exr")
-    scene = rm.load_file(ROOT / name / "scene.xml", res=64)
-    res = rm.render(scene, integrator={"type": "ptracer", "max_depth": cfg["max_depth"]}, spp=cfg["spp"], seed=1)
+    cfg, spec = MITSUBA[name], registry.get(name)
+    ref = rm.read_exr(spec.reference_exr)
+    scene = rm.load_file(spec.xml, **spec.fixed_params)
+    res = rm.render(scene, integrator={"type": "ptracer", "max_depth": registry.max_depth(spec)}, spp=cfg["spp"],
+                    seed=1)
     assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, res.stats
     floor = reference_variance_floor(ref.variance, int(ref.metadata["total_spp"]), res.spp)
 
     def compare(s):
         return blocked_z_test(res.image, res.variance, ref.image * s, ref.variance * s * s, b_splatted=False,
-                              alpha=ALPHA, var_a_floor=floor, k=cfg["k"], exclude=cfg["exclude"])
+                              alpha=ALPHA, var_a_floor=floor, k=cfg["k"],
+                              exclude=spec.exclusions.get("ptracer", []))
 
     passed, msg = compare(1.0)
     assert passed, f"{name}: ptracer ({res.spp} spp) differs from Mitsuba's reference:\n{msg}"

@@ -253,7 +253,8 @@ def test_closed_cube_furnace_is_unbiased_to_1e4(integrator, max_depth):
 
     t = (means.mean() - exact) / (means.std(ddof=1) / np.sqrt(len(means)))
     p = 2 * stats.t.sf(abs(t), len(means) - 1)
-    assert p > 0.01, f"mean {means.mean():.7f} vs exact {exact:.7f} (relative {means.mean() / exact - 1:+.2e}), t {t:.2f}"
+    assert p > 0.01, (f"mean {means.mean():.7f} vs exact {exact:.7f} (relative {means.mean() / exact - 1:+.2e}), "
+                      f"t {t:.2f}")
     # The resolution it has: a 3e-4 relative error would be seen.
     t_biased = (means.mean() - exact * (1 - 3e-4)) / (means.std(ddof=1) / np.sqrt(len(means)))
     assert 2 * stats.t.sf(abs(t_biased), len(means) - 1) < 0.01

@@ -99,7 +99,7 @@ SCENES = {
 }
 
 
-# Medium stress scenes (issue 6): what must be lit, as SCENES. Estimators
+# Medium stress scenes: what must be lit, as SCENES. Estimators
 # without media support must refuse them with the documented error
 # (Integrator::supports_media, checked by the render driver) rather than
 # render the media as vacuum; the others get the sanity checks above.

@@ -1,5 +1,5 @@
-"""`photonmapper` in scenes with participating media (issue 6, points 3 and
-4): the volume photon map (Jensen & Christensen 1998) and ray marching
+"""`photonmapper` in scenes with participating media and subsurface
+scattering: the volume photon map (Jensen & Christensen 1998) and ray marching
 along camera rays, and with the same machinery subsurface scattering by the
 photon map (the seed's "photon tracing - subsurface scattering").
 

@@ -32,7 +32,7 @@ KEEP_STREAMS = ("path", "direct", "ptracer", "bdpt")
 
 def _render_all(spp: int):
     import radiometer as rm
-    from radiometer.benchmarks import scenes as sc
+    from radiometer.reference_scenes import registry as sc
 
     out = {}
     for name, spec in sorted(sc.SCENES.items()):

@@ -42,5 +42,5 @@ def read_exr(path):
     return _read(path)
 
 
-__all__ = ["load_file", "load_dict", "render", "write_exr", "read_exr", "Scene", "SceneError", "SceneWarning", "RenderResult",
-           "RenderCancelled", "EFFECTS", "__version__"]
+__all__ = ["load_file", "load_dict", "render", "write_exr", "read_exr", "Scene", "SceneError", "SceneWarning",
+           "RenderResult", "RenderCancelled", "EFFECTS", "__version__"]

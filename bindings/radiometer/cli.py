@@ -114,8 +114,8 @@ def cmd_render(a) -> int:
             strategy_pyramid(res, png, weighted=weighted)
             print(f"  per-strategy images ({'MIS-weighted' if weighted else 'unweighted'}): {png}")
     means = ", ".join(f"{k} {float(v.mean()):.4g}" for k, v in res.effects.items() if float(abs(v).max()) > 0)
-    print(f"  mean radiance {float(res.image.mean()):.5g} (std. error {float(res.variance.mean()) ** 0.5 / res.image[..., 0].size ** 0.5:.2g}); "
-          f"by effect: {means}")
+    std_error = float(res.variance.mean()) ** 0.5 / res.image[..., 0].size ** 0.5
+    print(f"  mean radiance {float(res.image.mean()):.5g} (std. error {std_error:.2g}); by effect: {means}")
     return 0
 
 
@@ -123,17 +123,19 @@ def cmd_refs(a) -> int:
     """Regenerates the Mitsuba 3 references of the canonical scenes."""
     if a.effects:
         return _effect_refs(a)
-    from .reference_scenes.make_reference import HERE, SCENES, make_mitsuba_reference
+    from .reference_scenes.make_reference import make_mitsuba_reference
+    from .reference_scenes.registry import mitsuba_scenes
 
-    names = a.scenes or sorted(SCENES)
-    unknown = [n for n in names if n not in SCENES]
+    scenes = mitsuba_scenes()
+    names = a.scenes or sorted(scenes)
+    unknown = [n for n in names if n not in scenes]
     if unknown:
         raise SceneError(f"refs: no Mitsuba reference is defined for {', '.join(unknown)} "
-                         f"(known: {', '.join(sorted(SCENES))})")
+                         f"(known: {', '.join(sorted(scenes))})")
     if a.list:
         for n in names:
-            cfg = SCENES[n]
-            ref = HERE / n / "reference.exr"
+            spec = scenes[n]
+            ref = spec.reference_exr
             state = "missing"
             if ref.exists():
                 from . import read_exr
@@ -141,18 +143,18 @@ def cmd_refs(a) -> int:
                 m = read_exr(ref).metadata
                 state = (f"{m.get('total_spp', '?')} spp, Mitsuba {m.get('mitsuba_version', '?')} "
                          f"{m.get('variant', '?')}, {m.get('date', '?')}")
-            integ = cfg.get("integrator", {}).get("type", "the scene's integrator")
-            print(f"{n}: {cfg['runs']} runs x {cfg['spp']} spp, Mitsuba {integ}, params {cfg['params']} -- {state}")
+            integ = (spec.mitsuba_integrator or {}).get("type", "the scene's integrator")
+            print(f"{n}: {spec.runs} runs x {spec.spp} spp, Mitsuba {integ}, params {spec.fixed_params} -- {state}")
         return 0
     out_dir = Path(a.out_dir) if a.out_dir else None
     for n in names:
-        cfg = SCENES[n]
-        runs, spp = a.runs or cfg["runs"], a.spp or cfg["spp"]
-        out = (out_dir / n / "reference.exr") if out_dir else HERE / n / "reference.exr"
+        spec = scenes[n]
+        runs, spp = a.runs or spec.runs, a.spp or spec.spp
+        out = (out_dir / n / "reference.exr") if out_dir else spec.reference_exr
         out.parent.mkdir(parents=True, exist_ok=True)
         print(f"{n}: {runs} runs x {spp} spp with Mitsuba {a.variant} -> {out}", file=sys.stderr)
-        _, var, meta = make_mitsuba_reference(HERE / n / "scene.xml", out, runs=runs, spp=spp, variant=a.variant,
-                                              integrator=cfg.get("integrator"), **cfg["params"])
+        _, var, meta = make_mitsuba_reference(spec.xml, out, runs=runs, spp=spp, variant=a.variant,
+                                              integrator=spec.mitsuba_integrator, **spec.fixed_params)
         print(f"  wrote {out} in {meta['seconds']:.0f} s ({meta['variant']}); mean variance {var.mean():.3g}")
     return 0
 
@@ -162,7 +164,8 @@ def _effect_refs(a) -> int:
     Mitsuba-referenced scenes: long runs of our path tracer, kept only when
     their total passes the z-test against Mitsuba."""
     from . import read_exr
-    from .benchmarks import effect_refs, scenes
+    from .benchmarks import effect_refs
+    from .reference_scenes import registry as scenes
 
     names = a.scenes or [n for n, s in sorted(scenes.SCENES.items()) if s.kind == "mitsuba"]
     for n in names:
@@ -221,7 +224,7 @@ def cmd_bench(a) -> int:
     store = _store_path(a)
     _print_effect_table(store, run_id)
     if not a.no_report:
-        from .analysis import report
+        from .benchmarks import report
 
         index = report.write(store, run_id, log=lambda m: print(m, file=sys.stderr))
         print(f"\nreport: {index.resolve()}")
@@ -247,7 +250,7 @@ def cmd_compare(a) -> int:
 
 
 def cmd_report(a) -> int:
-    from .analysis import report
+    from .benchmarks import report
 
     store, run = _store_path(a), a.run
     p = Path(a.run) if a.run else None

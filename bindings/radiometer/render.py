@@ -7,7 +7,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .scene_desc import IntegratorDesc, SceneDesc, SceneError
+from .scene_desc import IntegratorDesc, SceneError
 
 EFFECTS = ("emission", "direct", "indirect", "caustic", "specular", "volume", "subsurface")
 

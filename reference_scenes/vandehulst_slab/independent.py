@@ -48,8 +48,8 @@ def batch(n, rng):
         ct = np.clip((1 + G * G - s_ * s_) / (2 * G), -1.0, 1.0)
         phi = 2 * np.pi * rng.random(j.size)
         m = mu[j]
-        mu[j] = np.clip(m * ct + np.sqrt(np.maximum(0.0, 1 - m * m)) * np.sqrt(np.maximum(0.0, 1 - ct * ct)) * np.cos(phi),
-                        -1.0, 1.0)
+        mu[j] = np.clip(m * ct + np.sqrt(np.maximum(0.0, 1 - m * m)) * np.sqrt(np.maximum(0.0, 1 - ct * ct))
+                        * np.cos(phi), -1.0, 1.0)
         scattered[j] = True
         alive &= w >= 1e-6
     return t_d / n, t_0 / n, r / n

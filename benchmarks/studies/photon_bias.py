@@ -2,7 +2,7 @@
 region, as the photon count N grows with the lookup size n ~ sqrt(N)
 (Jensen 2001, sec. 7.2: the estimate converges when n -> inf and n / N -> 0).
 
-    python -m radiometer.benchmarks.photon_bias [--seeds 4] [--spp 16]
+    python -m radiometer.benchmarks.studies.photon_bias [--seeds 4] [--spp 16]
 
 Bias = mean over `seeds` independent renders minus the reference, relative
 to the reference, per region of the scene's card and per effect class; its
@@ -13,28 +13,25 @@ tests/test_canonical_mitsuba.py and samples caustics far better than
 `path`), since Mitsuba's references hold only the total; its standard error
 per region comes from the spread of its 4 renders. Both photonmapper modes: final gathering (the default) and the global
 map seen directly (final_gather off), where the density estimate's bias is in
-plain view. Writes a table to stdout and benchmarks/results/photon_bias.json.
+plain view. Writes a table to stdout and benchmarks/results/photon_bias.json
+(the studies' layout, studies/record.py).
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
-import os
-import platform
 import time
-from pathlib import Path
 
 import numpy as np
 
 import radiometer as rm
+from radiometer.benchmarks.studies import record
+from radiometer.reference_scenes import registry
 
-ROOT = Path(__file__).resolve().parents[1]
 SCENES = {
-    # name: (res, max_depth, regions (x0, y0, x1, y1) at that res, effect classes to report)
-    "cornell_box": (32, 8, {"whole image": (0, 0, 32, 32), "floor": (4, 26, 28, 32), "left wall": (0, 4, 6, 28),
+    # name: (res, regions (x0, y0, x1, y1) at that res, effect classes to report); max_depth: the reference's
+    "cornell_box": (32, {"whole image": (0, 0, 32, 32), "floor": (4, 26, 28, 32), "left wall": (0, 4, 6, 28),
                             "back wall": (8, 6, 24, 20)}, ("direct", "indirect")),
-    "glass_sphere_caustic": (64, 12, {"caustic focus": (32, 33, 42, 40), "shadow": (20, 29, 58, 47),
+    "glass_sphere_caustic": (64, {"caustic focus": (32, 33, 42, 40), "shadow": (20, 29, 58, 47),
                                       "sphere": (16, 14, 41, 39), "open floor": (0, 48, 64, 64)},
                              ("direct", "caustic", "indirect", "specular")),
 }
@@ -52,12 +49,14 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--ref-spp", type=int, default=2048)
     ap.add_argument("--ref-runs", type=int, default=4)
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "photon_bias.json"))
+    ap.add_argument("--out", default=str(record.default_path("photon_bias")))
     args = ap.parse_args(argv)
     rows = []
     print(f"{'scene':<22}{'mode':<8}{'N':>8}{'n':>5}  {'effect':<9}{'region':<15}{'bias %':>8}{'se %':>7}")
-    for name, (res, md, regions, effects) in SCENES.items():
-        scene = rm.load_file(ROOT / "reference_scenes" / name / "scene.xml", res=res)
+    for name, (res, regions, effects) in SCENES.items():
+        spec = registry.get(name)
+        md = registry.max_depth(spec)
+        scene = rm.load_file(spec.xml, res=res)
         t = time.perf_counter()
         refs = [rm.render(scene, integrator={"type": "bdpt", "max_depth": md}, spp=args.ref_spp, seed=1000 + i)
                 for i in range(args.ref_runs)]
@@ -90,12 +89,7 @@ def main(argv=None):
                               f"{100 * se / want:>7.2f}", flush=True)
         rows.append({"scene": name, "reference": "bdpt", "reference_seconds": ref_s, "reference_spp": args.ref_spp,
                      "reference_runs": args.ref_runs})
-    out = {"benchmark": "photon_bias", "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-           "machine": {"platform": platform.platform(), "cpus": os.cpu_count()}, "seeds": args.seeds,
-           "spp": args.spp, "rows": rows}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    print(f"wrote {record.write('photon_bias', record.params_of(args), {'rows': rows}, out=args.out)}")
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 (renderer/photon/photon_map.h), build and query times from 1e5 to 1e7
 photons.
 
-    python -m radiometer.benchmarks.photon_kdtree [--sizes 1e5,1e6,1e7] [--threads 1] [--queries 100000]
+    python -m radiometer.benchmarks.studies.photon_kdtree [--sizes 1e5,1e6,1e7] [--threads 1] [--queries 100000]
 
 Photons: a caustic-like distribution (half of them in a small bright disc on
 a plane, the rest spread over the faces of a unit box, as a Cornell box's
@@ -12,24 +12,18 @@ k = 50 and 120 (Mitsuba's default lookupSize) within a radius of 0.05, and
 range-query time (queries in the diffuse part only) at the radius that
 would hold 120 photons on one face (edges, corners and the disc's
 neighbourhood hold more: the mean count found is reported). Medians of `--repeats` runs. Writes a table to stdout and
-benchmarks/results/photon_kdtree.json.
+benchmarks/results/photon_kdtree.json (the studies' layout, studies/record.py).
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
-import os
-import platform
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
 
 from radiometer import _core
-
-ROOT = Path(__file__).resolve().parents[1]
+from radiometer.benchmarks.studies import record
 
 
 def photons(n, rng):
@@ -51,7 +45,7 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=1, help="build and query threads")
     ap.add_argument("--queries", type=int, default=20000)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "photon_kdtree.json"))
+    ap.add_argument("--out", default=str(record.default_path("photon_kdtree")))
     args = ap.parse_args(argv)
     rng = np.random.default_rng(0)
     rows = []
@@ -85,12 +79,7 @@ def main(argv=None):
         rows.append(row)
         print(f"{n:>10} {row['build_s']:>9.3f} {row['knn50_us']:>9.2f} {row['knn120_us']:>10.2f} "
               f"{row['range_us']:>9.2f} {row['range_mean_count']:>8.1f}", flush=True)
-    out = {"benchmark": "photon_kdtree", "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-           "machine": {"platform": platform.platform(), "cpus": os.cpu_count()}, "threads": args.threads,
-           "queries": args.queries, "repeats": args.repeats, "rows": rows}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    print(f"wrote {record.write('photon_kdtree', record.params_of(args), {'rows': rows}, out=args.out)}")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Volume photon map report (not a test): photonmapper's bias and time in
 scenes with media against volpath, as the volume map grows.
 
-    python -m radiometer.benchmarks.volume_photon [--seeds 3] [--res 32]
+    python -m radiometer.benchmarks.studies.volume_photon [--seeds 3] [--res 32]
 
 Scenes: fog_room (a homogeneous fog, camera inside it; regions: top and
 bottom half) and translucent_slab (subsurface scattering behind a dielectric
@@ -27,24 +27,19 @@ sqrt(its seconds / render seconds)): the unbiased estimator's error to set
 against the photon map's bias; "volpath err" is that volpath render's
 deviation from the reference.
 
-Writes a table to stdout and benchmarks/results/volume_photon.json. About a
-minute on two cores.
+Writes a table to stdout and benchmarks/results/volume_photon.json (the
+studies' layout, studies/record.py). About a minute on two cores.
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
-import os
-import platform
 import time
-from pathlib import Path
 
 import numpy as np
 
 import radiometer as rm
-
-ROOT = Path(__file__).resolve().parents[1]
+from radiometer.benchmarks.studies import record
+from radiometer.reference_scenes import registry
 
 
 def halves_rows(img):
@@ -73,14 +68,15 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--res", type=int, default=32)
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "volume_photon.json"))
+    ap.add_argument("--out", default=str(record.default_path("volume_photon")))
     args = ap.parse_args(argv)
     rows, refs_info = [], []
     print(f"{'scene':<18}{'photons':>8}{'K':>4}  {'region':<19}{'bias %':>8}{'se %':>6}{'s/render':>9}{'trace s':>8}"
           f"{'volpath same-time se %':>23}{'volpath err %':>14}")
     for name, (regions, spp, vp_spp, extra) in SCENES.items():
-        scene = rm.load_file(ROOT / "reference_scenes" / name / "scene.xml", res=args.res)
-        mref = rm.read_exr(ROOT / "reference_scenes" / name / "reference.exr")
+        spec = registry.get(name)
+        scene = rm.load_file(spec.xml, res=args.res)
+        mref = rm.read_exr(spec.reference_exr)
         f = mref.image.shape[0] // args.res
         blocks = lambda a: np.asarray(a, np.float64).reshape(args.res, f, args.res, f, 3)  # noqa: E731
         ref_img = blocks(mref.image).mean(axis=(1, 3))
@@ -119,15 +115,12 @@ def main(argv=None):
                              "seed_spread": float(got.std(ddof=1) / want), "seconds_per_render": sec,
                              "volume_map_seconds": float(np.median(trace)), "spp": spp,
                              "volpath_same_time_rel_se": float(same_time)})
-                print(f"{name:<18}{n_photons:>8}{k_rays:>4}  {reg:<19}{100 * bias:>+8.2f}{100 * se / want:>6.2f}{sec:>9.2f}"
+                print(f"{name:<18}{n_photons:>8}{k_rays:>4}  {reg:<19}{100 * bias:>+8.2f}{100 * se / want:>6.2f}"
+                      f"{sec:>9.2f}"
                       f"{float(np.median(trace)):>8.2f}{100 * same_time:>23.2f}"
                       f"{100 * (vp_reg[reg] / want - 1):>+14.2f}", flush=True)
-    out = {"benchmark": "volume_photon", "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-           "machine": {"platform": platform.platform(), "cpus": os.cpu_count()}, "seeds": args.seeds,
-           "res": args.res, "references": refs_info, "rows": rows}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    out = {"references": refs_info, "rows": rows}
+    print(f"wrote {record.write('volume_photon', record.params_of(args), out, out=args.out)}")
 
 
 if __name__ == "__main__":

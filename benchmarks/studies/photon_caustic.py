@@ -1,9 +1,9 @@
-"""Why photon mapping exists (issue 5, point 6): on glass_sphere_caustic, the
+"""Why photon mapping exists: on glass_sphere_caustic, the
 wall-clock time `path`, `photonmapper` and `sppm` need to bring the caustic
 region's relMSE under a target, and the ratios path / photonmapper and
 path / sppm. A benchmark, not a timed test.
 
-    python -m radiometer.benchmarks.photon_caustic [--target 0.02] [--threads 0]
+    python -m radiometer.benchmarks.studies.photon_caustic [--target 0.02] [--threads 0]
 
 Region: the sphere's shadow with the caustic focus in it (card.md: pixel box
 (20, 29, 58, 47) at 64 x 64). relMSE (DESIGN section 4, eps 1e-2): mean over
@@ -23,24 +23,23 @@ reference (reference.exr, 524288 spp). Curves:
   paths.
 The time to the target is read off each curve (log-log interpolation between
 the first point under the target and the one before). Writes a table to
-stdout and benchmarks/results/photon_caustic.json.
+stdout and benchmarks/results/photon_caustic.json (the studies' layout,
+studies/record.py).
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
 import math
-import os
-import platform
-from pathlib import Path
 
 import numpy as np
 
 import radiometer as rm
+from radiometer.benchmarks.studies import record
+from radiometer.reference_scenes import registry
 
-ROOT = Path(__file__).resolve().parents[1]
-SCENE = ROOT / "reference_scenes" / "glass_sphere_caustic" / "scene.xml"
+SPEC = registry.get("glass_sphere_caustic")
+SCENE = SPEC.xml
+MAX_DEPTH = registry.max_depth(SPEC)  # 12, as the reference was made
 REGION = (20, 29, 58, 47)
 
 
@@ -72,14 +71,14 @@ def main(argv=None):
     ap.add_argument("--target", type=float, default=0.02, help="caustic-region relMSE to reach")
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--path-max-spp", type=int, default=4096)
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "photon_caustic.json"))
+    ap.add_argument("--out", default=str(record.default_path("photon_caustic")))
     args = ap.parse_args(argv)
-    ref = rm.read_exr(SCENE.parent / "reference.exr").image
-    scene = rm.load_file(SCENE, res=64)
+    ref = rm.read_exr(SPEC.reference_exr).image
+    scene = rm.load_file(SCENE, **SPEC.fixed_params)
     curves = {}
 
     cps = [1 << k for k in range(0, 30) if (1 << k) <= args.path_max_spp]
-    r = rm.render(scene, integrator={"type": "path", "max_depth": 12}, spp=args.path_max_spp, seed=1,
+    r = rm.render(scene, integrator={"type": "path", "max_depth": MAX_DEPTH}, spp=args.path_max_spp, seed=1,
                   threads=args.threads, checkpoints=cps)
     curves["path"] = [(c[1], rel_mse(c[2], ref)) for c in r.checkpoints]
 
@@ -88,15 +87,15 @@ def main(argv=None):
     # the sphere into the caustic is the noisy part, so the spp matters.
     cps = [1 << k for k in range(0, 7)]
     for n_photons, n in ((50000, 30), (200000, 60)):
-        r = rm.render(scene, integrator={"type": "photonmapper", "max_depth": 12, "global_photons": n_photons,
+        r = rm.render(scene, integrator={"type": "photonmapper", "max_depth": MAX_DEPTH, "global_photons": n_photons,
                                          "caustic_photons": n_photons, "lookup_size": n, "direct_samples": 1,
                                          "gather_rays": 8}, spp=cps[-1], seed=1, threads=args.threads,
                       checkpoints=cps)
         curves[f"photonmapper N={n_photons}"] = [(c[1], rel_mse(c[2], ref)) for c in r.checkpoints]
 
     cps = [1 << k for k in range(0, 9)]
-    r = rm.render(scene, integrator={"type": "sppm", "max_depth": 12, "photon_count": 50000}, spp=cps[-1], seed=1,
-                  threads=args.threads, checkpoints=cps)
+    r = rm.render(scene, integrator={"type": "sppm", "max_depth": MAX_DEPTH, "photon_count": 50000}, spp=cps[-1],
+                  seed=1, threads=args.threads, checkpoints=cps)
     curves["sppm"] = [(c[1], rel_mse(c[2], ref)) for c in r.checkpoints]
 
     times = {}
@@ -120,15 +119,11 @@ def main(argv=None):
         if times["path"][0] and ts:
             ratios[f"path/{other}"] = times["path"][0] / min(ts)
             print(f"  ratio path / {other} (best configuration): {ratios[f'path/{other}']:.1f}")
-    out = {"benchmark": "photon_caustic", "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-           "machine": {"platform": platform.platform(), "cpus": os.cpu_count()}, "threads": args.threads,
-           "target_rel_mse": args.target, "region": REGION,
+    out = {"target_rel_mse": args.target, "region": REGION,
            "curves": {k: [list(p) for p in v] for k, v in curves.items()},
            "time_to_target": {k: {"seconds": v[0], "extrapolated": v[1]} for k, v in times.items()},
            "ratios": ratios}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    print(f"wrote {record.write('photon_caustic', record.params_of(args), out, out=args.out)}")
 
 
 if __name__ == "__main__":

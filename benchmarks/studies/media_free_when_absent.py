@@ -1,11 +1,11 @@
-"""Performance benchmark (not a test), issue 6 point 6: media support must
-cost nothing in a scene without media. Our `path` on the Cornell box
+"""Performance benchmark (not a test): media support must cost nothing in a
+scene without media. Our `path` on the Cornell box
 (256 x 256, 16 spp, max_depth 8, one thread by default) with this tree's renderer and
 with a build of an earlier commit (before media), side by side on the same
 machine, interleaved (A B A B ...) so that load from other processes hits
 both alike.
 
-    python -m radiometer.benchmarks.media_free_when_absent --base /path/to/base/bindings [--repeats 7]
+    python -m radiometer.benchmarks.studies.media_free_when_absent --base /path/to/base/bindings [--repeats 7]
 
 `--base` is a folder holding the earlier commit's `radiometer` package with
 its compiled `_core` module next to its Python files (e.g. `git archive
@@ -14,24 +14,22 @@ into bindings/radiometer). Each timed render runs in a fresh process (scene
 load and first-touch costs excluded: the process loads the scene, renders
 once untimed at 1 spp, then times one render). Reports the median of each
 side and their ratio (this tree / base), and writes
-benchmarks/results/media_free_when_absent.json. Also checks that the two
+benchmarks/results/media_free_when_absent.json (the studies' layout,
+studies/record.py). Also checks that the two
 builds give the same image bytes for the same seed (the surface loop is
 unchanged, so they must).
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
-import os
-import platform
 import statistics
 import subprocess
 import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-SCENE = ROOT / "reference_scenes" / "cornell_box" / "scene.xml"
+from radiometer.benchmarks.studies import record
+from radiometer.reference_scenes import registry
+
+SCENE = registry.get("cornell_box").xml
 
 CHILD = r"""
 import sys, time, hashlib
@@ -71,7 +69,7 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=1,
                     help="render threads (default 1: on a loaded shared machine one thread's CPU time is the "
                          "steadiest measure)")
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "media_free_when_absent.json"))
+    ap.add_argument("--out", default=str(record.default_path("media_free_when_absent")))
     a = ap.parse_args(argv)
     times = {"this": [], "base": []}
     cpu = {"this": [], "base": []}
@@ -91,20 +89,12 @@ def main(argv=None):
     print(f"median wall: this {med['this']:.3f} s, base {med['base']:.3f} s, ratio {ratio:.3f}; "
           f"median cpu: this {med_cpu['this']:.3f} s, base {med_cpu['base']:.3f} s, ratio {ratio_cpu:.3f}; "
           f"same image bytes: {hashes['this'] == hashes['base']}")
-    try:
-        commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True,
-                                check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = ""
+    params = {"res": a.res, "spp": a.spp, "max_depth": a.max_depth, "repeats": a.repeats, "integrator": "path",
+              "threads": a.threads, "base": a.base, "base_commit": a.base_commit}
     rec = {
-        "benchmark": "media_free_when_absent",
         "scene": "reference_scenes/cornell_box/scene.xml",
-        "params": {"res": a.res, "spp": a.spp, "max_depth": a.max_depth, "repeats": a.repeats,
-                   "integrator": "path", "threads": a.threads},
         "timing": "wall seconds (time.perf_counter) and process CPU seconds (time.process_time, all threads) of "
                   "one render per fresh process, after an untimed 1 spp render; sides interleaved",
-        "this_commit": commit,
-        "base_commit": a.base_commit,
         "seconds": times,
         "cpu_seconds": cpu,
         "median_s": med,
@@ -112,12 +102,8 @@ def main(argv=None):
         "ratio_this_over_base": ratio,
         "ratio_cpu_this_over_base": ratio_cpu,
         "same_image_bytes": hashes["this"] == hashes["base"],
-        "machine": {"cpu_count": os.cpu_count(), "os": platform.platform(), "python": platform.python_version()},
-        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(rec, indent=2) + "\n")
-    print("wrote", a.out)
+    print("wrote", record.write("media_free_when_absent", params, rec, out=a.out))
 
 
 if __name__ == "__main__":

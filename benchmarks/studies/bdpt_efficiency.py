@@ -1,5 +1,5 @@
-"""Efficiency benchmark of the bidirectional estimators (issue 4; not a
-test): error against wall-clock time, equal time for every contender.
+"""Efficiency benchmark of the bidirectional estimators (not a test): error
+against wall-clock time, equal time for every contender.
 
 Part `scenes`: `path`, `bdpt` and `ptracer` on the scenes bidirectional
 transport is for, glass_sphere_caustic (caustics seen on a diffuse floor)
@@ -9,7 +9,7 @@ heuristic (beta 2, 1 = balance, 3), the balance heuristic and uniform
 weights, plus `path` for scale: the seed's point that the choice of the
 weights w_ij is substantial.
 
-    python -m radiometer.benchmarks.bdpt_efficiency [--part scenes|mis|all]
+    python -m radiometer.benchmarks.studies.bdpt_efficiency [--part scenes|mis|all]
         [--seconds 2 4 8] [--seeds 3] [--threads 0] [--clock wall|cpu]
         [--scenes ajar_door ...]
 
@@ -25,16 +25,14 @@ contribution (the reference is noisy: E[(a - r)^2] = (a - L)^2 + Var[a] +
 Var[r], so mean(Var[r] / (r^2 + eps)) is subtracted; printed as `floor`).
 Efficiency is 1 / (relMSE x seconds); the ratio column is bdpt's (or each
 weighting's) efficiency over path's at the same budget. Writes a table to
-stdout, benchmarks/results/bdpt_efficiency_<part>.json and a log-log plot
-of error against time per scene next to it.
+stdout, benchmarks/results/bdpt_efficiency_<part>.json (the studies' layout,
+studies/record.py) and a log-log plot of error against time per scene next
+to it.
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
 import os
-import platform
 import statistics
 import time
 from pathlib import Path
@@ -43,19 +41,17 @@ import numpy as np
 
 import radiometer as rm
 from radiometer.analysis.blocks import region_mask
-from radiometer.benchmarks.runner import cpu_name
+from radiometer.benchmarks.studies import record
+from radiometer.reference_scenes import registry
 
-ROOT = Path(__file__).resolve().parents[1]
-SCENES = ROOT / "reference_scenes"
-RESULTS = ROOT / "benchmarks" / "results"
 EPS = 1e-2
 
-# Effect regions (card.md boxes at 64 x 64) and max_depth as the references were made.
+# Effect regions (card.md boxes at 64 x 64); the scenes render with their
+# references' parameters (max_depth included, reference_scenes/registry.py).
 SCENE_CFG = {
-    "glass_sphere_caustic": {"max_depth": 12, "region": ("caustic focus and shadow", [(20, 29, 58, 47)])},
-    "ajar_door": {"max_depth": 10, "region": ("near room (lit through the gap only)", None)},
-    "veach_mis": {"max_depth": 8, "region": ("light sampling wins | BSDF sampling wins",
-                                             [(0, 48, 16, 53), (48, 28, 64, 34)])},
+    "glass_sphere_caustic": {"region": ("caustic focus and shadow", [(20, 29, 58, 47)])},
+    "ajar_door": {"region": ("near room (lit through the gap only)", None)},
+    "veach_mis": {"region": ("light sampling wins | BSDF sampling wins", [(0, 48, 16, 53), (48, 28, 64, 34)])},
 }
 CONTENDERS = {
     "scenes": {"path": {"type": "path"}, "bdpt": {"type": "bdpt"}, "ptracer": {"type": "ptracer"}},
@@ -97,12 +93,12 @@ def run(part, budgets, seeds, threads, progress=True, clock="wall", only=None):
     for name in PART_SCENES[part]:
         if only and name not in only:
             continue
-        cfg = SCENE_CFG[name]
-        ref = rm.read_exr(SCENES / name / "reference.exr")
-        scene = rm.load_file(SCENES / name / "scene.xml", res=64)
+        spec = registry.get(name)
+        ref = rm.read_exr(spec.reference_exr)
+        scene = rm.load_file(spec.xml, **spec.fixed_params)
         mask = _mask(name)
-        for label, spec in CONTENDERS[part].items():
-            integ = {**spec, "max_depth": cfg["max_depth"]}
+        for label, contender in CONTENDERS[part].items():
+            integ = {**contender, "max_depth": registry.max_depth(spec)}
             if clock == "cpu":  # CPU seconds per sample, from a render of ~1/4 the smallest budget
                 _, c = _cpu_render(scene, integ, 0, 99, threads, 1.0)  # 1 spp: warms caches, sizes the next
                 probe_spp = max(1, int(0.25 * min(budgets) / max(c, 1e-4)))
@@ -130,7 +126,8 @@ def run(part, budgets, seeds, threads, progress=True, clock="wall", only=None):
                        "floor": floor, "floor_region": floor_r, "seeds": seeds}
                 rows.append(row)
                 if progress:
-                    print(f"  {name:22s} {label:20s} {row['time']:5.2f} s  {row['spp']:7.0f} spp  relMSE {row['relmse']:.3e}"
+                    print(f"  {name:22s} {label:20s} {row['time']:5.2f} s  {row['spp']:7.0f} spp  "
+                          f"relMSE {row['relmse']:.3e}"
                           f"  region {row['relmse_region']:.3e}", flush=True)
     return rows
 
@@ -184,7 +181,7 @@ def main(argv=None):
     ap.add_argument("--seconds", type=float, nargs="+", default=[2.0, 4.0, 8.0])
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--threads", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument("--out", type=Path, default=record.RESULTS, help="folder of the results")
     ap.add_argument("--clock", choices=["wall", "cpu"], default="wall",
                     help="budgets in wall-clock seconds (default) or in this process's CPU seconds")
     ap.add_argument("--scenes", nargs="+", help="only these scenes of the part")
@@ -197,13 +194,11 @@ def main(argv=None):
         if not rows:
             continue
         print(table(rows, part))
-        meta = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                "machine": platform.node(), "cpu": cpu_name(), "cpu_count": os.cpu_count(),
-                "threads": a.threads or os.cpu_count(), "clock": a.clock, "platform": platform.platform()}
         stem = "_".join([f"bdpt_efficiency_{part}"] + sorted(a.scenes or []) + ([a.clock] if a.clock != "wall" else []))
-        (a.out / f"{stem}.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
-        plot(rows, a.out / f"{stem}.png")
-        print(f"wrote {a.out / f'{stem}.json'} and the .png beside it")
+        out = record.write(stem, dict(record.params_of(a), part=part),
+                           {"threads_used": a.threads or os.cpu_count(), "rows": rows}, out=a.out / f"{stem}.json",
+                           plot=lambda png, rows=rows: plot(rows, png))
+        print(f"wrote {out} and the .png beside it")
 
 
 if __name__ == "__main__":

@@ -1,8 +1,8 @@
-"""Error report (not a test), issue 6 point 4: the dipole BSSRDF (Jensen et
-al. 2001, renderer/scene/dipole.h) as the fast approximation of random-walk
+"""Error report (not a test): the dipole BSSRDF (Jensen et al. 2001,
+renderer/scene/dipole.h) as the fast approximation of random-walk
 subsurface scattering, measured per scene against the random walk.
 
-    python -m radiometer.benchmarks.dipole_vs_randomwalk [--rw-spp 256] [--converged-spp 1024]
+    python -m radiometer.benchmarks.studies.dipole_vs_randomwalk [--rw-spp 256] [--converged-spp 1024]
 
 Scenes: translucent_slab and translucent_object. The random walk is each
 scene's scene.xml (a dense medium behind a smooth dielectric, rendered by
@@ -24,17 +24,14 @@ a half space (a 10 x 10 x 3 block, 60 mean free paths deep) of
 translucent_slab's medium under a uniform environment, seen along the
 normal (8 x 8 pixels of its centre): dipole and random walk (both ours,
 --half-space-spp each) and the dipole's analytic value Fr(0) + Ft(0) R_d.
-Writes benchmarks/results/dipole_vs_randomwalk.json and a PNG, one row per
-scene: dipole (converged) / random walk (reference) / relative difference
-(dipole - reference) / reference, at one exposure per scene.
+Writes benchmarks/results/dipole_vs_randomwalk.json (the studies' layout,
+studies/record.py) and a PNG beside it, one row per scene: dipole
+(converged) / random walk (reference) / relative difference (dipole -
+reference) / reference, at one exposure per scene.
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
-import os
-import platform
 import time
 from pathlib import Path
 
@@ -42,9 +39,10 @@ import numpy as np
 
 import radiometer as rm
 from radiometer.analysis.metrics import display_exposure, relmse, relmse_floor
+from radiometer.benchmarks.studies import record
 from radiometer.exr import read_exr
+from radiometer.reference_scenes import registry
 
-ROOT = Path(__file__).resolve().parents[1]
 THREADS = 2
 # Regions (x0, y0, x1, y1), half-open, at 64 x 64: the scenes' card.md.
 SCENES = {
@@ -61,7 +59,9 @@ def region_mean(img, box):
 
 def half_space(kind):
     """The calibration scene: `kind` 'dipole' or 'random_walk'."""
-    rgb = lambda v: {"type": "rgb", "value": [float(x) for x in np.broadcast_to(v, 3)]}
+    def rgb(v):
+        return {"type": "rgb", "value": [float(x) for x in np.broadcast_to(v, 3)]}
+
     st, albedo = 20.0, np.array([0.99, 0.95, 0.8])  # translucent_slab's medium
     block = {"type": "cube", "to_world": np.array([[5, 0, 0, 0], [0, 5, 0, 0], [0, 0, 1.5, -1.5], [0, 0, 0, 1]], float)}
     if kind == "dipole":
@@ -107,13 +107,12 @@ def main(argv=None):
     ap.add_argument("--rw-spp", type=int, default=256, help="random walk (volpath) spp of the matched budget")
     ap.add_argument("--converged-spp", type=int, default=1024, help="dipole spp for its model error")
     ap.add_argument("--half-space-spp", type=int, default=1024)
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "dipole_vs_randomwalk.json"))
-    ap.add_argument("--png", default=str(ROOT / "benchmarks" / "results" / "dipole_vs_randomwalk.png"))
+    ap.add_argument("--out", default=str(record.default_path("dipole_vs_randomwalk")))
     args = ap.parse_args(argv)
     rows, panels = [], []
     t_all = time.perf_counter()
     for name, regions in SCENES.items():
-        folder = ROOT / "reference_scenes" / name
+        folder = registry.get(name).xml.parent
         ref = read_exr(folder / "reference.exr")
         rw_scene = rm.load_file(folder / "scene.xml")
         dp_scene = rm.load_file(folder / "dipole.xml")
@@ -160,19 +159,16 @@ def main(argv=None):
     cal = calibrate(args.half_space_spp)
     q = cal["dipole_over_random_walk"]
     print(f"half space: dipole {np.round(cal['dipole']['mean'], 4).tolist()} (analytic "
-          f"{np.round(cal['dipole_analytic'], 4).tolist()}), random walk {np.round(cal['random_walk']['mean'], 4).tolist()}"
+          f"{np.round(cal['dipole_analytic'], 4).tolist()}), "
+          f"random walk {np.round(cal['random_walk']['mean'], 4).tolist()}"
           f" +- {np.round(cal['random_walk']['standard_error'], 4).tolist()}: ratio {q[0]:.3f} {q[1]:.3f} {q[2]:.3f}")
-    out = {"benchmark": "dipole_vs_randomwalk",
-           "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-           "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "threads": THREADS},
+    out = {"threads": THREADS,
            "reference": "each scene's reference.exr (Mitsuba 3.9.1 volpath, see its card.md)",
            "relmse_eps": 1e-2, "total_seconds": time.perf_counter() - t_all, "rows": rows,
            "half_space_calibration": cal}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {args.out}")
-    save_png(panels, args.png)
-    print(f"wrote {args.png}")
+    path = record.write("dipole_vs_randomwalk", record.params_of(args), out, out=args.out,
+                        plot=lambda png: save_png(panels, png))
+    print(f"wrote {path} and the .png beside it")
 
 
 def save_png(panels, path):
@@ -186,7 +182,10 @@ def save_png(panels, path):
     fig, axes = plt.subplots(len(panels), 3, figsize=(9, 3.1 * len(panels)), squeeze=False)
     for row, (name, dip, ref) in zip(axes, panels):
         ev = display_exposure(ref)
-        lum = lambda a: 0.2126 * a[..., 0] + 0.7152 * a[..., 1] + 0.0722 * a[..., 2]
+
+        def lum(a):
+            return 0.2126 * a[..., 0] + 0.7152 * a[..., 1] + 0.0722 * a[..., 2]
+
         rel = (lum(dip) - lum(ref)) / np.maximum(lum(ref), 1e-3)
         row[0].imshow(to_srgb(dip, ev))
         row[0].set_title(f"{name}\ndipole (path)", fontsize=9)

@@ -1,35 +1,32 @@
-"""SPPM's consistency at the largest budget run (issue 5, point 3; not a
-test: minutes of CPU). On the Cornell box and glass_sphere_caustic (64 x 64,
+"""SPPM's consistency at the largest budget run (not a test: minutes of
+CPU). On the Cornell box and glass_sphere_caustic (64 x 64,
 Mitsuba's references), `seeds` independent SPPM renders of `passes` passes
 of `photon_count` light paths, with checkpoints at 4, 16, 64, ...: per
 checkpoint, the relative bias of the mean over seeds in every region of the
 scene (tests/test_photon.py's region lists) with its standard error (seed
 spread and the reference's variance), and the RMS error of single renders.
 
-    python -m radiometer.benchmarks.photon_sppm [--passes 1024] [--seeds 4] [--photon-count 20000]
+    python -m radiometer.benchmarks.studies.photon_sppm [--passes 1024] [--seeds 4] [--photon-count 20000]
 
-Writes a table to stdout and benchmarks/results/photon_sppm.json.
+Writes a table to stdout and benchmarks/results/photon_sppm.json (the studies'
+layout, studies/record.py).
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
-import os
-import platform
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
 import radiometer as rm
+from radiometer.benchmarks.studies import record
+from radiometer.reference_scenes import registry
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(record.REPO / "tests"))
 from test_photon import CORNELL_REGIONS, GLASS_REGIONS  # noqa: E402
 
-SCENES = {"cornell_box": (8, CORNELL_REGIONS), "glass_sphere_caustic": (12, GLASS_REGIONS)}
+SCENES = {"cornell_box": CORNELL_REGIONS, "glass_sphere_caustic": GLASS_REGIONS}
 
 
 def main(argv=None):
@@ -38,14 +35,15 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=4)
     ap.add_argument("--photon-count", type=int, default=20000)
     ap.add_argument("--scenes", default=",".join(SCENES))
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "photon_sppm.json"))
+    ap.add_argument("--out", default=str(record.default_path("photon_sppm")))
     args = ap.parse_args(argv)
     cps = [4 ** k for k in range(1, 10) if 4 ** k < args.passes] + [args.passes]
     rows = []
     for name in args.scenes.split(","):
-        md, regions = SCENES[name]
-        scene = rm.load_file(ROOT / "reference_scenes" / name / "scene.xml", res=64)
-        ref = rm.read_exr(ROOT / "reference_scenes" / name / "reference.exr")
+        regions, spec = SCENES[name], registry.get(name)
+        md = registry.max_depth(spec)
+        scene = rm.load_file(spec.xml, **spec.fixed_params)
+        ref = rm.read_exr(spec.reference_exr)
         R, RV = np.asarray(ref.image, np.float64), np.asarray(ref.variance, np.float64)
         runs, secs = [], []
         for s in range(args.seeds):
@@ -57,7 +55,6 @@ def main(argv=None):
             print(f"{name}: seed {s} done in {secs[-1]:.1f} s", flush=True)
         for i, p in enumerate(cps):
             imgs = [run[i][2] for run in runs]
-            mean = np.mean(imgs, 0)
             rmse = float(np.mean([np.sqrt(((im - R) ** 2).mean()) for im in imgs]) / R.mean())
             row = {"scene": name, "passes": p, "seconds": float(np.mean([run[i][1] for run in runs])),
                    "rel_rmse_single": rmse, "regions": {}}
@@ -72,12 +69,7 @@ def main(argv=None):
             print(f"{name:<22} passes {p:>5} ({row['seconds']:.1f} s)  rel RMSE {rmse:.4f}  worst region "
                   f"{worst[0]}: {100 * worst[1]['rel_bias']:+.2f} % (se {100 * worst[1]['rel_se']:.2f} %)  all: "
                   + ", ".join(f"{k} {100 * v['rel_bias']:+.2f}" for k, v in row["regions"].items()), flush=True)
-    out = {"benchmark": "photon_sppm", "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-           "machine": {"platform": platform.platform(), "cpus": os.cpu_count()}, "seeds": args.seeds,
-           "photon_count": args.photon_count, "rows": rows}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    print(f"wrote {record.write('photon_sppm', record.params_of(args), {'rows': rows}, out=args.out)}")
 
 
 if __name__ == "__main__":

@@ -17,16 +17,14 @@ collisions of delta and ratio tracking) per sample, and seconds per spp
 `radiometer` package with its compiled _core), that build is timed too
 (accel is then ignored by it: always the global majorant).
 
-    python -m benchmarks.majorant_grid [--spp 64] [--repeats 5] [--base DIR]
+    python -m radiometer.benchmarks.studies.majorant_grid [--spp 64] [--repeats 5] [--base DIR]
 
-Writes benchmarks/results/majorant_grid.json and prints a table.
+Writes benchmarks/results/majorant_grid.json (the studies' layout,
+studies/record.py) and prints a table.
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import json
-import platform
 import shutil
 import statistics
 import subprocess
@@ -36,8 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-STRESS = ROOT / "reference_scenes" / "stress"
+from radiometer.benchmarks.studies import record
+
+STRESS = record.REPO / "reference_scenes" / "stress"
 
 CHILD = r"""
 import sys, time
@@ -105,7 +104,7 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--estimators", default="volpath,bdpt")
     ap.add_argument("--base", default=None, help="folder with an earlier build's radiometer package")
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "majorant_grid.json"))
+    ap.add_argument("--out", default=str(record.default_path("majorant_grid")))
     a = ap.parse_args(argv)
     tmp = Path(tempfile.mkdtemp(prefix="majorant_grid_"))
     xmls = _scenes(tmp)
@@ -130,12 +129,9 @@ def main(argv=None):
                 })
     result = {
         "what": "majorant grid (accel true) vs one global majorant (accel false) for grid media",
-        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "machine": platform.platform(), "processor": platform.processor(),
-        "spp": a.spp, "repeats": a.repeats, "resolution": "32x32", "threads": 1, "rows": rows,
+        "resolution": "32x32", "threads": 1, "rows": rows,
     }
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(result, indent=1) + "\n")
+    record.write("majorant_grid", record.params_of(a), result, out=a.out)
     print(f"{'scene':7} {'estimator':9} {'variant':7} {'lookups/sample':>14} {'ms/spp wall':>12} {'ms/spp cpu':>11}"
           f" {'speed-up':>8} {'mean':>8}")
     for r in rows:

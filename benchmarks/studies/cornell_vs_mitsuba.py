@@ -2,7 +2,7 @@
 max_depth 8, our `path` against Mitsuba 3's `path` in llvm_ad_rgb and
 scalar_rgb, in one process, on all cores.
 
-    python -m radiometer.benchmarks.cornell_vs_mitsuba [--repeats 3]
+    python -m radiometer.benchmarks.studies.cornell_vs_mitsuba [--repeats 3]
 
 For each renderer: scene load, the first render, then `repeats` timed
 renders with fresh seeds. Each Mitsuba variant runs in its own process with
@@ -18,15 +18,14 @@ llvm_ad_rgb (64 runs x 64 spp = 4096 spp) and cached under out/. The
 reference's own variance adds the same ~1/64 of a 64 spp render's error to
 every contender's relMSE.
 
-Writes a table to stdout and benchmarks/results/cornell_vs_mitsuba.json.
+Writes a table to stdout and benchmarks/results/cornell_vs_mitsuba.json (the
+studies' layout, studies/record.py).
 """
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -36,10 +35,14 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-SCENE = ROOT / "reference_scenes" / "cornell_box" / "scene.xml"
+from radiometer.benchmarks.runner import now as _now
+from radiometer.benchmarks.studies import record
+from radiometer.reference_scenes import registry
+
+ROOT = record.REPO
+SCENE = registry.get("cornell_box").xml
 OUT_DIR = ROOT / "out"
-RESULTS = ROOT / "benchmarks" / "results" / "cornell_vs_mitsuba.json"
+RESULTS = record.default_path("cornell_vs_mitsuba")
 EPS = 1e-2
 
 
@@ -49,48 +52,13 @@ def rel_mse(a, ref, eps=EPS) -> float:
     return float(np.mean((a - r) ** 2 / (r * r + eps)))
 
 
-def _now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-
-
-def machine_info() -> dict:
-    from radiometer.benchmarks.runner import cpu_name
-
-    cpu = cpu_name()
-    mem_gib = None
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemTotal"):
-                mem_gib = round(int(line.split()[1]) / 2 ** 20, 1)
-                break
-    except OSError:
-        pass
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return {"cpu": cpu, "cores": cores, "memory_gib": mem_gib, "os": platform.platform(),
-            "python": platform.python_version()}
-
-
-def git_info() -> dict:
-    def run(*args):
-        try:
-            return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
-        except (OSError, subprocess.CalledProcessError):
-            return None
-    status = run("status", "--porcelain")
-    return {"commit": run("rev-parse", "HEAD"), "dirty": bool(status) if status is not None else None}
-
-
 def long_reference(res: int, max_depth: int, runs: int, spp: int, rfilter: str = "gaussian"):
     """Mitsuba llvm_ad_rgb reference, made once and cached under out/."""
     path = OUT_DIR / f"cornell_box_ref_mitsuba_{res}px_d{max_depth}_{rfilter}_{runs}x{spp}spp.exr"
     import radiometer as rm
 
     if not path.exists():
-        try:
-            from radiometer.reference_scenes.make_reference import make_mitsuba_reference
-        except ImportError:  # an editable install made before reference_scenes was mapped
-            sys.path.insert(0, str(ROOT))
-            from reference_scenes.make_reference import make_mitsuba_reference
+        from radiometer.reference_scenes.make_reference import make_mitsuba_reference
 
         OUT_DIR.mkdir(exist_ok=True)
         print(f"making the long reference ({runs} x {spp} spp, Mitsuba llvm_ad_rgb) -> {path}", file=sys.stderr)
@@ -172,7 +140,7 @@ def _run_worker(variant, args, ref_path):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m radiometer.benchmarks.cornell_vs_mitsuba", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m radiometer.benchmarks.studies.cornell_vs_mitsuba", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--res", type=int, default=256)
     ap.add_argument("--spp", type=int, default=64)
@@ -184,12 +152,14 @@ def main(argv=None):
     ap.add_argument("--rfilter", default="gaussian", choices=["gaussian", "box", "tent"],
                     help="reconstruction filter for every renderer (box: both estimators are the same per "
                          "pixel; gaussian: Mitsuba splats, ours importance-samples the filter)")
-    ap.add_argument("-o", "--out", type=Path, help="results JSON (default: benchmarks/results/cornell_vs_mitsuba[_FILTER].json)")
+    ap.add_argument("-o", "--out", type=Path,
+                    help="results JSON (default: benchmarks/results/cornell_vs_mitsuba[_FILTER].json)")
     ap.add_argument("--worker", help=argparse.SUPPRESS)  # internal: one Mitsuba variant, JSON row on stdout
     ap.add_argument("--worker-ref", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.out is None:
-        args.out = RESULTS if args.rfilter == "gaussian" else RESULTS.with_name(f"cornell_vs_mitsuba_{args.rfilter}.json")
+        args.out = (RESULTS if args.rfilter == "gaussian"
+                    else RESULTS.with_name(f"cornell_vs_mitsuba_{args.rfilter}.json"))
 
     if args.worker:
         import radiometer as rm
@@ -237,11 +207,10 @@ def main(argv=None):
               f"{jit:>6} {row['render_s_median']:>9.3f} {row['time_vs_ours']:>7.2f} {row['msamples_per_s']:>8.2f} "
               f"{row['relmse_mean']:>9.3e} {row['efficiency_vs_ours']:>11.2f}")
 
+    params = {"res": args.res, "spp": args.spp, "max_depth": args.max_depth, "repeats": args.repeats,
+              "rfilter": args.rfilter, "ref_runs": args.ref_runs, "ref_spp": args.ref_spp, "no_scalar": args.no_scalar}
     out = {
-        "benchmark": "cornell_vs_mitsuba",
         "scene": str(SCENE.relative_to(ROOT)),
-        "params": {"res": args.res, "spp": args.spp, "max_depth": args.max_depth, "repeats": args.repeats,
-                   "rfilter": args.rfilter},
         "metric": f"relMSE, eps {EPS:g}: mean over pixels and channels of (a - r)^2 / (r^2 + eps)",
         "reference": {"path": str(ref_path.relative_to(ROOT)) if ref_path.is_relative_to(ROOT) else str(ref_path),
                       "made_with": "mitsuba", **{k: ref.metadata.get(k) for k in
@@ -250,16 +219,13 @@ def main(argv=None):
         "timing": "wall seconds (time.perf_counter); Mitsuba's include the evaluation and numpy conversion; "
                   "each Mitsuba variant ran in a fresh process with an empty drjit kernel cache, so "
                   "first_render_s of llvm_ad_rgb includes tracing and the JIT compile; compile_s = first - median",
-        "machine": machine_info(),
         "versions": {"radiometer": rm.__version__, "mitsuba": mi.__version__,
                      "drjit": __import__("drjit").__version__, "numpy": np.__version__},
-        "git": git_info(),
         "started": started,
         "finished": finished,
         "results": rows,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(out, indent=2) + "\n")
+    record.write("cornell_vs_mitsuba", params, out, out=args.out)
     print(f"\nwrote {args.out}")
     return out
 

@@ -1,0 +1,147 @@
+"""Scene loader: Mitsuba 3 scene dicts and XML files -> `SceneDesc`.
+
+Written here rather than taken from a library: no maintained package reads
+Mitsuba 3's XML/dict formats without Mitsuba itself, which must stay
+optional. PLY files go through the maintained `plyfile` package. OBJ has a
+small reader of our own (_read_obj) because the maintained readers change
+the mesh: meshio drops the texture and normal indices of OBJ faces, trimesh
+merges vertices (and needs PIL for a textured OBJ); neither splits vertices
+per distinct v/vt/vn triple as Mitsuba does, which the tests check against
+Mitsuba's own buffers.
+
+`load_dict(d)` takes the dict that `mitsuba.load_dict` takes, `load_file(path,
+**params)` a Mitsuba 3 XML file; both resolve what Mitsuba leaves implicit
+(defaults, named IORs, `ref`s, transforms, fov_axis) into the dataclasses of
+`scene_desc.py`. Mitsuba 3.9.1 is the reference for every default and
+convention below; anything outside this subset, any parameter a plugin does not
+use, a wrong type or a bad value raises `SceneError` naming the element and its
+place: `scene.xml:12: bsdf 'diffuse': unknown parameter 'reflectanse'`, or for
+dicts the key path, `scene['floor']['bsdf']['reflectance']: bsdf 'diffuse':
+negative value -0.1`.
+
+Both front ends (from_dict.py, from_xml.py) turn their input into one
+intermediate form (nodes.py: a node per plugin instance with its
+parameters); build.py makes the descriptions from it, reading parameters
+through parameters.py, meshes and volumes through meshes.py and volumes.py,
+with the transforms of transforms.py; plugins.py is the table of accepted
+plugin types.
+
+Supported plugins and their parameters (defaults in brackets)
+-------------------------------------------------------------
+shape      obj, ply: filename, face_normals [false], flip_normals [false],
+               to_world, obj also flip_tex_coords [true]. Faces are fans of
+               polygons (OBJ) or triangles only (PLY, as Mitsuba). Vertex
+               normals from the file are kept; without any and without
+               face_normals they are recomputed, angle-weighted, as Mitsuba does.
+           rectangle: [-1,1]^2 at z=0, normal +z; to_world, flip_normals
+               (face_normals accepted: a flat shape has no other normals).
+           cube: [-1,1]^3, 24 vertices, outward normals per face;
+               to_world, flip_normals, face_normals.
+           disk (analytic): to_world, flip_normals.
+           sphere (analytic): center [0], radius [1], to_world (no shear or
+               non-uniform scale), flip_normals.
+           Each shape may nest one bsdf, one area emitter and one
+           irradiancemeter sensor.
+bsdf       diffuse: reflectance [0.5]
+           conductor: material ['none': eta 0, k 1] or eta [0] + k [1],
+               specular_reflectance [1]
+           roughconductor: as conductor + distribution ['beckmann'|'ggx'],
+               alpha [0.1] or alpha_u + alpha_v, sample_visible [true]
+           dielectric, thindielectric: int_ior ['bk7'], ext_ior ['air'],
+               specular_reflectance [1], specular_transmittance [1]
+           roughdielectric: as dielectric + the microfacet parameters
+           plastic: diffuse_reflectance [0.5], specular_reflectance [1],
+               int_ior ['polypropylene'], ext_ior ['air'], nonlinear [false]
+           twosided: one or two nested bsdfs; null: none.
+           An IOR is a float or one of the names in NAMED_IOR (any case).
+emitter    area (nested in a shape): radiance [1]
+           point: intensity [1], position or to_world
+           spot: intensity [1], cutoff_angle [20], beam_width [3/4 cutoff],
+               to_world (shines along +z)
+           directional: irradiance [1], direction or to_world
+           constant: radiance [1]
+           Mitsuba 3 emitters take no 'scale' parameter (3.9.1 rejects it as
+           unreferenced), so neither do we: scale the radiance itself.
+sensor     perspective: fov + fov_axis ['x'|'y'|'diagonal'|'smaller'|
+               'larger'] or focal_length ['50mm', a string as in Mitsuba],
+               near_clip [1e-2], far_clip [1e4], to_world (no scale); accepted
+               and ignored because they change nothing for a pinhole camera:
+               PERSPECTIVE_IGNORED.
+           orthographic: to_world (its scale sets the extent), near_clip,
+               far_clip.
+           radiancemeter: to_world or origin + direction; needs a 1x1 film.
+           irradiancemeter: only nested in a shape.
+           Each sensor may nest a film and a sampler.
+film       hdrfilm: width [768], height [576] (1..16384), pixel_format
+               ['rgb'|'rgba'], component_format ['float16'|'float32'], rfilter.
+rfilter    box (radius 0.5), tent: radius [1], gaussian: stddev [0.5]
+               (radius = 4 stddev).
+sampler    independent: sample_count [4] -> SensorDesc.spp, seed (accepted).
+integrator direct path volpath ptracer bdpt photonmapper sppm; its parameters
+           (ints, floats, bools, strings) go unchecked to IntegratorDesc.params.
+medium     homogeneous: sigma_t [1] + albedo [0.75] (Mitsuba 3), or sigma_a +
+               sigma_s (Mitsuba 0.6's form; albedo = sigma_s / sigma_t, 0
+               where sigma_t is 0), scale [1] multiplying the coefficients;
+               each an rgb or a float; sample_emitters [true] (only true);
+               one nested phase [isotropic]. Nested in a shape as `interior`
+               / `exterior` (or referenced by those names), in a sensor as
+               `medium`; declared at the top level for refs.
+           heterogeneous: as homogeneous, but sigma_t and albedo may each be
+               a nested volume of that name; has_spectral_extinction
+               accepted. The renderer tracks it against a majorant grid of
+               a sigma_t gridvolume (its `accel`; delta tracking, ratio
+               tracking for shadow rays), else one global majorant.
+volume     gridvolume: filename (Mitsuba's .vol, version 3, float32, 1 or 3
+               channels), to_world (maps the unit cube), use_grid_bbox
+               [false], filter_type ['trilinear'], wrap_mode ['clamp'], raw,
+               accel [true] (as sigma_t: a majorant grid for tracking; false:
+               one global majorant); constvolume: value [1].
+phase      isotropic; hg: g [0.8] in (-1, 1).
+subsurface dipole (Mitsuba 0.6's plugin; nested in a shape, which it turns
+               into a smooth dielectric boundary over a dipole BSSRDF, Jensen
+               et al. 2001; renderer/scene/dipole.h): sigma_a + sigma_s, or
+               sigma_t + albedo (albedo = sigma_s / sigma_t), each an rgb or a
+               float, per unit length; sigma_s is the scattering coefficient
+               itself, NOT the reduced one: sigma_s' = sigma_s (1 - g) with g
+               [0] in (-1, 1); scale [1] multiplies the coefficients;
+               int_ior ['bk7'], ext_ior ['air'] (IORs as for dielectric).
+               Mitsuba 0.6's camelCase names (sigmaA, sigmaS, sigmaT, intIOR,
+               extIOR) are accepted as aliases; irrSamples (its
+               irradiance cache's density) is refused, naming why: exit
+               points are sampled per path here. Its material presets are
+               not supported. The shape may nest no bsdf (a smooth
+               dielectric of the dipole's IORs is made), a `dielectric` of
+               the same IORs, or, as Mitsuba 0.6's documentation sets it up,
+               a `plastic` of the same IORs with diffuse_reflectance 0 (only
+               its Fresnel reflection: the same boundary); no interior
+               medium. Only the `path` and `volpath` integrators render it;
+               the others refuse the scene.
+
+Decisions where Mitsuba leaves a choice (see also the functions' comments)
+-------------------------------------------------------------------------
+- A scene without a sensor gets Mitsuba's default `perspective` (50 mm focal
+  length on the diagonal, 768x576, gaussian filter, 4 spp, identity to_world);
+  Mitsuba 3.9.1 itself leaves such a scene without a sensor. More than one
+  sensor is an error (the renderer renders one).
+- An irradiancemeter is stored both in its `ShapeDesc.sensor` and as
+  `SceneDesc.sensor` (the same object).
+- Meshes are in world space, so their `ShapeDesc.to_world` is the identity. A
+  sphere's `to_world` is the full object-to-world map of the unit sphere,
+  rotation included (radius * Q | center), consistent with `center`/`radius`; a
+  mirroring to_world turns a sphere's normals inward, as in Mitsuba.
+- A directional emitter's `to_world` is an orthonormal frame whose +z column is
+  the (normalised) direction of travel of the light.
+- Point and spot emitters store their position as the to_world translation.
+"""
+from __future__ import annotations
+
+from ..scene_desc import SceneError
+from .build import SceneWarning
+from .from_dict import load_dict
+from .from_xml import load_file
+from .parameters import NAMED_IOR, PERSPECTIVE_IGNORED
+from .plugins import PLUGINS
+from .volumes import write_vol
+
+__all__ = ["load_dict", "load_file", "SceneError", "SceneWarning", "NAMED_IOR", "PERSPECTIVE_IGNORED", "PLUGINS",
+           "write_vol"]

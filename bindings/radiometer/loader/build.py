@@ -1,0 +1,660 @@
+"""From _Nodes to the scene description: each plugin built into its
+dataclass of scene_desc.py (refs share one object), then the scene
+assembled and checked."""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from ..scene_desc import (
+    BsdfDesc,
+    DipoleDesc,
+    EmitterDesc,
+    GridDesc,
+    IntegratorDesc,
+    MediumDesc,
+    SceneDesc,
+    SceneError,
+    SensorDesc,
+    ShapeDesc,
+)
+from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _rectangle_mesh
+from .nodes import _Node, _Prop, _Ref
+from .parameters import _Params
+from .transforms import _frame_along, _translate
+from .volumes import _read_vol
+
+_MAX_RESOLUTION = 16384
+
+
+class _Builder:
+    def __init__(self, base_dir):
+        self.base_dir = base_dir
+        self.built = {}  # id(node) -> description, so refs share one object
+        self.in_progress = set()
+
+    def cached(self, node, make):
+        key = id(node)
+        if key in self.built:
+            return self.built[key]
+        if key in self.in_progress:
+            raise SceneError(f"{node.place}: {node.label()}: reference cycle")
+        self.in_progress.add(key)
+        desc = make(node)
+        self.in_progress.discard(key)
+        self.built[key] = desc
+        return desc
+
+    # -- BSDFs ---------------------------------------------------------------
+
+    def bsdf(self, node):
+        return self.cached(node, self._bsdf)
+
+    def _bsdf(self, node):
+        p, t = _Params(node), node.type
+        b = BsdfDesc(type=t, id=node.place)
+        if t == "diffuse":
+            b.reflectance = p.rgb("reflectance", 0.5)
+        elif t in ("conductor", "roughconductor"):
+            material = p.string("material", "none") if p.has("material") else None
+            if material is not None and (p.has("eta") or p.has("k")):
+                raise p.error("give either (eta, k) or material, not both")
+            if material is not None and material.lower() != "none":
+                raise p.error(f"named conductor materials are not supported yet; give eta "
+                              f"and k (material '{material}')")
+            b.eta = p.rgb("eta", 0.0)
+            b.k = p.rgb("k", 1.0)
+            b.specular_reflectance = p.rgb("specular_reflectance", 1.0)
+        elif t in ("dielectric", "roughdielectric", "thindielectric"):
+            b.int_ior = p.ior("int_ior", "bk7")
+            b.ext_ior = p.ior("ext_ior", "air")
+            b.specular_reflectance = p.rgb("specular_reflectance", 1.0)
+            b.specular_transmittance = p.rgb("specular_transmittance", 1.0)
+        elif t == "plastic":
+            b.diffuse_reflectance = p.rgb("diffuse_reflectance", 0.5)
+            b.specular_reflectance = p.rgb("specular_reflectance", 1.0)
+            b.int_ior = p.ior("int_ior", "polypropylene")
+            b.ext_ior = p.ior("ext_ior", "air")
+            b.nonlinear = p.bool("nonlinear", False)
+        elif t == "twosided":
+            kids = p.children("bsdf")
+            if not 1 <= len(kids) <= 2:
+                raise p.error(f"needs one or two nested bsdfs, got {len(kids)}")
+            for k in kids:
+                if k.type == "twosided":
+                    raise p.error("a twosided bsdf cannot nest another twosided", k.place)
+            b.nested = [self.bsdf(k) for k in kids]
+        if t in ("roughconductor", "roughdielectric"):
+            b.distribution = p.string("distribution", "beckmann", ("beckmann", "ggx"))
+            if p.has("alpha") and (p.has("alpha_u") or p.has("alpha_v")):
+                raise p.error("give either alpha or alpha_u/alpha_v")
+            if p.has("alpha_u") != p.has("alpha_v"):
+                raise p.error("give both alpha_u and alpha_v")
+            if p.has("alpha_u"):
+                b.alpha_u = p.float("alpha_u", check="positive")
+                b.alpha_v = p.float("alpha_v", check="positive")
+            else:
+                b.alpha_u = b.alpha_v = p.float("alpha", 0.1, check="positive")
+            b.sample_visible = p.bool("sample_visible", True)
+        p.done()
+        return b
+
+    # -- media ---------------------------------------------------------------
+
+    def medium(self, node):
+        return self.cached(node, self._medium)
+
+    def _medium(self, node):
+        p, t = _Params(node), node.type
+        m = MediumDesc(type=t, id=node.id or node.place)
+        if t == "heterogeneous":
+            # sigma_t and albedo: a nested volume (gridvolume, constvolume)
+            # named so, or a plain value as for `homogeneous`.
+            for name in ("sigma_t", "albedo"):
+                vol = p.named_child("volume", name)
+                if vol is None:
+                    continue
+                if p.has(name):
+                    raise p.error(f"'{name}' given both as a value and as a nested volume", vol.place)
+                value = self.volume(vol)
+                if isinstance(value, GridDesc):
+                    setattr(m, name + "_grid", value)
+                else:  # constvolume: its value stands in for the parameter
+                    node.props[name] = _Prop("rgb", np.array(value), vol.place)
+        given_3 = p.has("sigma_t") or p.has("albedo")
+        given_06 = p.has("sigma_a") or p.has("sigma_s")
+        if given_3 and given_06:
+            raise p.error("give either sigma_t + albedo or sigma_a + sigma_s, not both")
+        scale = p.float("scale", 1.0, check="nonneg")
+        if given_06:
+            sa = np.array(p.rgb("sigma_a", 0.0))
+            ss = np.array(p.rgb("sigma_s", 0.0))
+            st = sa + ss
+            albedo = np.divide(ss, st, out=np.zeros(3), where=st > 0)
+        else:
+            st = np.array(p.rgb("sigma_t", 1.0))
+            albedo = np.array(p.rgb("albedo", 0.75))
+            if np.any(albedo > 1.0):
+                raise p.error(f"albedo must lie in [0, 1], got {tuple(albedo.tolist())}",
+                              node.props["albedo"].place)
+        m.sigma_t = tuple(float(x) for x in st * scale)
+        m.albedo = tuple(float(x) for x in albedo)
+        m.scale = scale
+        if t == "heterogeneous":
+            p.bool("has_spectral_extinction", True)  # an optimisation hint in Mitsuba; no effect here
+        if not all(math.isfinite(x) for x in m.sigma_t):
+            raise p.error(f"sigma_t * scale overflows: {m.sigma_t}")
+        if not p.bool("sample_emitters", True):
+            raise p.error("sample_emitters = false is not supported (next event estimation is always on)",
+                          node.props["sample_emitters"].place)
+        ph = p.child("phase")
+        if ph is not None:
+            pp = _Params(ph)
+            m.phase = ph.type
+            if ph.type == "hg":
+                m.g = pp.float("g", 0.8)
+                if not -1.0 < m.g < 1.0:
+                    raise pp.error(f"parameter 'g' must lie in (-1, 1), got {m.g}", ph.props["g"].place)
+            pp.done()
+        p.done()
+        return m
+
+    def volume(self, node):
+        return self.cached(node, self._volume)
+
+    def _volume(self, node):
+        """gridvolume -> GridDesc; constvolume -> its value (3 floats)."""
+        p, t = _Params(node), node.type
+        if t == "constvolume":
+            v = p.rgb("value", 1.0)
+            p.done()
+            return v
+        filename = p.string("filename")
+        path = filename if os.path.isabs(filename) else os.path.join(self.base_dir, filename)
+        if not os.path.isfile(path):
+            raise p.error(f"volume file not found: '{filename}' (looked for {path})", node.props["filename"].place)
+        data, bbox = _read_vol(path, f"{node.place}: {node.label()}")
+        m = p.transform("to_world")
+        m = np.eye(4) if m is None else m
+        if p.bool("use_grid_bbox", False):
+            lo, hi = bbox
+            if not np.all(hi > lo):
+                raise p.error(f"use_grid_bbox: the file's bounding box {lo.tolist()} .. {hi.tolist()} is empty")
+            m = m @ _translate(lo) @ np.diag([*(hi - lo), 1.0])
+        p.string("filter_type", "trilinear", ("trilinear",))
+        p.string("wrap_mode", "clamp", ("clamp",))
+        p.bool("raw", False)  # linear RGB values either way (no spectral upsampling here)
+        # Mitsuba's majorant grid: true, a coarse grid of local majorants
+        # for delta / ratio tracking through a sigma_t grid (Medium in
+        # renderer/scene/medium.h); false, one global majorant per channel.
+        accel = p.bool("accel", True)
+        p.done()
+        return GridDesc(data=data, to_world=m, accel=bool(accel))
+
+    def _media_of(self, p):
+        """(interior, exterior) MediumDescs nested in or referenced by a shape."""
+        out = []
+        for name in ("interior", "exterior"):
+            node = p.named_child("medium", name)
+            out.append(None if node is None else self.medium(node))
+        return tuple(out)
+
+    # -- emitters ------------------------------------------------------------
+
+    def emitter(self, node):
+        return self.cached(node, self._emitter)
+
+    def _emitter(self, node):
+        p, t = _Params(node), node.type
+        if p.has("scale"):
+            raise p.error("Mitsuba 3 emitters take no 'scale' parameter; multiply the "
+                          "radiance/intensity/irradiance instead",
+                          node.props["scale"].place)
+        e = EmitterDesc(type=t, id=node.place)
+        if t in ("area", "constant"):
+            e.radiance = p.rgb("radiance", 1.0)
+        elif t == "point":
+            pos = p.vec3("position")
+            m = p.transform("to_world")
+            if pos is not None and m is not None:
+                raise p.error("give either position or to_world, not both")
+            e.intensity = p.rgb("intensity", 1.0)
+            e.to_world = _translate(pos) if pos is not None else (np.eye(4) if m is None else m)
+        elif t == "spot":
+            e.intensity = p.rgb("intensity", 1.0)
+            e.cutoff_angle = p.float("cutoff_angle", 20.0, check="positive")
+            if e.cutoff_angle > 180.0:
+                raise p.error(f"cutoff_angle {e.cutoff_angle} exceeds 180 degrees")
+            # Mitsuba keeps a beam_width beyond the cutoff: the falloff is then a hard edge.
+            e.beam_width = p.float("beam_width", 0.75 * e.cutoff_angle, check="positive")
+            m = p.transform("to_world")
+            e.to_world = np.eye(4) if m is None else m
+        elif t == "directional":
+            d = p.vec3("direction", what="a vector")
+            m = p.transform("to_world")
+            if d is not None and m is not None:
+                raise p.error("give either direction or to_world, not both")
+            e.irradiance = p.rgb("irradiance", 1.0)
+            if d is None:
+                d = np.array([0.0, 0.0, 1.0]) if m is None else m[:3, 2]
+            if not np.linalg.norm(d) > 0:
+                raise p.error("the direction has zero length")
+            e.to_world = _frame_along(d / np.linalg.norm(d))
+        p.done()
+        return e
+
+    # -- shapes --------------------------------------------------------------
+
+    def shape(self, node):
+        return self.cached(node, self._shape)
+
+    def _shape(self, node):
+        p, t = _Params(node), node.type
+        m = p.transform("to_world")
+        m = np.eye(4) if m is None else m
+        s = ShapeDesc(id=node.place, flip_normals=p.bool("flip_normals", False))
+        if t in ("obj", "ply"):
+            filename = p.string("filename")
+            face_normals = p.bool("face_normals", False)
+            flip_tex = p.bool("flip_tex_coords", True) if t == "obj" else False
+            path = filename if os.path.isabs(filename) else os.path.join(self.base_dir, filename)
+            if not os.path.isfile(path):
+                raise p.error(f"mesh file not found: '{filename}' (looked for {path})",
+                              node.props["filename"].place)
+            where = f"{node.place}: {node.label()}"
+            pos, f, n, uv = (_read_obj(path, flip_tex, where) if t == "obj"
+                             else _read_ply(path, where))
+            _mesh_shape(s, m, pos, f, n, uv, face_normals)
+        elif t == "rectangle":
+            p.bool("face_normals", False)  # Mitsuba accepts it; a plane has no other normal
+            pos, f, uv = _rectangle_mesh()
+            _mesh_shape(s, m, pos, f, None, uv, face_normals=True)
+        elif t == "cube":
+            face_normals = p.bool("face_normals", False)
+            pos, f, n, uv = _cube_mesh()
+            _mesh_shape(s, m, pos, f, n, uv, face_normals)
+        elif t == "disk":
+            s.type, s.to_world = "disk", m
+        elif t == "sphere":
+            self._sphere(p, s, m)
+        bsdf = p.child("bsdf")
+        s.bsdf = None if bsdf is None else self.bsdf(bsdf)
+        em = p.child("emitter")
+        if em is not None:
+            if em.type != "area":
+                raise p.error(f"only an area emitter can be nested in a shape, got "
+                              f"'{em.type}'", em.place)
+            s.emitter = self.emitter(em)
+        sensor = p.child("sensor")
+        if sensor is not None:
+            if sensor.type != "irradiancemeter":
+                raise p.error(f"only an irradiancemeter can be nested in a shape, got "
+                              f"'{sensor.type}'", sensor.place)
+            s.sensor = self.sensor(sensor, on_shape=True)
+        s.interior, s.exterior = self._media_of(p)
+        sub = p.child("subsurface")
+        if sub is not None:
+            s.subsurface = self.subsurface(sub)
+            d = s.subsurface
+            if s.interior is not None:
+                raise p.error("a shape with a dipole subsurface cannot also have an interior medium "
+                              "(the dipole models the inside; use a dielectric + interior medium for "
+                              "random-walk subsurface instead)", sub.place)
+            if s.bsdf is None:
+                s.bsdf = BsdfDesc(type="dielectric", id=f"{sub.place}: dipole boundary",
+                                  int_ior=d.int_ior, ext_ior=d.ext_ior)
+            elif s.bsdf.type not in ("dielectric", "plastic") or (
+                    s.bsdf.type == "plastic" and any(x != 0 for x in s.bsdf.diffuse_reflectance)):
+                raise p.error(f"a shape with a dipole subsurface takes no bsdf, a smooth 'dielectric' or a "
+                              f"'plastic' with diffuse_reflectance 0 (its boundary), got '{s.bsdf.type}'"
+                              + (" with a diffuse part" if s.bsdf.type == "plastic" else ""), bsdf.place)
+            elif (abs(s.bsdf.int_ior - d.int_ior) > 1e-6 * d.int_ior
+                  or abs(s.bsdf.ext_ior - d.ext_ior) > 1e-6 * d.ext_ior):
+                raise p.error(f"the {s.bsdf.type}'s IORs ({s.bsdf.int_ior}, {s.bsdf.ext_ior}) differ from "
+                              f"the dipole's ({d.int_ior}, {d.ext_ior})", bsdf.place)
+            if s.bsdf.type == "plastic":  # the same boundary, as the renderer's dielectric
+                s.bsdf = BsdfDesc(type="dielectric", id=s.bsdf.id, int_ior=d.int_ior, ext_ior=d.ext_ior)
+        p.done()
+        return s
+
+    # -- subsurface ----------------------------------------------------------
+
+    def subsurface(self, node):
+        return self.cached(node, self._subsurface)
+
+    def _subsurface(self, node):
+        p = _Params(node)
+        if p.has("material"):
+            raise p.error("material presets are not supported: give sigma_a + sigma_s (or sigma_t + albedo)",
+                          node.props["material"].place)
+        # Mitsuba 0.6's irradiance-cache density: it sets nothing here, and
+        # an unused parameter is an error (DESIGN sec. 3), so it says why.
+        if p.has("irrSamples"):
+            raise p.error("irrSamples (Mitsuba 0.6's irradiance-cache density) does not apply: exit points "
+                          "are sampled per path here; remove it", node.props["irrSamples"].place)
+
+        def name_of(name, alias):
+            """The parameter given under its name or Mitsuba 0.6's alias."""
+            if p.has(name) and p.has(alias):
+                raise p.error(f"'{name}' given twice (also as '{alias}')", node.props[alias].place)
+            return alias if p.has(alias) else name
+
+        a_, s_, t_ = name_of("sigma_a", "sigmaA"), name_of("sigma_s", "sigmaS"), name_of("sigma_t", "sigmaT")
+        i_, e_ = name_of("int_ior", "intIOR"), name_of("ext_ior", "extIOR")
+        given_ts = p.has(t_) or p.has("albedo")
+        given_as = p.has(a_) or p.has(s_)
+        if given_ts and given_as:
+            raise p.error("give either sigma_a + sigma_s or sigma_t + albedo, not both")
+        if not given_ts and not given_as:
+            raise p.error("needs sigma_a + sigma_s (or sigma_t + albedo)")
+        scale = p.float("scale", 1.0, check="positive")
+        if given_as:
+            sa = np.array(p.rgb(a_, 0.0))
+            ss = np.array(p.rgb(s_, 0.0))
+        else:
+            st = np.array(p.rgb(t_, 1.0))
+            albedo = np.array(p.rgb("albedo", 0.75))
+            if np.any(albedo > 1.0):
+                raise p.error(f"albedo must lie in [0, 1], got {tuple(albedo.tolist())}",
+                              node.props["albedo"].place)
+            ss = st * albedo
+            sa = st - ss
+        g = p.float("g", 0.0)
+        if not -1.0 < g < 1.0:
+            raise p.error(f"parameter 'g' must lie in (-1, 1), got {g}", node.props["g"].place)
+        d = DipoleDesc(id=node.id or node.place, g=g,
+                       sigma_a=tuple(float(x) for x in sa * scale),
+                       sigma_s=tuple(float(x) for x in ss * scale),
+                       int_ior=p.ior(i_, "bk7"), ext_ior=p.ior(e_, "air"))
+        if not all(math.isfinite(x) for x in d.sigma_a + d.sigma_s):
+            raise p.error(f"the coefficients times scale overflow: {d.sigma_a}, {d.sigma_s}")
+        if not any(a + b > 0 for a, b in zip(d.sigma_a, d.sigma_s)):
+            raise p.error("sigma_a + sigma_s is 0 in every channel: nothing to scatter")
+        p.done()
+        return d
+
+    def _sphere(self, p, s, m):
+        """Mitsuba: to_world * translate(center) * scale(radius), split by polar
+        decomposition into rotation Q and a stretch that must be uniform."""
+        center = p.vec3("center", (0.0, 0.0, 0.0))
+        radius = p.float("radius", 1.0, check="positive")
+        full = m @ _translate(center) @ np.diag([radius, radius, radius, 1.0])
+        u, sig, vt = np.linalg.svd(full[:3, :3])
+        if sig.max() - sig.min() > 1e-4 * sig.max():
+            raise p.error(f"sphere to_world must not shear or scale non-uniformly "
+                          f"(scales {sig.tolist()})", p.node.props["to_world"].place)
+        q = u @ vt
+        flip = s.flip_normals
+        if np.linalg.det(q) < 0:  # a mirror: Mitsuba's radius turns negative, normals flip
+            q, flip = -q, not flip
+        r = float(sig.mean())
+        s.type, s.flip_normals = "sphere", flip
+        s.center = tuple(float(c) for c in full[:3, 3])
+        s.radius = r
+        s.to_world = np.eye(4)
+        s.to_world[:3, :3] = r * q
+        s.to_world[:3, 3] = full[:3, 3]
+
+    # -- sensors, film, sampler ------------------------------------------------
+
+    def sensor(self, node, on_shape=False):
+        if node.type == "irradiancemeter" and not on_shape:
+            raise SceneError(f"{node.place}: {node.label()}: must be nested in a shape")
+        return self.cached(node, self._sensor)
+
+    def _sensor(self, node):
+        p, t = _Params(node), node.type
+        s = SensorDesc(type=t)
+        self._film(p.child("film"), s)
+        med = p.named_child("medium", "medium")
+        s.medium = None if med is None else self.medium(med)
+        sampler = p.child("sampler")
+        s.spp = 4
+        if sampler is not None:
+            sp = _Params(sampler)
+            s.spp = sp.int("sample_count", 4, lo=1, hi=2**31 - 1)
+            sp.int("seed", 0)  # accepted; the render call's seed decides
+            sp.done()
+        m = p.transform("to_world") if t != "irradiancemeter" else None
+        if t in ("perspective", "orthographic"):
+            s.near_clip = p.float("near_clip", 1e-2, check="positive")
+            s.far_clip = p.float("far_clip", 1e4, check="positive")
+            if not s.far_clip > s.near_clip:
+                raise p.error(f"far_clip {s.far_clip} must exceed near_clip {s.near_clip}")
+            for name in ("shutter_open", "shutter_close"):
+                p.float(name)
+        if t == "perspective":
+            if m is not None:
+                sv = np.linalg.svd(m[:3, :3], compute_uv=False)
+                if np.any(np.abs(sv - 1.0) > 1e-3):
+                    raise p.error("scale factors in the camera's to_world are not allowed "
+                                  "(as in Mitsuba)", node.props["to_world"].place)
+            s.fov_x = self._fov_x(p, s.width / s.height)
+            p.float("focus_distance")
+            for name in ("principal_point_offset_x", "principal_point_offset_y"):
+                if p.float(name, 0.0) != 0.0:
+                    raise p.error(f"a non-zero '{name}' is not supported",
+                                  node.props[name].place)
+        elif t == "radiancemeter":
+            o = p.vec3("origin")
+            d = p.vec3("direction", what="a vector")
+            if (o is not None or d is not None) and m is not None:
+                raise p.error("give either origin/direction or to_world, not both")
+            if (o is None) != (d is None):
+                raise p.error("give both origin and direction")
+            if d is not None:
+                if not np.linalg.norm(d) > 0:
+                    raise p.error("the direction has zero length")
+                m = _translate(o) @ _frame_along(d / np.linalg.norm(d))
+            if (s.width, s.height) != (1, 1):
+                raise p.error(f"a radiancemeter needs a 1x1 film, got {s.width}x{s.height}")
+        s.to_world = np.eye(4) if m is None else m
+        p.done()
+        return s
+
+    @staticmethod
+    def _fov_x(p, aspect):
+        """Horizontal fov in degrees from fov + fov_axis or a 35 mm-equivalent
+        focal length (pinhole geometry: tan(fov/2) = half extent / distance)."""
+        if p.has("fov") and p.has("focal_length"):
+            raise p.error("give either fov or focal_length, not both")
+        if p.has("fov"):
+            fov = p.float("fov")
+            if not 0.0 < fov < 180.0:
+                raise p.error(f"fov {fov} must lie in (0, 180) degrees",
+                              p.node.props["fov"].place)
+            axis = p.string("fov_axis", "x").lower()
+        else:
+            text = p.string("focal_length", "50mm")
+            num = text[:-2] if text.endswith("mm") else text
+            try:
+                f = float(num)
+            except ValueError:
+                raise p.error(f"cannot parse focal_length '{text}'",
+                              p.node.props["focal_length"].place) from None
+            if not (math.isfinite(f) and f > 0):
+                raise p.error(f"focal_length must be > 0, got '{text}'",
+                              p.node.props["focal_length"].place)
+            # 35 mm film: 36 x 24 mm, the focal length fixes the diagonal fov.
+            fov = math.degrees(2.0 * math.atan(math.hypot(36.0, 24.0) / (2.0 * f)))
+            axis = "diagonal"
+        if axis == "smaller":
+            axis = "y" if aspect > 1 else "x"
+        elif axis == "larger":
+            axis = "y" if aspect < 1 else "x"
+        half = math.tan(math.radians(fov) / 2.0)
+        if axis == "x":
+            return fov
+        if axis == "y":
+            return math.degrees(2.0 * math.atan(half * aspect))
+        if axis == "diagonal":
+            return math.degrees(2.0 * math.atan(half / math.sqrt(1.0 + 1.0 / aspect**2)))
+        raise p.error(f"fov_axis '{axis}' is not one of x, y, diagonal, smaller, larger")
+
+    @staticmethod
+    def _film(node, s):
+        s.width, s.height = 768, 576
+        s.rfilter, s.filter_radius, s.filter_stddev = "gaussian", 2.0, 0.5
+        if node is None:
+            return
+        p = _Params(node)
+        s.width = p.int("width", 768, lo=1, hi=_MAX_RESOLUTION)
+        s.height = p.int("height", 576, lo=1, hi=_MAX_RESOLUTION)
+        p.string("pixel_format", "rgb", ("rgb", "rgba"))
+        p.string("component_format", "float16", ("float16", "float32"))
+        rf = p.child("rfilter")
+        if rf is not None:
+            fp = _Params(rf)
+            s.rfilter = rf.type
+            if rf.type == "box":
+                s.filter_radius = 0.5
+            elif rf.type == "tent":
+                s.filter_radius = fp.float("radius", 1.0, check="positive")
+            else:
+                s.filter_stddev = fp.float("stddev", 0.5, check="positive")
+                s.filter_radius = 4.0 * s.filter_stddev
+            fp.done()
+        p.done()
+
+    # -- integrator ------------------------------------------------------------
+
+    @staticmethod
+    def integrator(node):
+        p = _Params(node)
+        params = {}
+        for name, prop in node.props.items():
+            if prop.kind not in ("integer", "float", "boolean", "string"):
+                raise p.error(f"parameter '{name}' must be an integer, float, boolean or "
+                              f"string", prop.place)
+            if prop.kind == "float" and not math.isfinite(prop.value):
+                raise p.error(f"parameter '{name}': non-finite value {prop.value}", prop.place)
+            params[name] = prop.value
+        if node.children:
+            raise p.error(f"unexpected nested {node.children[0][1].label()}",
+                          node.children[0][1].place)
+        return IntegratorDesc(type=node.type, params=params)
+
+
+def _resolve_refs(nodes, ids):
+    """Replace every _Ref by the node it names (anywhere in the document)."""
+    stack = list(nodes)
+    seen = set()
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        for i, (name, child) in enumerate(node.children):
+            if isinstance(child, _Ref):
+                target = ids.get(child.id)
+                if target is None:
+                    raise SceneError(f"{child.place}: {node.label()}: reference to unknown "
+                                     f"id '{child.id}'")
+                target.referenced = True
+                node.children[i] = (name, target)
+            else:
+                stack.append(child)
+
+
+def _assemble(nodes, ids, source, base_dir):
+    _resolve_refs(nodes, ids)
+    b = _Builder(base_dir)
+    scene = SceneDesc(source=source)
+    sensors, integrators = [], []
+    for node in nodes:
+        cat = node.category
+        if cat == "shape":
+            shape = b.shape(node)
+            scene.shapes.append(shape)
+            if shape.sensor is not None:
+                sensors.append((shape.sensor, node.place))
+        elif cat == "emitter":
+            if node.type == "area":
+                if not node.referenced:
+                    raise SceneError(f"{node.place}: {node.label()}: an area emitter must "
+                                     f"be nested in a shape")
+                b.emitter(node)  # validated here, attached where referenced
+            else:
+                scene.emitters.append(b.emitter(node))
+        elif cat == "sensor":
+            sensors.append((b.sensor(node), node.place))
+        elif cat == "bsdf":
+            b.bsdf(node)  # a declaration for refs; validate it even if unused
+        elif cat == "medium":
+            b.medium(node)  # a declaration for refs; validate it even if unused
+        elif cat == "integrator":
+            integrators.append((b.integrator(node), node.place))
+        elif cat == "subsurface":
+            if not node.referenced:
+                raise SceneError(f"{node.place}: {node.label()}: must be nested in a shape")
+            b.subsurface(node)
+        else:
+            raise SceneError(f"{node.place}: {node.label()}: must be nested in a sensor, "
+                             f"not at the top level")
+    if len(sensors) > 1:
+        raise SceneError(f"{sensors[1][1]}: more than one sensor (first at {sensors[0][1]}); "
+                         f"radiometer renders exactly one")
+    if sensors:
+        scene.sensor = sensors[0][0]
+    else:  # Mitsuba's default perspective camera, see the module docstring
+        scene.sensor = b.sensor(_Node("sensor", "perspective", f"{source}: default sensor"))
+    if len(integrators) > 1:
+        raise SceneError(f"{integrators[1][1]}: more than one integrator (first at "
+                         f"{integrators[0][1]})")
+    if integrators:
+        scene.integrator = integrators[0][0]
+    _warn_media(scene)
+    return scene
+
+
+class SceneWarning(UserWarning):
+    """A scene that loads and renders as written, but probably not as meant."""
+
+
+def _bbox(shape):
+    if shape.type == "sphere":
+        c, r = np.asarray(shape.center, np.float64), float(shape.radius)
+        return c - r, c + r
+    if shape.positions is not None and len(shape.positions):
+        p = np.asarray(shape.positions, np.float64)
+        return p.min(axis=0), p.max(axis=0)
+    return None  # disks: flat, they enclose nothing
+
+
+def _warn_media(scene):
+    """Warns about a shape that declares an interior medium but no exterior
+    while it sits in another medium (inside the bounding box of a shape
+    whose interior is a medium, or in a camera medium that no shape bounds).
+    Such a scene is valid, and rendered as Mitsuba 3 renders it: the medium
+    changes only at shapes that declare one, so a path leaving the shape is
+    in vacuum, not in the medium around it, while light arriving from that
+    medium was attenuated by it. Estimators then disagree only through
+    which of the two they trace (measured: bdpt 0.955 of volpath for a
+    medium-filled glass ball in fog without an exterior). Usually the
+    exterior was forgotten."""
+    import warnings
+
+    bounded = {id(m) for s in scene.shapes for m in (s.interior, s.exterior) if m is not None}
+    cam = scene.sensor.medium
+    for s in scene.shapes:
+        if s.interior is None or s.exterior is not None:
+            continue
+        around = None
+        if cam is not None and id(cam) not in bounded:
+            around = f"the sensor's medium ({cam.id or 'unnamed'}), which no shape bounds"
+        else:
+            box = _bbox(s)
+            for c in scene.shapes:
+                cb = None if c is s or c.interior is None or box is None else _bbox(c)
+                if cb is not None and np.all(cb[0] <= box[0]) and np.all(box[1] <= cb[1]):
+                    around = f"shape {c.id or 'unnamed'}'s interior medium ({c.interior.id or 'unnamed'})"
+                    break
+        if around is not None:
+            msg = (f"{scene.source}: shape {s.id or 'unnamed'} declares an interior medium but no exterior, "
+                   f"and it lies in {around}: paths leaving it continue in vacuum (Mitsuba 3's rule: the "
+                   f"medium changes only at shapes that declare one); declare <ref name=\"exterior\" "
+                   f"id=\"...\"/> on it if it sits in that medium")
+            scene.warnings.append(msg)
+            warnings.warn(msg, SceneWarning, stacklevel=4)

@@ -1,0 +1,213 @@
+"""Triangle meshes: OBJ (our reader, Mitsuba's vertex splitting) and PLY
+(plyfile) files, Mitsuba's rectangle and cube, vertex normals, and a mesh
+ShapeDesc in world space."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene_desc import SceneError
+from .transforms import _apply_normals, _apply_points
+
+
+def _vertex_normals(p, f):
+    """Angle-weighted vertex normals, Thuermer and Wuethrich, "Computing Vertex
+    Normals from Polygonal Facets", JGT 3(1), 1998: each face adds its unit
+    normal times its angle at the vertex; degenerate faces add nothing and a
+    vertex with no valid face gets (1, 0, 0), as Mitsuba's recompute."""
+    p = p.astype(np.float64)
+    v0, v1, v2 = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
+    n = np.cross(v1 - v0, v2 - v0)
+    length = np.linalg.norm(n, axis=1)
+    ok = length > 0
+    n[ok] /= length[ok, None]
+    n[~ok] = 0.0
+    acc = np.zeros_like(p)
+    corners = (v0, v1, v2)
+    for j in range(3):
+        e1 = corners[(j + 1) % 3] - corners[j]
+        e2 = corners[(j + 2) % 3] - corners[j]
+        l1 = np.linalg.norm(e1, axis=1)
+        l2 = np.linalg.norm(e2, axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cos = np.einsum("ij,ij->i", e1, e2) / (l1 * l2)
+        angle = np.arccos(np.clip(np.nan_to_num(cos, nan=1.0), -1.0, 1.0))
+        np.add.at(acc, f[:, j], n * angle[:, None])
+    length = np.linalg.norm(acc, axis=1)
+    bad = ~(length > 0)
+    acc[~bad] /= length[~bad, None]
+    acc[bad] = (1.0, 0.0, 0.0)
+    return acc.astype(np.float32)
+
+
+def _read_obj(path, flip_tex_coords, err):
+    """Wavefront OBJ with Mitsuba's semantics: a vertex per distinct
+    (position, texcoord, normal) index triple, numbered in order of first use;
+    polygons as fans (v0, v[i-1], v[i]); 'vt' v flipped to 1 - v by default.
+    Negative (relative) indices are rejected, as Mitsuba does. Statements
+    other than v/vt/vn/f (o, g, s, usemtl, mtllib, l, #) are ignored.
+
+    Parsed here rather than with trimesh/meshio: meshio ignores the vt/vn
+    indices of faces and trimesh merges vertices and needs PIL for texcoords,
+    so neither reproduces Mitsuba's vertex splitting."""
+    positions, texcoords, normals = [], [], []
+    keys = {}
+    tris = []
+    with open(path, "r", encoding="utf-8", errors="replace") as fh:
+        for lineno, line in enumerate(fh, 1):
+            parts = line.split()
+            if not parts:
+                continue
+            head = parts[0]
+            try:
+                if head == "v":
+                    positions.append([float(x) for x in parts[1:4]])
+                    if len(positions[-1]) != 3:
+                        raise ValueError
+                elif head == "vn":
+                    normals.append([float(x) for x in parts[1:4]])
+                    if len(normals[-1]) != 3:
+                        raise ValueError
+                elif head == "vt":
+                    uv = [float(x) for x in parts[1:3]]
+                    if len(uv) != 2:
+                        raise ValueError
+                    texcoords.append(uv)
+                elif head == "f":
+                    ids = []
+                    for tok in parts[1:]:
+                        idx = tok.split("/")
+                        if len(idx) > 3:
+                            raise ValueError
+                        key = tuple(int(s) if s else 0 for s in idx) + (0,) * (3 - len(idx))
+                        if key[0] < 1 or key[0] > len(positions) or min(key) < 0:
+                            raise SceneError(f"{err}: {path}:{lineno}: face index '{tok}' "
+                                             f"is out of range (only positive indices of "
+                                             f"earlier vertices are supported)")
+                        ids.append(keys.setdefault(key, len(keys)))
+                    if len(ids) < 3:
+                        raise SceneError(f"{err}: {path}:{lineno}: face with fewer than 3 "
+                                         f"vertices")
+                    for i in range(2, len(ids)):
+                        tris.append((ids[0], ids[i - 1], ids[i]))
+            except ValueError:
+                raise SceneError(f"{err}: {path}:{lineno}: cannot parse OBJ line "
+                                 f"'{line.strip()}'") from None
+    if not tris:
+        raise SceneError(f"{err}: {path}: the OBJ file has no faces")
+    key_arr = np.array(list(keys), dtype=np.int64)
+    p = np.asarray(positions, dtype=np.float64)[key_arr[:, 0] - 1]
+    uv = None
+    if texcoords:
+        if key_arr[:, 1].max() > len(texcoords):
+            raise SceneError(f"{err}: {path}: reference to an invalid texture coordinate")
+        t = np.vstack([np.zeros((1, 2)), np.asarray(texcoords, dtype=np.float64)])
+        uv = t[key_arr[:, 1]]
+        if flip_tex_coords:
+            uv[:, 1] = 1.0 - uv[:, 1]
+    n = None
+    if normals:
+        if key_arr[:, 2].max() > len(normals):
+            raise SceneError(f"{err}: {path}: reference to an invalid vertex normal")
+        if key_arr[:, 2].min() == 0:
+            raise SceneError(f"{err}: {path}: some face vertices have normals and some "
+                             f"do not")
+        n = np.asarray(normals, dtype=np.float64)[key_arr[:, 2] - 1]
+    return p, np.asarray(tris, dtype=np.uint32), n, uv
+
+
+def _read_ply(path, err):
+    """PLY (ascii or binary) through plyfile; Mitsuba's names: x y z, nx ny nz,
+    u v | texture_u texture_v | s t, face list vertex_indices | vertex_index.
+    Faces must be triangles (Mitsuba 3.9.1 rejects other polygons). Other
+    elements and properties (colours ...) are ignored: Mitsuba keeps them as
+    mesh attributes, which nothing in the subset reads."""
+    try:
+        from plyfile import PlyData
+    except ImportError:  # pragma: no cover - plyfile is a declared dependency
+        raise SceneError(f"{err}: loading PLY files needs the 'plyfile' package") from None
+    try:
+        ply = PlyData.read(path)
+    except Exception as e:  # plyfile raises several exception types
+        raise SceneError(f"{err}: {path}: cannot read PLY file ({e})") from None
+    names = [el.name for el in ply.elements]
+    if "vertex" not in names or "face" not in names:
+        raise SceneError(f"{err}: {path}: PLY file needs 'vertex' and 'face' elements")
+    vert, face = ply["vertex"], ply["face"]
+    props = {pr.name for pr in vert.properties}
+    if not {"x", "y", "z"} <= props:
+        raise SceneError(f"{err}: {path}: PLY vertices need x, y, z")
+    p = np.stack([np.asarray(vert[c], dtype=np.float64) for c in "xyz"], axis=1)
+    n = None
+    if {"nx", "ny", "nz"} <= props:
+        n = np.stack([np.asarray(vert[c], dtype=np.float64) for c in ("nx", "ny", "nz")], axis=1)
+    uv = None
+    for us, vs in (("u", "v"), ("texture_u", "texture_v"), ("s", "t")):
+        if {us, vs} <= props:
+            uv = np.stack([np.asarray(vert[us], dtype=np.float64),
+                           np.asarray(vert[vs], dtype=np.float64)], axis=1)
+            break
+    fprops = {pr.name for pr in face.properties}
+    field = ("vertex_indices" if "vertex_indices" in fprops
+             else "vertex_index" if "vertex_index" in fprops else None)
+    if field is None:
+        raise SceneError(f"{err}: {path}: PLY faces need a vertex_indices list")
+    lists = face[field]
+    if len(lists) == 0:
+        raise SceneError(f"{err}: {path}: the PLY file has no faces")
+    if any(len(x) != 3 for x in lists):
+        raise SceneError(f"{err}: {path}: PLY faces must be triangles (as in Mitsuba 3)")
+    f = np.array(np.vstack(lists), dtype=np.int64)
+    if f.min() < 0 or f.max() >= len(p):
+        raise SceneError(f"{err}: {path}: face index out of range")
+    if not np.all(np.isfinite(p)) or (n is not None and not np.all(np.isfinite(n))):
+        raise SceneError(f"{err}: {path}: non-finite vertex data")
+    return p, f.astype(np.uint32), n, uv
+
+
+def _mesh_shape(shape, m, p, f, n, uv, face_normals):
+    """Fill a mesh ShapeDesc in world space (float64 maths, float32 storage)."""
+    shape.type = "mesh"
+    shape.positions = np.ascontiguousarray(_apply_points(m, p))
+    shape.indices = np.ascontiguousarray(f.astype(np.uint32).reshape(-1, 3))
+    if face_normals:
+        shape.normals = None
+    elif n is not None:
+        shape.normals = np.ascontiguousarray(_apply_normals(m, n))
+    else:
+        shape.normals = _vertex_normals(shape.positions, shape.indices)
+    shape.uvs = None if uv is None else np.ascontiguousarray(uv.astype(np.float32))
+
+
+def _rectangle_mesh():
+    """Mitsuba's rectangle: [-1,1]^2 at z = 0, normal +z (the winding below),
+    uv = ((x+1)/2, (y+1)/2). Mitsuba 3 intersects it analytically with the
+    normal cross(dp/du, dp/dv), which is what this winding gives, mirrors
+    included."""
+    p = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=np.float64)
+    uv = (p[:, :2] + 1.0) * 0.5
+    f = np.array([[0, 1, 2], [2, 3, 0]], dtype=np.uint32)
+    return p, f, uv
+
+
+# Mitsuba's cube: per face its outward normal and its four corners, with uvs
+# (0,1) (1,1) (1,0) (0,0) and triangles (0,1,2) (3,0,2), in Mitsuba's order
+# (-y, +y, +x, +z, -x, -z) so that vertex and face ids agree with Mitsuba's.
+_CUBE_FACES = (
+    ((0, -1, 0), ((1, -1, -1), (1, -1, 1), (-1, -1, 1), (-1, -1, -1))),
+    ((0, 1, 0), ((1, 1, -1), (-1, 1, -1), (-1, 1, 1), (1, 1, 1))),
+    ((1, 0, 0), ((1, -1, -1), (1, 1, -1), (1, 1, 1), (1, -1, 1))),
+    ((0, 0, 1), ((1, -1, 1), (1, 1, 1), (-1, 1, 1), (-1, -1, 1))),
+    ((-1, 0, 0), ((-1, -1, 1), (-1, 1, 1), (-1, 1, -1), (-1, -1, -1))),
+    ((0, 0, -1), ((1, 1, -1), (1, -1, -1), (-1, -1, -1), (-1, 1, -1))),
+)
+
+
+def _cube_mesh():
+    p = np.array([c for _, cs in _CUBE_FACES for c in cs], dtype=np.float64)
+    n = np.array([nn for nn, _ in _CUBE_FACES for _ in range(4)], dtype=np.float64)
+    uv = np.tile(np.array([[0, 1], [1, 1], [1, 0], [0, 0]], dtype=np.float64), (6, 1))
+    f = np.array([[4 * i, 4 * i + 1, 4 * i + 2] for i in range(6)]
+                 + [[4 * i + 3, 4 * i, 4 * i + 2] for i in range(6)], dtype=np.uint32)
+    # Mitsuba interleaves the two triangles of each face.
+    f = f.reshape(2, 6, 3).transpose(1, 0, 2).reshape(-1, 3)
+    return p, f, n, uv

@@ -1,0 +1,20 @@
+"""The plugin table: the plugin types the loader accepts in each category
+(the XML tag or the dict's `type`), and the category of each type."""
+from __future__ import annotations
+
+PLUGINS = {
+    "shape": ("obj", "ply", "rectangle", "cube", "disk", "sphere"),
+    "bsdf": ("diffuse", "conductor", "roughconductor", "dielectric", "roughdielectric",
+             "thindielectric", "plastic", "twosided", "null"),
+    "emitter": ("area", "point", "spot", "directional", "constant"),
+    "sensor": ("perspective", "orthographic", "radiancemeter", "irradiancemeter"),
+    "film": ("hdrfilm",),
+    "rfilter": ("box", "tent", "gaussian"),
+    "sampler": ("independent",),
+    "integrator": ("direct", "path", "volpath", "ptracer", "bdpt", "photonmapper", "sppm"),
+    "medium": ("homogeneous", "heterogeneous"),
+    "phase": ("isotropic", "hg"),
+    "volume": ("gridvolume", "constvolume"),
+    "subsurface": ("dipole",),
+}
+_CATEGORY_OF = {t: c for c, types in PLUGINS.items() for t in types}

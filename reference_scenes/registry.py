@@ -1,0 +1,174 @@
+"""The canonical scenes, in one place: for each its XML, where its
+reference comes from and how it was made. The Mitsuba references
+(make_reference.py, `radiometer refs`), the benchmark harness (its matrices,
+jobs and per-effect references) and the scene tests all read this table.
+
+- "analytic": the scene's analytic.py (reference_scenes/<folder>), exact,
+  with an exact split into effect classes where the physics gives one
+  (furnace: emission / direct / indirect by bounce count; area lights: all
+  direct; mirror caustic: direct + caustic). Any XML parameter may be
+  overridden (the solution takes them), so a smoke matrix can run them at
+  8 x 8 pixels.
+- "mitsuba": reference_scenes/<folder>/reference.exr, the mean of `runs`
+  Mitsuba 3 renders of `spp` each with the variance of that mean, made with
+  `fixed_params` and `mitsuba_integrator` (make_reference.py); whatever is
+  compared with it must use those parameters unchanged (a benchmark matrix
+  that overrides them is refused). Their per-effect references are long
+  runs of our own unbiased `effect_ref_estimator` at `effect_ref_spp`,
+  accepted only when their total passes the blocked z-test against
+  Mitsuba's (benchmarks/effect_refs.py).
+
+Committed references stay small: at most 256 px a side (64 x 64 keeps the
+EXR ~100 KB). Budgets and times of the Mitsuba references: llvm_ad_rgb on
+2 shared cores. Most scenes are box-filtered, so a sample lands in one
+pixel and Mitsuba's pixels are independent (its box filter splats nowhere
+else); card.md in each folder says what the scene isolates.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+HERE = Path(__file__).resolve().parent
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    name: str
+    xml: Path
+    kind: str  # "analytic" or "mitsuba"
+    folder: str
+    fixed_params: dict = field(default_factory=dict)  # mitsuba: the reference's XML parameters
+    # The Mitsuba reference: `runs` independent renders (seeds 0 .. runs-1)
+    # of `spp` samples per pixel each, with `mitsuba_integrator` (a Mitsuba
+    # plugin dict) in place of the scene's own integrator when given.
+    runs: int = 0
+    spp: int = 0
+    mitsuba_integrator: Optional[dict] = None
+    # Budget and estimator of the per-effect reference (ours, unbiased, all
+    # cores), mitsuba scenes.
+    effect_ref_spp: int = 0
+    effect_ref_estimator: str = "path"
+    # Known exclusions: estimator -> pixel boxes (x0, y0, x1, y1), half-open,
+    # at the reference's resolution, that the estimator cannot estimate and
+    # that a comparison with the reference leaves out (why: the comments
+    # below and the scene's card.md).
+    exclusions: dict = field(default_factory=dict)
+
+    @property
+    def reference_exr(self) -> Path:
+        """The committed Mitsuba reference (mitsuba scenes)."""
+        return self.xml.parent / "reference.exr"
+
+
+def _analytic(name, xml, folder):
+    return SceneSpec(name, HERE / folder / xml, "analytic", folder)
+
+
+def _mitsuba(name, params, runs, spp, effect_ref_spp, effect_ref_estimator="path", integrator=None,
+             exclusions=None):
+    return SceneSpec(name, HERE / name / "scene.xml", "mitsuba", name, dict(params), runs, spp, integrator,
+                     effect_ref_spp, effect_ref_estimator, dict(exclusions or {}))
+
+
+# Per-effect reference budgets (surface scenes): about 15-60 s each with
+# `path` on 2 cores (measured 2026-11: cornell ~250 spp/s, glass ~650, veach
+# ~550 at 64 x 64), 10-30 x what a 4 s benchmark job reaches. Media scenes:
+# `path` (volpath) passes its z-tests against these references at 512-1024
+# spp (tests/test_canonical_mitsuba.py); 1024 keeps the main job's first run
+# near 10 minutes (translucent_slab ~36 s).
+_SCENES = [
+    _analytic("furnace", "scene.xml", "furnace"),
+    _analytic("area_lights_disk", "disk_light.xml", "area_lights"),
+    _analytic("area_lights_rect", "rect_light.xml", "area_lights"),
+    _analytic("mirror_caustic", "scene.xml", "mirror_caustic"),
+    # 32 x 2048 = 65536 spp in total: the reference's variance is 1/256 of a
+    # 256 spp test render's, so it barely widens the z-test. About 3-4
+    # minutes. Gaussian-filtered (Mitsuba's splats correlate its pixels:
+    # tests/test_cornell_reference.py).
+    _mitsuba("cornell_box", {"res": 64, "max_depth": 8}, 32, 2048, 8192),
+    # 524288 spp in all, ~2.5 min. ptracer: the sphere itself is seen
+    # through a delta BSDF (L ... S E), which a light path can never
+    # connect to a pinhole camera through, so light tracing renders it 0.
+    _mitsuba("glass_sphere_caustic", {"res": 64, "max_depth": 12}, 32, 16384, 16384,
+             exclusions={"ptracer": [(16, 14, 41, 39)]}),
+    # 262144 spp, ~3 min. ptracer: the plates of alpha 0.005 and 0.02
+    # reflect the indirectly lit room into the camera through lobes so
+    # narrow that light tracing's estimate is carried by rare huge samples
+    # (a heavy tail, not a bias; measured in card.md).
+    _mitsuba("veach_mis", {"res": 64, "max_depth": 8}, 32, 8192, 16384,
+             exclusions={"ptracer": [(0, 28, 64, 34), (0, 34, 64, 39)]}),
+    # Mitsuba's light tracer, not its path tracer: the near room is lit only
+    # by a narrow strip the lamp throws through the door's gap, which a
+    # camera path finds by BSDF sampling less than 1 time in 100 per
+    # bounce, while every light path that leaves the far room lands on it
+    # first. All surfaces are diffuse, so light tracing sees every path
+    # (card.md: its cross-check against Mitsuba's path). The per-effect
+    # reference is `bdpt`'s (unbiased, every strategy filed under its effect
+    # class): it reaches there in 1024 spp what path would in ~20 000 (21 x
+    # less error per sample, card.md), in about 20 s on 2 cores.
+    _mitsuba("ajar_door", {"res": 64, "max_depth": 10}, 32, 4096, 1024, "bdpt",
+             integrator={"type": "ptracer", "max_depth": 10}),
+    # Media and subsurface scenes: Mitsuba's volpath (the scene's integrator).
+    _mitsuba("homogeneous_slab", {"res": 64, "max_depth": 8}, 32, 4096, 1024),
+    _mitsuba("fog_room", {"res": 64, "max_depth": 16}, 32, 1024, 1024),
+    _mitsuba("vandehulst_slab", {"max_depth": 256}, 32, 524288, 1024),  # a 1 x 1 irradiancemeter film
+    _mitsuba("vandehulst_slab_reflectance", {"max_depth": 256}, 32, 524288, 1024),  # a 1 x 1 irradiancemeter film
+    _mitsuba("translucent_slab", {"res": 64, "max_depth": 1024}, 32, 256, 1024),
+    # ptracer: the torus is seen through its smooth dielectric boundary
+    # only (L ... S E); what stays is the floor, lit directly and through it.
+    _mitsuba("translucent_object", {"res": 64, "max_depth": 512}, 32, 1024, 1024,
+             exclusions={"ptracer": [(12, 6, 53, 48)]}),
+    # ptracer: the glass sphere, seen through itself.
+    _mitsuba("volumetric_caustic", {"res": 64, "max_depth": 12}, 32, 2048, 1024,
+             exclusions={"ptracer": [(23, 24, 41, 41)]}),
+]
+SCENES = {s.name: s for s in _SCENES}
+
+
+def get(name: str) -> SceneSpec:
+    try:
+        return SCENES[name]
+    except KeyError:
+        raise KeyError(f"unknown scene '{name}' (known: {', '.join(sorted(SCENES))})") from None
+
+
+def mitsuba_scenes() -> dict:
+    """The scenes whose reference is Mitsuba's, by name."""
+    return {n: s for n, s in SCENES.items() if s.kind == "mitsuba"}
+
+
+def xml_defaults(spec: SceneSpec) -> dict:
+    from radiometer.reference_scenes.area_lights.analytic import xml_defaults as _d
+
+    return _d(spec.xml)
+
+
+def scene_params(spec: SceneSpec, overrides: Optional[dict] = None) -> dict:
+    """The XML parameters a job renders with: the reference's, then the
+    matrix's overrides (refused for Mitsuba-referenced scenes when they
+    differ from the reference's)."""
+    overrides = dict(overrides or {})
+    if spec.kind == "mitsuba":
+        for k, v in overrides.items():
+            if k not in spec.fixed_params or spec.fixed_params[k] != v:
+                raise ValueError(f"parameter '{k}' = {v!r}: {spec.name}'s Mitsuba reference was made with "
+                                 f"{spec.fixed_params}; these cannot change without a new reference")
+        return dict(spec.fixed_params)
+    defaults = xml_defaults(spec)
+    for k in overrides:
+        if k not in defaults:
+            raise ValueError(f"parameter '{k}': not a <default> of {spec.xml.name} "
+                             f"(known: {', '.join(sorted(defaults))})")
+    return overrides
+
+
+def max_depth(spec: SceneSpec, params: Optional[dict] = None) -> Optional[int]:
+    """The scene's max_depth (the job's parameter, else the reference's or
+    the XML default)."""
+    params = spec.fixed_params if params is None else params
+    if "max_depth" in params:
+        return int(params["max_depth"])
+    d = xml_defaults(spec).get("max_depth")
+    return None if d is None else int(float(d))
