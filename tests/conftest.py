@@ -1,8 +1,36 @@
 """Shared scene builders for the tests (scenes as dicts, the way Mitsuba 3's
 own render tests write them)."""
+import os
+
 import pytest
 
 import radiometer as rm
+
+# RADIOMETER_SEED_OFFSET=K re-rolls every render's random streams in the
+# tests (seed s becomes a hash of (s, K)): the same distributions, fresh
+# noise. Running the suite under a few offsets measures its false-alarm rate
+# (a statistical test that fails under one offset and passes under others is
+# sized too tightly). Unset or 0: the seeds as written, bit for bit.
+SEED_OFFSET = int(os.environ.get("RADIOMETER_SEED_OFFSET", "0") or 0)
+
+
+def reroll(seed: int) -> int:
+    """The seed a test's `seed` stands for under RADIOMETER_SEED_OFFSET."""
+    if not SEED_OFFSET:
+        return seed
+    import hashlib
+
+    h = hashlib.sha256(f"{int(seed)}:{SEED_OFFSET}".encode()).digest()
+    return int.from_bytes(h[:8], "little") >> 1
+
+
+if SEED_OFFSET:
+    _render = rm.render
+
+    def _rerolled_render(scene, *args, seed=0, **kwargs):
+        return _render(scene, *args, seed=reroll(seed), **kwargs)
+
+    rm.render = _rerolled_render
 
 
 def furnace_dict(le=0.5, rho=0.5, res=16, max_depth=2, integrator="path"):
