@@ -19,6 +19,21 @@ const Medium& medium_at(const Scene& s, int m) {
     return *s.media[size_t(m)];
 }
 
+using PointArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+// f(p) -> Color at each row of an (N, 3) array of world points: (N, 3).
+template <class F>
+py::array_t<float> per_point(const PointArray& pts, F f) {
+    py::array_t<float> out({pts.shape(0), py::ssize_t(3)});
+    auto p = pts.unchecked<2>();
+    auto o = out.mutable_unchecked<2>();
+    for (py::ssize_t i = 0; i < pts.shape(0); ++i) {
+        Color c = f(Vec3(float(p(i, 0)), float(p(i, 1)), float(p(i, 2))));
+        for (int k = 0; k < 3; ++k) o(i, k) = c[k];
+    }
+    return out;
+}
+
 }  // namespace
 
 void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
@@ -26,29 +41,18 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
         // Tests of the majorant grid (tests/test_majorant_grid.py): sigma_t
         // and the local majorant at N x 3 world points, N x 3 arrays.
         .def("medium_sigma_t",
-             [](const Scene& s, int m, py::array_t<double, py::array::c_style | py::array::forcecast> pts) {
+             [](const Scene& s, int m, const PointArray& pts) {
                  const Medium& med = medium_at(s, m);
-                 py::array_t<float> out({pts.shape(0), py::ssize_t(3)});
-                 auto p = pts.unchecked<2>();
-                 auto o = out.mutable_unchecked<2>();
-                 for (py::ssize_t i = 0; i < pts.shape(0); ++i) {
+                 return per_point(pts, [&](const Vec3& p) {
                      Color st, ss;
-                     med.coefficients(Vec3(float(p(i, 0)), float(p(i, 1)), float(p(i, 2))), st, ss);
-                     for (int c = 0; c < 3; ++c) o(i, c) = st[c];
-                 }
-                 return out;
+                     med.coefficients(p, st, ss);
+                     return st;
+                 });
              })
         .def("medium_majorant",
-             [](const Scene& s, int m, py::array_t<double, py::array::c_style | py::array::forcecast> pts) {
+             [](const Scene& s, int m, const PointArray& pts) {
                  const Medium& med = medium_at(s, m);
-                 py::array_t<float> out({pts.shape(0), py::ssize_t(3)});
-                 auto p = pts.unchecked<2>();
-                 auto o = out.mutable_unchecked<2>();
-                 for (py::ssize_t i = 0; i < pts.shape(0); ++i) {
-                     Color mj = med.majorant_at(Vec3(float(p(i, 0)), float(p(i, 1)), float(p(i, 2))));
-                     for (int c = 0; c < 3; ++c) o(i, c) = mj[c];
-                 }
-                 return out;
+                 return per_point(pts, [&](const Vec3& p) { return med.majorant_at(p); });
              })
         .def("medium_has_majorant_grid", [](const Scene& s, int m) { return medium_at(s, m).has_majorant_grid(); })
         // `n` ratio-tracking estimates of the transmittance of o + d t, t in

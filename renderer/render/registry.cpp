@@ -46,40 +46,30 @@ std::string prefix(const std::string& estimator) { return "integrator '" + estim
 
 // ---- ParamSpec --------------------------------------------------------------
 
-ParamSpec ParamSpec::integer(std::string name, int64_t def, std::string doc) {
-    ParamSpec s;
-    s.name = std::move(name);
-    s.type = ParamType::Int;
-    s.default_value = def;
-    s.doc = std::move(doc);
-    return s;
-}
+namespace {
 
-ParamSpec ParamSpec::real(std::string name, double def, std::string doc) {
+ParamSpec declared(std::string name, ParamValue def, std::string doc) {
     ParamSpec s;
     s.name = std::move(name);
-    s.type = ParamType::Float;
-    s.default_value = def;
-    s.doc = std::move(doc);
-    return s;
-}
-
-ParamSpec ParamSpec::boolean(std::string name, bool def, std::string doc) {
-    ParamSpec s;
-    s.name = std::move(name);
-    s.type = ParamType::Bool;
-    s.default_value = def;
-    s.doc = std::move(doc);
-    return s;
-}
-
-ParamSpec ParamSpec::string(std::string name, std::string def, std::string doc) {
-    ParamSpec s;
-    s.name = std::move(name);
-    s.type = ParamType::String;
+    s.type = param_type(def);
     s.default_value = std::move(def);
     s.doc = std::move(doc);
     return s;
+}
+
+}  // namespace
+
+ParamSpec ParamSpec::integer(std::string name, int64_t def, std::string doc) {
+    return declared(std::move(name), def, std::move(doc));
+}
+ParamSpec ParamSpec::real(std::string name, double def, std::string doc) {
+    return declared(std::move(name), def, std::move(doc));
+}
+ParamSpec ParamSpec::boolean(std::string name, bool def, std::string doc) {
+    return declared(std::move(name), def, std::move(doc));
+}
+ParamSpec ParamSpec::string(std::string name, std::string def, std::string doc) {
+    return declared(std::move(name), std::move(def), std::move(doc));
 }
 
 ParamSpec ParamSpec::mitsuba_ignored(std::string name, std::string doc) {
