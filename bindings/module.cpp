@@ -7,6 +7,8 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include "bindings.h"
+#include "convert.h"
 #include "film/film.h"
 #include "render/render.h"
 #include "photon/photon_map.h"
@@ -16,41 +18,9 @@
 
 namespace py = pybind11;
 using namespace rm;
+using namespace rm::bind;
 
 namespace {
-
-// Moves a vector into a numpy array of the given shape without copying.
-py::array_t<float> to_numpy(std::vector<float>&& v, std::vector<py::ssize_t> shape) {
-    auto* heap = new std::vector<float>(std::move(v));
-    py::capsule owner(heap, [](void* p) { delete static_cast<std::vector<float>*>(p); });
-    return py::array_t<float>(shape, heap->data(), owner);
-}
-
-template <class T>
-std::vector<T> flat(const py::object& o, size_t cols, const char* what) {
-    if (o.is_none()) return {};
-    auto a = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(o);
-    if (!a) throw py::value_error(std::string(what) + ": not convertible to an array");
-    if (a.ndim() != 2 || size_t(a.shape(1)) != cols)
-        throw py::value_error(std::string(what) + ": expected shape (N, " + std::to_string(cols) + ")");
-    return std::vector<T>(a.data(), a.data() + a.size());
-}
-
-Matrix4 to_matrix(const py::object& o) {
-    auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(o);
-    if (!a || a.size() != 16) throw py::value_error("expected a 4x4 matrix");
-    Matrix4 m;
-    std::copy(a.data(), a.data() + 16, m.begin());
-    return m;
-}
-
-Color to_color(const py::object& o) {
-    auto t = o.cast<std::vector<float>>();
-    if (t.size() != 3) throw py::value_error("expected an RGB triple");
-    return Color(t[0], t[1], t[2]);
-}
-
-py::tuple color_tuple(const Color& c) { return py::make_tuple(c.x, c.y, c.z); }
 
 // A desc struct's Color member as a Python property: read as an (r, g, b)
 // tuple, set from anything to_color takes.
@@ -61,11 +31,6 @@ auto color_get(Color T::*m) {
 template <class T>
 auto color_set(Color T::*m) {
     return [m](T& d, py::object v) { d.*m = to_color(v); };
-}
-
-const Medium& medium_at(const Scene& s, int m) {
-    if (m < 0 || size_t(m) >= s.media.size()) throw py::index_error("no medium " + std::to_string(m));
-    return *s.media[size_t(m)];
 }
 
 using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
@@ -212,35 +177,10 @@ PYBIND11_MODULE(_core, m) {
         .def_property_readonly("z_r", [](const Dipole& d) { return color_tuple(d.z_r); })
         .def_property_readonly("z_v", [](const Dipole& d) { return color_tuple(d.z_v); });
 
-    py::class_<IntegratorDesc>(m, "IntegratorDesc")
-        .def(py::init<>())
-        .def_readwrite("type", &IntegratorDesc::type)
-        .def_readwrite("max_depth", &IntegratorDesc::max_depth)
-        .def_readwrite("rr_depth", &IntegratorDesc::rr_depth)
-        .def_readwrite("hide_emitters", &IntegratorDesc::hide_emitters)
-        .def_readwrite("emitter_samples", &IntegratorDesc::emitter_samples)
-        .def_readwrite("bsdf_samples", &IntegratorDesc::bsdf_samples)
-        .def_readwrite("mis", &IntegratorDesc::mis)
-        .def_readwrite("beta", &IntegratorDesc::beta)
-        .def_readwrite("strategy_images", &IntegratorDesc::strategy_images)
-        .def_readwrite("direct_samples", &IntegratorDesc::direct_samples)
-        .def_readwrite("global_photons", &IntegratorDesc::global_photons)
-        .def_readwrite("caustic_photons", &IntegratorDesc::caustic_photons)
-        .def_readwrite("global_lookup_radius", &IntegratorDesc::global_lookup_radius)
-        .def_readwrite("caustic_lookup_radius", &IntegratorDesc::caustic_lookup_radius)
-        .def_readwrite("lookup_size", &IntegratorDesc::lookup_size)
-        .def_readwrite("gather_rays", &IntegratorDesc::gather_rays)
-        .def_readwrite("final_gather", &IntegratorDesc::final_gather)
-        .def_readwrite("volume_photons", &IntegratorDesc::volume_photons)
-        .def_readwrite("volume_lookup_radius", &IntegratorDesc::volume_lookup_radius)
-        .def_readwrite("volume_lookup_size", &IntegratorDesc::volume_lookup_size)
-        .def_readwrite("step_size", &IntegratorDesc::step_size)
-        .def_readwrite("volume_boundary_rays", &IntegratorDesc::volume_boundary_rays)
-        .def_readwrite("photon_count", &IntegratorDesc::photon_count)
-        .def_readwrite("initial_radius", &IntegratorDesc::initial_radius)
-        .def_readwrite("alpha", &IntegratorDesc::alpha);
+    bind_estimators(m);
 
-    py::class_<Scene>(m, "Scene")
+    py::class_<Scene> scene_class(m, "Scene");
+    scene_class
         .def(py::init<>())
         .def("add_bsdf", &Scene::add_bsdf)
         .def("add_mesh",
@@ -266,51 +206,6 @@ PYBIND11_MODULE(_core, m) {
         .def("set_shape_media", &Scene::set_shape_media, py::arg("shape"), py::arg("interior"), py::arg("exterior"))
         .def("add_dipole", &Scene::add_dipole, py::arg("shape"), py::arg("desc"))
         .def_property_readonly("medium_count", [](const Scene& s) { return s.media.size(); })
-        // Tests of the majorant grid (tests/test_majorant_grid.py): sigma_t
-        // and the local majorant at N x 3 world points, N x 3 arrays.
-        .def("medium_sigma_t",
-             [](const Scene& s, int m, py::array_t<double, py::array::c_style | py::array::forcecast> pts) {
-                 const Medium& med = medium_at(s, m);
-                 py::array_t<float> out({pts.shape(0), py::ssize_t(3)});
-                 auto p = pts.unchecked<2>();
-                 auto o = out.mutable_unchecked<2>();
-                 for (py::ssize_t i = 0; i < pts.shape(0); ++i) {
-                     Color st, ss;
-                     med.coefficients(Vec3(float(p(i, 0)), float(p(i, 1)), float(p(i, 2))), st, ss);
-                     for (int c = 0; c < 3; ++c) o(i, c) = st[c];
-                 }
-                 return out;
-             })
-        .def("medium_majorant",
-             [](const Scene& s, int m, py::array_t<double, py::array::c_style | py::array::forcecast> pts) {
-                 const Medium& med = medium_at(s, m);
-                 py::array_t<float> out({pts.shape(0), py::ssize_t(3)});
-                 auto p = pts.unchecked<2>();
-                 auto o = out.mutable_unchecked<2>();
-                 for (py::ssize_t i = 0; i < pts.shape(0); ++i) {
-                     Color mj = med.majorant_at(Vec3(float(p(i, 0)), float(p(i, 1)), float(p(i, 2))));
-                     for (int c = 0; c < 3; ++c) o(i, c) = mj[c];
-                 }
-                 return out;
-             })
-        .def("medium_has_majorant_grid", [](const Scene& s, int m) { return medium_at(s, m).has_majorant_grid(); })
-        // `n` ratio-tracking estimates of the transmittance of o + d t, t in
-        // [0, t1) (Medium::segment_transmittance), seeded: an n x 3 array.
-        .def("medium_transmittance_samples",
-             [](const Scene& s, int m, py::object o, py::object d, float t1, int n, uint64_t seed) {
-                 const Medium& med = medium_at(s, m);
-                 Color oc = to_color(o), dc = to_color(d);
-                 Vec3 ov(oc.x, oc.y, oc.z), dv = normalize(Vec3(dc.x, dc.y, dc.z));
-                 py::array_t<float> out({py::ssize_t(n), py::ssize_t(3)});
-                 auto w = out.mutable_unchecked<2>();
-                 for (int i = 0; i < n; ++i) {
-                     Sampler sampler(seed, 0, uint64_t(i));
-                     Color tr = med.segment_transmittance(ov, dv, t1, sampler);
-                     for (int c = 0; c < 3; ++c) w(i, c) = tr[c];
-                 }
-                 return out;
-             },
-             py::arg("medium"), py::arg("o"), py::arg("d"), py::arg("t1"), py::arg("n"), py::arg("seed") = 0)
         .def("add_area_emitter", &Scene::add_area_emitter)
         .def("add_emitter", &Scene::add_emitter)
         .def("set_sensor", &Scene::set_sensor)
@@ -325,89 +220,6 @@ PYBIND11_MODULE(_core, m) {
         .def_property_readonly("bbox", [](const Scene& s) {
             return py::make_tuple(color_tuple(s.bbox_lo), color_tuple(s.bbox_hi));
         })
-        .def("sample_emitter_direction",
-             [](const Scene& s, py::object ref, py::object u) {
-                 // Next event estimation's light sample, as estimate_direct takes it:
-                 // u columns = (pick, u.x, u.y, u_extra).
-                 if (!s.committed()) throw py::value_error("scene is not committed");
-                 auto r = flat<float>(ref, 3, "ref");
-                 auto uu = flat<float>(u, 4, "u");
-                 size_t n = r.size() / 3;
-                 if (uu.size() != 4 * n) throw py::value_error("u must be (N, 4) for N reference points");
-                 std::vector<float> d(3 * n), pdf(n), rad(3 * n), delta(n);
-                 size_t ne = s.emitters.size();
-                 for (size_t i = 0; i < n; ++i) {
-                     if (ne == 0) continue;
-                     size_t idx = std::min(size_t(uu[4 * i] * float(ne)), ne - 1);
-                     DirectSample ds = s.emitters[idx]->sample_direct(Vec3(r[3 * i], r[3 * i + 1], r[3 * i + 2]),
-                                                                      Vec2(uu[4 * i + 1], uu[4 * i + 2]), uu[4 * i + 3]);
-                     for (int k = 0; k < 3; ++k) { d[3 * i + k] = ds.d[k]; rad[3 * i + k] = ds.radiance[k]; }
-                     pdf[i] = ds.pdf_w / float(ne);
-                     delta[i] = ds.is_delta ? 1.f : 0.f;
-                 }
-                 py::dict out;
-                 py::ssize_t N = py::ssize_t(n);
-                 out["d"] = to_numpy(std::move(d), {N, 3});
-                 out["pdf"] = to_numpy(std::move(pdf), {N});
-                 out["radiance"] = to_numpy(std::move(rad), {N, 3});
-                 out["is_delta"] = to_numpy(std::move(delta), {N});
-                 return out;
-             },
-             py::arg("ref"), py::arg("u"))
-        .def("sample_sensor_rays",
-             [](const Scene& s, py::object film, py::object u) {
-                 // Rays the sensor generates for film positions (N, 2) (pixels,
-                 // continuous) and extra samples u (N, 5) = (u1, u2.xy, u3.xy).
-                 if (!s.sensor) throw py::value_error("scene has no sensor");
-                 auto f = flat<float>(film, 2, "film");
-                 auto uu = flat<float>(u, 5, "u");
-                 size_t n = f.size() / 2;
-                 if (uu.size() != 5 * n) throw py::value_error("u must be (N, 5) for N film positions");
-                 std::vector<float> o(3 * n), d(3 * n), w(3 * n);
-                 for (size_t i = 0; i < n; ++i) {
-                     SensorRay sr = s.sensor->sample_ray(Vec2(f[2 * i], f[2 * i + 1]), uu[5 * i],
-                                                         Vec2(uu[5 * i + 1], uu[5 * i + 2]),
-                                                         Vec2(uu[5 * i + 3], uu[5 * i + 4]));
-                     for (int k = 0; k < 3; ++k) { o[3 * i + k] = sr.ray.o[k]; d[3 * i + k] = sr.ray.d[k]; w[3 * i + k] = sr.weight[k]; }
-                 }
-                 py::dict r;
-                 py::ssize_t N = py::ssize_t(n);
-                 r["o"] = to_numpy(std::move(o), {N, 3});
-                 r["d"] = to_numpy(std::move(d), {N, 3});
-                 r["weight"] = to_numpy(std::move(w), {N, 3});
-                 return r;
-             },
-             py::arg("film"), py::arg("u"))
-        .def("pdf_emitter_direction",
-             [](const Scene& s, py::object ref, py::object dirs) {
-                 // The light-sampling density that MIS assigns to a ray leaving ref along d.
-                 if (!s.committed()) throw py::value_error("scene is not committed");
-                 auto r = flat<float>(ref, 3, "ref");
-                 auto dd = flat<float>(dirs, 3, "d");
-                 size_t n = dd.size() / 3;
-                 bool one_ref = r.size() == 3;
-                 if (!one_ref && r.size() != dd.size()) throw py::value_error("ref must be (1, 3) or match d");
-                 std::vector<float> out(n, 0.f);
-                 float pick = s.emitters.empty() ? 0.f : 1.f / float(s.emitters.size());
-                 {
-                     py::gil_scoped_release nogil;
-                     for (size_t i = 0; i < n; ++i) {
-                         size_t j = one_ref ? 0 : i;
-                         Ray ray;
-                         ray.o = Vec3(r[3 * j], r[3 * j + 1], r[3 * j + 2]);
-                         ray.d = normalize(Vec3(dd[3 * i], dd[3 * i + 1], dd[3 * i + 2]));
-                         Interaction it;
-                         if (s.intersect(ray, it)) {
-                             int e = s.shapes[it.shape]->emitter;
-                             if (e >= 0) out[i] = pick * s.emitters[e]->pdf_direct(ray.o, it.p, it.n);
-                         } else {
-                             for (const Emitter* env : s.environment) out[i] += pick * env->pdf_direct(ray.o, Vec3(0.f), Vec3(0.f));
-                         }
-                     }
-                 }
-                 return to_numpy(std::move(out), {py::ssize_t(n)});
-             },
-             py::arg("ref"), py::arg("d"))
         .def_property_readonly("features", [](const Scene& s) {
             py::dict d;
             d["has_delta_bsdf"] = s.features.has_delta_bsdf;
@@ -460,6 +272,8 @@ PYBIND11_MODULE(_core, m) {
              py::arg("paths"), py::arg("caustic_only") = false, py::arg("seed") = 0, py::arg("max_depth") = -1,
              py::arg("threads") = 0);
 
+
+    bind_test_hooks(m, scene_class);
 
     // ---- Components, vectorised for statistical tests (chi-square etc.).
     py::class_<Bsdf>(m, "Bsdf")
@@ -684,24 +498,6 @@ PYBIND11_MODULE(_core, m) {
             py::arg("queries"), py::arg("r"), py::arg("threads") = 1,
             "number of points within r of each query row (batched range queries, for benchmarks)");
 
-    m.def(
-        "bdpt_mis_check",
-        [](const Scene& scene, const IntegratorDesc& idesc, uint64_t seed, int n) {
-            if (!scene.committed()) throw py::value_error("bdpt_mis_check: scene is not committed");
-            std::vector<float> fast, brute, sums;
-            std::vector<int> strategy;
-            {
-                py::gil_scoped_release nogil;
-                bdpt_mis_check(scene, idesc, seed, n, fast, brute, sums, strategy);
-            }
-            return py::make_tuple(py::array_t<float>(fast.size(), fast.data()),
-                                  py::array_t<float>(brute.size(), brute.data()),
-                                  py::array_t<float>(sums.size(), sums.data()),
-                                  py::array_t<int>(strategy.size(), strategy.data()));
-        },
-        py::arg("scene"), py::arg("integrator"), py::arg("seed"), py::arg("n"),
-        "test hook: bdpt's MIS weights (linear-time), brute-force ones and the linear-time weights' sum over "
-        "each path's strategies, for the strategies of n sample pairs");
     m.def(
         "render",
         [](const Scene& scene, const IntegratorDesc& idesc, std::vector<bool> effects, int spp, double seconds,

@@ -340,7 +340,7 @@ def test_loader_forms_and_xml(tmp_path):
         rm.load_file(tmp_path / "s.xml")
 
 
-@pytest.mark.parametrize("estimator", ["direct", "ptracer", "bdpt", "photonmapper", "sppm"])
+@pytest.mark.parametrize("estimator", [n for n, e in rm.estimators().items() if not e["capabilities"]["dipole"]])
 def test_other_estimators_refuse(estimator):
     scene = rm.load_dict(plane_scene(res=4))
     with pytest.raises(ValueError, match=f"integrator '{estimator}' cannot render the dipole BSSRDF.*'plane'.*'path'"):

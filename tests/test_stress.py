@@ -29,8 +29,9 @@ import radiometer as rm
 from radiometer.analysis.stats import z_test
 from radiometer.render import INTEGRATOR_PARAMS
 
-# Every estimator: each must survive every scene.
-ESTIMATORS = ["path", "direct", "ptracer", "bdpt", "photonmapper", "sppm"]
+# Every estimator (the core's registry): each must survive every scene.
+ESTIMATORS = list(rm.estimators())
+ALIASES = [a for e in rm.estimators().values() for a in e["aliases"]]
 # Per-estimator settings for the sweep's budget (defaults elsewhere): the
 # photon estimators' defaults (250 000 photons, 16 shadow and 32 gather rays)
 # cost minutes over the sweep; stability does not depend on them.
@@ -115,7 +116,7 @@ MEDIA_SCENES = {
     "media_camera_in_glass": {"lit": [(*ALL, "environment through the medium and the glass")]},
     "media_grid_sparse": {"lit": [(*ALL, "backlight through the cloud")]},
 }
-SUPPORTS_MEDIA = {"path", "volpath", "ptracer", "bdpt", "photonmapper"}
+SUPPORTS_MEDIA = {n for n in ESTIMATORS + ALIASES if rm.registry.estimator(n)["capabilities"]["media"]}
 # Media scenes where light tracing cannot light the checked region (the
 # sanity checks still apply): the camera sees it only through glass, and a
 # light path never connects to a pinhole through a delta vertex.
@@ -211,7 +212,7 @@ def block_means(image, variance, b=4):
     return img, var
 
 
-@pytest.mark.parametrize("estimator", ESTIMATORS + ["volpath"])
+@pytest.mark.parametrize("estimator", ESTIMATORS + ALIASES)
 @pytest.mark.parametrize("name", sorted(MEDIA_SCENES))
 def test_media_finite_nonnegative_and_lit(name, estimator):
     where = f"{name} / {estimator}"

@@ -8,6 +8,7 @@ __version__ = "0.1.0"
 
 from .scene_desc import SceneError
 from .loader import SceneWarning
+from .registry import estimators
 from .render import EFFECTS, RenderCancelled, RenderResult, render
 from .scene import Scene
 
@@ -42,5 +43,5 @@ def read_exr(path):
     return _read(path)
 
 
-__all__ = ["load_file", "load_dict", "render", "write_exr", "read_exr", "Scene", "SceneError", "SceneWarning",
-           "RenderResult", "RenderCancelled", "EFFECTS", "__version__"]
+__all__ = ["load_file", "load_dict", "render", "estimators", "write_exr", "read_exr", "Scene", "SceneError",
+           "SceneWarning", "RenderResult", "RenderCancelled", "EFFECTS", "__version__"]

@@ -1,6 +1,7 @@
 """The `radiometer` command line.
 
   radiometer render SCENE [-i NAME] [--spp N | --seconds S] [-o out.exr]
+  radiometer render --help-integrator NAME
   radiometer bench [MATRIX] [--scheduler ADDRESS] [--resume [RUN]]
   radiometer compare A B | report [RUN] | merge STORE... | runs | refs [--effects]
 
@@ -69,6 +70,21 @@ def _parse_integrator(arg):
         except json.JSONDecodeError as e:
             raise SceneError(f"-i: not valid JSON ({e})") from None
     return arg
+
+
+class _HelpIntegrator(argparse.Action):
+    """--help-integrator NAME: prints the estimator's parameter table and
+    exits, like --help (before the required SCENE is asked for)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from .registry import help_text
+
+        try:
+            text = help_text(values)
+        except KeyError as e:
+            parser.exit(2, f"radiometer render: error: {e.args[0]}\n")
+        print(text)
+        parser.exit(0)
 
 
 def cmd_render(a) -> int:
@@ -300,7 +316,13 @@ def main(argv=None) -> int:
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("render", help="render a scene to EXR (image, variance and effect layers)")
     r.add_argument("scene", help="Mitsuba 3 XML file, or a canonical scene name such as cornell-box")
-    r.add_argument("-i", "--integrator", help="estimator name (direct, path, ptracer, bdpt) or a JSON dict like the XML's")
+    from .registry import estimator_names
+
+    r.add_argument("-i", "--integrator",
+                   help=f"estimator name ({', '.join(estimator_names())}) or a JSON dict like the XML's; "
+                        "--help-integrator NAME lists its parameters")
+    r.add_argument("--help-integrator", metavar="NAME", action=_HelpIntegrator,
+                   help="print estimator NAME's parameters (type, default, allowed values) and exit")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--spp", type=int, help="samples per pixel (default: the scene's sampler)")
     g.add_argument("--seconds", type=float, help="wall-clock budget in seconds")

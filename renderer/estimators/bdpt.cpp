@@ -10,12 +10,8 @@
 //   s, t >= 2  a deterministic connection of y_{s-1} and z_{t-1}
 // weighted by multiple importance sampling over all strategies that could
 // have produced the same path (Veach 1997, sec. 10.2 and eq. 9.13).
-// Parameters, as Mitsuba 3's (0.6's) `bdpt`:
-//   max_depth      longest path in segments (s + t - 1); -1 = unbounded
-//   rr_depth       subpath depth (segments) from which Russian roulette may stop a subpath
-//   hide_emitters  directly visible emitters appear black
-//   mis            "power" (default), "balance" or "uniform" weights
-//   beta           the power heuristic's exponent (default 2)
+// Parameters: the registration below (Mitsuba 3's (0.6's) `bdpt`'s, and
+// mis, beta, strategy_images).
 //
 // Driver: bdpt splats (t = 1), so it runs through the light-path driver
 // (light_render.cpp): light path g = s W H + j also traces one camera path
@@ -87,6 +83,7 @@
 #include <stdexcept>
 
 #include "film/film.h"
+#include "render/registry.h"
 #include "transport/subpath.h"
 
 namespace rm {
@@ -95,24 +92,43 @@ namespace {
 
 enum class Mis { Power, Balance, Uniform };
 
+std::unique_ptr<Integrator> make_bdpt(ParamReader& p);
+
+[[maybe_unused]] const bool kRegistered = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "bdpt";
+    e.doc = "bidirectional path tracing: every strategy (s, t) combined by multiple importance sampling "
+            "(Veach 1997, ch. 10)";
+    e.params = {
+        max_depth_param().described("longest path in segments (s + t - 1)"),
+        rr_depth_param().described("subpath depth (segments) from which Russian roulette may stop a subpath"),
+        hide_emitters_param(),
+        ParamSpec::string("mis", "power", "MIS weights: the power or balance heuristic, or uniform weights")
+            .one_of({"power", "balance", "uniform"}),
+        ParamSpec::real("beta", 2.0, "the power heuristic's exponent (Veach 1997, eq. 9.13)").greater_than(0),
+        strategy_images_param(),
+    };
+    e.caps.media = true;
+    e.caps.driver = Driver::Light;
+    e.factory = make_bdpt;
+    return e;
+}());
+
+Mis mis_from_name(const std::string& name) {
+    if (name == "balance") return Mis::Balance;
+    if (name == "uniform") return Mis::Uniform;
+    return Mis::Power;  // the declaration admits no other name
+}
+
 }  // namespace
 
 class BdptIntegrator final : public Integrator {
 public:
-    explicit BdptIntegrator(const IntegratorDesc& d)
-        : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), beta_(d.beta),
-          strategy_depth_(d.strategy_images) {
-        check_strategy_images("bdpt", strategy_depth_);
-        if (d.mis == "power") mis_ = Mis::Power;
-        else if (d.mis == "balance") mis_ = Mis::Balance;
-        else if (d.mis == "uniform") mis_ = Mis::Uniform;
-        else throw std::invalid_argument("integrator 'bdpt': mis must be 'power', 'balance' or 'uniform', not '" + d.mis + "'");
-        if (!(beta_ > 0.f) || !std::isfinite(beta_))
-            throw std::invalid_argument("integrator 'bdpt': beta must be a positive finite number");
-    }
+    explicit BdptIntegrator(ParamReader& p)
+        : max_depth_(p.get_int("max_depth")), rr_depth_(p.get_int("rr_depth")), hide_(p.get_bool("hide_emitters")),
+          beta_(p.get_float("beta")), strategy_depth_(p.get_int("strategy_images")),
+          mis_(mis_from_name(p.get_string("mis"))) {}
 
-    bool is_light_tracer() const override { return true; }
-    bool supports_media() const override { return true; }
     int strategy_depth() const override { return strategy_depth_; }
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator 'bdpt' runs through the light-path driver, not camera rays");
@@ -645,11 +661,17 @@ private:
     mutable std::unique_ptr<FilterSampler> filter_;
 };
 
-std::unique_ptr<Integrator> make_bdpt_integrator(const IntegratorDesc& d) { return std::make_unique<BdptIntegrator>(d); }
+namespace {
 
-void bdpt_mis_check(const Scene& scene, const IntegratorDesc& d, uint64_t seed, int n, std::vector<float>& fast,
+std::unique_ptr<Integrator> make_bdpt(ParamReader& p) { return std::make_unique<BdptIntegrator>(p); }
+
+}  // namespace
+
+void bdpt_mis_check(const Scene& scene, const Integrator& bdpt, uint64_t seed, int n, std::vector<float>& fast,
                     std::vector<float>& brute, std::vector<float>& sums, std::vector<int>& strategy) {
-    BdptIntegrator(d).mis_check(scene, seed, n, fast, brute, sums, strategy);
+    const auto* b = dynamic_cast<const BdptIntegrator*>(&bdpt);
+    if (!b) throw std::invalid_argument("bdpt_mis_check: integrator '" + bdpt.type + "' is not bdpt");
+    b->mis_check(scene, seed, n, fast, brute, sums, strategy);
 }
 
 }  // namespace rm

@@ -1,20 +1,42 @@
 // `direct`: direct illumination only (emission seen by the camera plus one
 // bounce), combining emitter and BSDF samples with the power heuristic in
-// Veach's multi-sample model (Veach 1997, sec. 9.2.2). Parameters, as Mitsuba
-// 3's `direct` plugin:
-//   emitter_samples  light samples per camera sample (default 1)
-//   bsdf_samples     BSDF samples per camera sample (default 1)
-//   hide_emitters    directly visible emitters appear black
+// Veach's multi-sample model (Veach 1997, sec. 9.2.2).
+#include "render/registry.h"
 #include "transport/common.h"
-
-#include <stdexcept>
 
 namespace rm {
 
+namespace {
+
+std::unique_ptr<Integrator> make_direct(ParamReader& p);
+
+// Parameters, as Mitsuba 3's `direct` plugin.
+[[maybe_unused]] const bool kRegistered = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "direct";
+    e.doc = "direct illumination: emitter and BSDF samples combined by the power heuristic (Veach 1997, sec. 9.2.2)";
+    e.params = {
+        ParamSpec::integer("emitter_samples", 1, "light samples per camera sample").at_least(0),
+        ParamSpec::integer("bsdf_samples", 1, "BSDF samples per camera sample").at_least(0),
+        hide_emitters_param(),
+        ParamSpec::setting("shading_samples", {"emitter_samples", "bsdf_samples"},
+                           "Mitsuba's shorthand for both sample counts")
+            .at_least(0),
+    };
+    e.caps.driver = Driver::Camera;
+    e.factory = make_direct;
+    return e;
+}());
+
+}  // namespace
+
 class DirectIntegrator final : public Integrator {
 public:
-    explicit DirectIntegrator(const IntegratorDesc& d)
-        : n_light_(d.emitter_samples), n_bsdf_(d.bsdf_samples), hide_(d.hide_emitters) {
+    explicit DirectIntegrator(ParamReader& p)
+        : n_light_(p.get_int("emitter_samples")), n_bsdf_(p.get_int("bsdf_samples")),
+          hide_(p.get_bool("hide_emitters")) {
+        if (n_light_ + n_bsdf_ == 0)
+            p.fail("emitter_samples", "emitter_samples and bsdf_samples must be >= 0, not both 0");
         float total = float(n_light_ + n_bsdf_);
         light_frac_ = n_light_ / total;
         bsdf_frac_ = n_bsdf_ / total;
@@ -79,37 +101,10 @@ private:
     float light_frac_, bsdf_frac_;
 };
 
-std::unique_ptr<Integrator> make_path_integrator(const IntegratorDesc& d);
-std::unique_ptr<Integrator> make_ptracer_integrator(const IntegratorDesc& d);
-std::unique_ptr<Integrator> make_bdpt_integrator(const IntegratorDesc& d);
-std::unique_ptr<Integrator> make_photonmapper_integrator(const IntegratorDesc& d);
-std::unique_ptr<Integrator> make_sppm_integrator(const IntegratorDesc& d);
+namespace {
 
-std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& d, const EffectMask& mask) {
-    std::unique_ptr<Integrator> r;
-    if (d.max_depth < -1 || d.max_depth == 0)
-        throw std::invalid_argument("integrator '" + d.type + "': max_depth must be -1 (unbounded) or >= 1");
-    if (d.rr_depth < 1) throw std::invalid_argument("integrator '" + d.type + "': rr_depth must be >= 1");
-    if (d.type == "path" || d.type == "volpath") {
-        r = make_path_integrator(d);
-    } else if (d.type == "ptracer") {
-        r = make_ptracer_integrator(d);
-    } else if (d.type == "bdpt") {
-        r = make_bdpt_integrator(d);
-    } else if (d.type == "photonmapper") {
-        r = make_photonmapper_integrator(d);
-    } else if (d.type == "sppm") {
-        r = make_sppm_integrator(d);
-    } else if (d.type == "direct") {
-        if (d.emitter_samples < 0 || d.bsdf_samples < 0 || d.emitter_samples + d.bsdf_samples == 0)
-            throw std::invalid_argument("integrator 'direct': emitter_samples and bsdf_samples must be >= 0, not both 0");
-        r = std::make_unique<DirectIntegrator>(d);
-    } else {
-        throw std::invalid_argument("integrator '" + d.type + "' is not implemented yet");
-    }
-    r->mask = mask;
-    r->type = d.type;
-    return r;
-}
+std::unique_ptr<Integrator> make_direct(ParamReader& p) { return std::make_unique<DirectIntegrator>(p); }
+
+}  // namespace
 
 }  // namespace rm

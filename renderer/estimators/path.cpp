@@ -1,10 +1,7 @@
 // `path`: unidirectional path tracing (Kajiya 1986) with next event estimation
 // and BSDF sampling combined by the power heuristic (Veach 1997, ch. 9), and
-// Russian roulette. Parameters, as Mitsuba 3's `path` plugin:
-//   max_depth      longest path in segments; -1 = unbounded; 1 = only emitters
-//                  seen directly; 2 = direct illumination
-//   rr_depth       path depth from which Russian roulette may stop a path
-//   hide_emitters  directly visible emitters appear black
+// Russian roulette. Parameters: the registration below (Mitsuba 3's `path`
+// plugin's).
 // Structure after pbrt-v4's PathIntegrator::Li (integrators.cpp): one loop,
 // direct lighting in its own helper (common.cpp).
 // `volpath` is this estimator under another name (DESIGN: "volpath, alias of
@@ -18,20 +15,45 @@
 #include "transport/common.h"
 #include "transport/dipole_step.h"
 #include "estimators/volpath.h"
+#include "render/registry.h"
 
 namespace rm {
 
+namespace {
+
+std::unique_ptr<Integrator> make_path(ParamReader& p);
+
+[[maybe_unused]] const bool kRegistered = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "path";
+    e.aliases = {"volpath"};
+    e.doc = "unidirectional path tracing with next event estimation and MIS (Kajiya 1986; Veach 1997, ch. 9); "
+            "media through volpath's loop";
+    e.params = {
+        max_depth_param().described("longest path in segments (1: only emitters seen directly; 2: direct "
+                                    "illumination); in media, scattering vertices"),
+        rr_depth_param(),
+        hide_emitters_param(),
+    };
+    e.caps.media = true;
+    e.caps.dipole = true;
+    e.caps.driver = Driver::Camera;
+    e.factory = make_path;
+    return e;
+}());
+
+}  // namespace
+
 class PathIntegrator final : public Integrator {
 public:
-    explicit PathIntegrator(const IntegratorDesc& d)
-        : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), media_(make_volpath_integrator(d)) {}
+    explicit PathIntegrator(const VolPathParams& prm)
+        : max_depth_(prm.max_depth), rr_depth_(prm.rr_depth), hide_(prm.hide), media_(make_volpath_integrator(prm)) {}
 
-    bool supports_media() const override { return true; }
-    bool supports_dipole() const override { return true; }
     const Integrator& for_scene(const Scene& scene) const override {
         if (!scene.features.has_media) return *this;
         media_->mask = mask;
         media_->type = type;
+        media_->caps = caps;
         return *media_;
     }
 
@@ -123,6 +145,16 @@ private:
     std::unique_ptr<Integrator> media_;  // the media-aware twin (volpath.cpp)
 };
 
-std::unique_ptr<Integrator> make_path_integrator(const IntegratorDesc& d) { return std::make_unique<PathIntegrator>(d); }
+namespace {
+
+std::unique_ptr<Integrator> make_path(ParamReader& p) {
+    VolPathParams prm;
+    prm.max_depth = p.get_int("max_depth");
+    prm.rr_depth = p.get_int("rr_depth");
+    prm.hide = p.get_bool("hide_emitters");
+    return std::make_unique<PathIntegrator>(prm);
+}
+
+}  // namespace
 
 }  // namespace rm

@@ -25,28 +25,9 @@
 // `indirect`, all three filed under `specular` when the camera path reached x
 // through a specular vertex, emission -> `emission` (DESIGN section 3).
 //
-// Parameters (Mitsuba 0.6's photonmapper names in snake_case; radii relative
-// to the radius of the scene's bounding sphere, as Mitsuba's are relative to
-// the scene size):
-//   direct_samples         shadow rays per camera sample at x (directSamples, 16)
-//   global_photons         photons stored in the global map (globalPhotons, 250000)
-//   caustic_photons        photons stored in the caustic map (causticPhotons, 250000)
-//   global_lookup_radius   maximum lookup radius, global map (globalLookupRadius, 0.05)
-//   caustic_lookup_radius  maximum lookup radius, caustic map (causticLookupRadius, 0.0125)
-//   lookup_size            photons per radiance estimate, n (lookupSize, 120)
-//   gather_rays            final-gathering rays per camera sample (ours, 32)
-//   final_gather           false: the global map seen directly at x (ours, true)
-//   max_depth, rr_depth, hide_emitters   as in `path` (maxDepth, rrDepth, hideEmitters)
-//   (granularity, Mitsuba's work-unit size, is accepted and ignored.)
-// In scenes with media (the second part of this file):
-//   volume_photons         photons stored in the volume photon map (volumePhotons, 250000)
-//   volume_lookup_radius   maximum lookup radius, volume map (volumeLookupRadius, 0.05)
-//   volume_lookup_size     photons per volume radiance estimate (ours, 64)
-//   volume_boundary_rays   K > 0: correct the volume estimate's sphere for its part
-//                          outside the medium with K rays (ours, 0: the seed's estimate)
-//   step_size              ray-marching step in world units (ours; 0 = automatic:
-//                          one mean free path of the medium's densest channel,
-//                          at most 1/16 of the scene's radius)
+// Parameters: the registration below (Mitsuba 0.6's photonmapper names in
+// snake_case, its camelCase ones as aliases; radii relative to the radius of
+// the scene's bounding sphere, as Mitsuba's are relative to the scene size).
 // In a scene with media, max_depth counts scattering vertices (surface or
 // medium; index-matched boundaries excluded), as volpath's does.
 // max_depth bounds whole paths: a photon of depth d (segments from its
@@ -76,11 +57,64 @@
 #include "transport/media_common.h"
 #include "core/warp.h"
 #include "render/render.h"
+#include "render/registry.h"
 #include "transport/photon_trace.h"
 
 namespace rm {
 
 namespace {
+
+std::unique_ptr<Integrator> make_photonmapper(ParamReader& p);
+
+[[maybe_unused]] const bool kRegistered = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "photonmapper";
+    e.doc = "two-pass photon mapping: caustic, global and volume photon maps, final gathering (Jensen 1996, 2001)";
+    e.params = {
+        max_depth_param().alias("maxDepth"),
+        rr_depth_param().alias("rrDepth"),
+        hide_emitters_param().alias("hideEmitters"),
+        ParamSpec::integer("direct_samples", 16, "shadow rays per camera sample at the first non-specular vertex")
+            .at_least(0)
+            .alias("directSamples"),
+        ParamSpec::integer("global_photons", 250000, "photons stored in the global map").at_least(0).alias("globalPhotons"),
+        ParamSpec::integer("caustic_photons", 250000, "photons stored in the caustic map")
+            .at_least(0)
+            .alias("causticPhotons"),
+        ParamSpec::real("global_lookup_radius", 0.05, "maximum lookup radius in the global map, relative to the scene's")
+            .greater_than(0)
+            .alias("globalLookupRadius"),
+        ParamSpec::real("caustic_lookup_radius", 0.0125,
+                        "maximum lookup radius in the caustic map, relative to the scene's")
+            .greater_than(0)
+            .alias("causticLookupRadius"),
+        ParamSpec::integer("lookup_size", 120, "photons per radiance estimate, n").at_least(1).alias("lookupSize"),
+        ParamSpec::integer("gather_rays", 32, "final-gathering rays per camera sample").at_least(1),
+        ParamSpec::boolean("final_gather", true, "false: the global map read at the first vertex itself (shows its bias)"),
+        ParamSpec::integer("volume_photons", 250000, "photons stored in the volume map (scenes with media)")
+            .at_least(0)
+            .alias("volumePhotons"),
+        ParamSpec::real("volume_lookup_radius", 0.05, "maximum lookup radius in the volume map, relative to the scene's")
+            .greater_than(0)
+            .alias("volumeLookupRadius"),
+        ParamSpec::integer("volume_lookup_size", 64, "photons per volume radiance estimate").at_least(1),
+        ParamSpec::real("step_size", 0.0,
+                        "ray-marching step in world units (automatic: one mean free path of the medium's densest "
+                        "channel, at most 1/16 of the scene's radius)")
+            .at_least(0)
+            .with_special(0.0, "automatic"),
+        ParamSpec::integer("volume_boundary_rays", 0,
+                           "K > 0: correct the volume estimate's sphere for its part outside the medium with K rays")
+            .at_least(0)
+            .at_most(1024)
+            .with_special(int64_t(0), "the seed's 4/3 pi r^3"),
+        ParamSpec::mitsuba_ignored("granularity", "Mitsuba's work-unit size: changes nothing here"),
+    };
+    e.caps.media = true;
+    e.caps.driver = Driver::OwnPasses;
+    e.factory = make_photonmapper;
+    return e;
+}());
 
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
@@ -116,34 +150,16 @@ inline int photon_budget(int max_depth, int camera_segments) {
 
 class PhotonMapper final : public Integrator {
 public:
-    explicit PhotonMapper(const IntegratorDesc& d)
-        : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), direct_samples_(d.direct_samples),
-          global_photons_(d.global_photons), caustic_photons_(d.caustic_photons),
-          global_radius_(d.global_lookup_radius), caustic_radius_(d.caustic_lookup_radius),
-          lookup_size_(d.lookup_size), gather_rays_(d.gather_rays), final_gather_(d.final_gather),
-          volume_photons_(d.volume_photons), volume_radius_(d.volume_lookup_radius),
-          volume_lookup_size_(d.volume_lookup_size), step_size_(d.step_size),
-          boundary_rays_(d.volume_boundary_rays) {
-        auto bad = [](const std::string& p, const std::string& what) {
-            throw std::invalid_argument("integrator 'photonmapper': " + p + " " + what);
-        };
-        if (direct_samples_ < 0) bad("direct_samples", "must be >= 0");
-        if (global_photons_ < 0) bad("global_photons", "must be >= 0");
-        if (caustic_photons_ < 0) bad("caustic_photons", "must be >= 0");
-        if (!(global_radius_ > 0.f) || !std::isfinite(global_radius_)) bad("global_lookup_radius", "must be > 0");
-        if (!(caustic_radius_ > 0.f) || !std::isfinite(caustic_radius_)) bad("caustic_lookup_radius", "must be > 0");
-        if (lookup_size_ < 1) bad("lookup_size", "must be >= 1");
-        if (gather_rays_ < 1) bad("gather_rays", "must be >= 1");
-        if (volume_photons_ < 0) bad("volume_photons", "must be >= 0");
-        if (!(volume_radius_ > 0.f) || !std::isfinite(volume_radius_)) bad("volume_lookup_radius", "must be > 0");
-        if (volume_lookup_size_ < 1) bad("volume_lookup_size", "must be >= 1");
-        if (!(step_size_ >= 0.f) || !std::isfinite(step_size_)) bad("step_size", "must be >= 0 (0 = automatic)");
-        if (boundary_rays_ < 0 || boundary_rays_ > 1024) bad("volume_boundary_rays", "must be in 0..1024");
-    }
+    explicit PhotonMapper(ParamReader& p)
+        : max_depth_(p.get_int("max_depth")), rr_depth_(p.get_int("rr_depth")), hide_(p.get_bool("hide_emitters")),
+          direct_samples_(p.get_int("direct_samples")), global_photons_(p.get_int("global_photons")),
+          caustic_photons_(p.get_int("caustic_photons")), global_radius_(p.get_float("global_lookup_radius")),
+          caustic_radius_(p.get_float("caustic_lookup_radius")), lookup_size_(p.get_int("lookup_size")),
+          gather_rays_(p.get_int("gather_rays")), final_gather_(p.get_bool("final_gather")),
+          volume_photons_(p.get_int("volume_photons")), volume_radius_(p.get_float("volume_lookup_radius")),
+          volume_lookup_size_(p.get_int("volume_lookup_size")), step_size_(p.get_float("step_size")),
+          boundary_rays_(p.get_int("volume_boundary_rays")) {}
 
-    bool supports_media() const override { return true; }
-
-    bool owns_driver() const override { return true; }
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator 'photonmapper' renders through its own driver");
     }
@@ -714,8 +730,11 @@ namespace {
 // The camera passes of photonmapper, through the ordinary tile driver.
 class PhotonMapperPass final : public Integrator {
 public:
-    PhotonMapperPass(const PhotonMapper& pm, const Maps& maps) : pm_(pm), maps_(maps) { type = "photonmapper"; }
-    bool supports_media() const override { return true; }
+    PhotonMapperPass(const PhotonMapper& pm, const Maps& maps) : pm_(pm), maps_(maps) {
+        type = pm.type;
+        caps = pm.caps;
+        caps.driver = Driver::Camera;
+    }
     void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
                 ThreadStats& stats) const override {
         pm_.radiance(scene, maps_, sampler, ray, out, stats);
@@ -873,8 +892,10 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     return out;
 }
 
-std::unique_ptr<Integrator> make_photonmapper_integrator(const IntegratorDesc& d) {
-    return std::make_unique<PhotonMapper>(d);
-}
+namespace {
+
+std::unique_ptr<Integrator> make_photonmapper(ParamReader& p) { return std::make_unique<PhotonMapper>(p); }
+
+}  // namespace
 
 }  // namespace rm

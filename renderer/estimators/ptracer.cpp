@@ -3,12 +3,8 @@
 // t = 1 strategy of Veach 1997, sec. 10.2; pbrt-v4's LightPathIntegrator and
 // Mitsuba 3's `ptracer` plugin). Emitters seen directly by the camera come
 // from connecting the emission sample's own origin to the sensor (s = 1,
-// t = 1), as Mitsuba's ptracer does. Parameters, as Mitsuba 3's `ptracer`:
-//   max_depth      longest path in segments, sensor connection included;
-//                  -1 = unbounded; 1 = only emitters seen directly; 2 = direct
-//   rr_depth       light-path depth (segments) from which Russian roulette may stop it
-//   hide_emitters  directly visible emitters appear black
-//   (Mitsuba's samples_per_pass only shapes its GPU wavefronts: accepted, ignored)
+// t = 1), as Mitsuba's ptracer does. Parameters: the registration below
+// (Mitsuba 3's `ptracer` plugin's, and strategy_images).
 // A render of `spp` traces spp * width * height light paths (as Mitsuba), and
 // the driver (light_render.cpp) splats, filters and averages their splats.
 //
@@ -39,20 +35,43 @@
 
 #include <climits>
 
+#include "render/registry.h"
 #include "transport/subpath.h"
 
 namespace rm {
 
+namespace {
+
+std::unique_ptr<Integrator> make_ptracer(ParamReader& p);
+
+[[maybe_unused]] const bool kRegistered = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "ptracer";
+    e.doc = "light tracing: light subpaths connected to the sensor at every non-specular vertex (the t = 1 "
+            "strategy, Veach 1997, sec. 10.2)";
+    e.params = {
+        max_depth_param().described("longest path in segments, sensor connection included (1: only emitters seen "
+                                    "directly; 2: direct illumination)"),
+        rr_depth_param().described("light-path depth (segments) from which Russian roulette may stop it"),
+        hide_emitters_param(),
+        ParamSpec::mitsuba_ignored("samples_per_pass", "Mitsuba's GPU wavefront size: changes nothing here"),
+        strategy_images_param(),
+    };
+    e.caps.media = true;
+    e.caps.driver = Driver::Light;
+    e.factory = make_ptracer;
+    return e;
+}());
+
+}  // namespace
+
 class LightTracer final : public Integrator {
 public:
-    explicit LightTracer(const IntegratorDesc& d)
-        : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), strategy_depth_(d.strategy_images) {
-        check_strategy_images("ptracer", strategy_depth_);
-    }
+    explicit LightTracer(ParamReader& p)
+        : max_depth_(p.get_int("max_depth")), rr_depth_(p.get_int("rr_depth")), hide_(p.get_bool("hide_emitters")),
+          strategy_depth_(p.get_int("strategy_images")) {}
     int strategy_depth() const override { return strategy_depth_; }
 
-    bool is_light_tracer() const override { return true; }
-    bool supports_media() const override { return true; }
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator 'ptracer' traces light paths, not camera rays");
     }
@@ -206,6 +225,10 @@ private:
     int strategy_depth_;
 };
 
-std::unique_ptr<Integrator> make_ptracer_integrator(const IntegratorDesc& d) { return std::make_unique<LightTracer>(d); }
+namespace {
+
+std::unique_ptr<Integrator> make_ptracer(ParamReader& p) { return std::make_unique<LightTracer>(p); }
+
+}  // namespace
 
 }  // namespace rm

@@ -32,13 +32,8 @@
 // (pbrt-v3's SPPM shares this); glossy visible points gather photons like
 // diffuse ones (their sharp highlights converge slowly).
 //
-// Parameters (Mitsuba 0.6's sppm names in snake_case):
-//   photon_count    light paths traced per pass (photonCount, 250000)
-//   initial_radius  initial gather radius in world units; 0 = automatic:
-//                   1/100 of the scene's bounding-sphere radius (initialRadius)
-//   alpha           radius reduction, 0 < alpha < 1 (alpha, 0.7)
-//   max_depth, rr_depth, hide_emitters   as in `path`
-//   (granularity is accepted and ignored.) The pass count is the spp.
+// Parameters: the registration below (Mitsuba 0.6's sppm names in snake_case,
+// its camelCase ones as aliases). The pass count is the spp.
 #include <chrono>
 #include <limits>
 #include <stdexcept>
@@ -46,12 +41,41 @@
 
 #include "transport/common.h"
 #include "render/parallel.h"
+#include "render/registry.h"
 #include "render/render.h"
 #include "transport/photon_trace.h"
 
 namespace rm {
 
 namespace {
+
+std::unique_ptr<Integrator> make_sppm(ParamReader& p);
+
+[[maybe_unused]] const bool kRegistered = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "sppm";
+    e.doc = "stochastic progressive photon mapping: one camera pass and one photon pass per spp, shrinking "
+            "radii (Hachisuka & Jensen 2009)";
+    e.params = {
+        max_depth_param().alias("maxDepth"),
+        rr_depth_param().alias("rrDepth"),
+        hide_emitters_param().alias("hideEmitters"),
+        ParamSpec::integer("photon_count", 250000, "light paths traced per pass").at_least(1).alias("photonCount"),
+        ParamSpec::real("initial_radius", 0.0,
+                        "initial gather radius in world units (automatic: 1/100 of the scene's bounding-sphere "
+                        "radius)")
+            .at_least(0)
+            .with_special(0.0, "automatic")
+            .alias("initialRadius"),
+        ParamSpec::real("alpha", 0.7, "radius reduction (Hachisuka, Ogaki & Jensen 2008, eq. 7)")
+            .greater_than(0)
+            .less_than(1),
+        ParamSpec::mitsuba_ignored("granularity", "Mitsuba's work-unit size: changes nothing here"),
+    };
+    e.caps.driver = Driver::OwnPasses;
+    e.factory = make_sppm;
+    return e;
+}());
 
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
@@ -80,16 +104,10 @@ struct PixelStats {
 
 class Sppm final : public Integrator {
 public:
-    explicit Sppm(const IntegratorDesc& d)
-        : max_depth_(d.max_depth), rr_depth_(d.rr_depth), hide_(d.hide_emitters), photon_count_(d.photon_count),
-          initial_radius_(d.initial_radius), alpha_(d.alpha) {
-        if (photon_count_ < 1) throw std::invalid_argument("integrator 'sppm': photon_count must be >= 1");
-        if (!(initial_radius_ >= 0.f) || !std::isfinite(initial_radius_))
-            throw std::invalid_argument("integrator 'sppm': initial_radius must be >= 0 (0 = automatic)");
-        if (!(alpha_ > 0.f && alpha_ < 1.f))
-            throw std::invalid_argument("integrator 'sppm': alpha must lie in (0, 1)");
-    }
-    bool owns_driver() const override { return true; }
+    explicit Sppm(ParamReader& p)
+        : max_depth_(p.get_int("max_depth")), rr_depth_(p.get_int("rr_depth")), hide_(p.get_bool("hide_emitters")),
+          photon_count_(p.get_int("photon_count")), initial_radius_(p.get_float("initial_radius")),
+          alpha_(p.get_float("alpha")) {}
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator 'sppm' renders through its own driver");
     }
@@ -345,6 +363,10 @@ RenderOutput Sppm::drive(const Scene& scene, const RenderOptions& opts, const Po
     return out;
 }
 
-std::unique_ptr<Integrator> make_sppm_integrator(const IntegratorDesc& d) { return std::make_unique<Sppm>(d); }
+namespace {
+
+std::unique_ptr<Integrator> make_sppm(ParamReader& p) { return std::make_unique<Sppm>(p); }
+
+}  // namespace
 
 }  // namespace rm

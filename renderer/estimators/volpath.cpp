@@ -207,11 +207,7 @@ namespace {
 
 class VolPathIntegrator final : public Integrator {
 public:
-    explicit VolPathIntegrator(const IntegratorDesc& d) : prm_{d.max_depth, d.rr_depth, d.hide_emitters} {
-        type = d.type;
-    }
-    bool supports_media() const override { return true; }
-    bool supports_dipole() const override { return true; }
+    explicit VolPathIntegrator(const VolPathParams& prm) : prm_(prm) {}
     void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
                 ThreadStats& stats) const override {
         volpath_sample(scene, sampler, ray, out, stats, prm_, mask);
@@ -223,8 +219,8 @@ private:
 
 }  // namespace
 
-std::unique_ptr<Integrator> make_volpath_integrator(const IntegratorDesc& d) {
-    return std::make_unique<VolPathIntegrator>(d);
+std::unique_ptr<Integrator> make_volpath_integrator(const VolPathParams& prm) {
+    return std::make_unique<VolPathIntegrator>(prm);
 }
 
 }  // namespace rm

@@ -14,6 +14,6 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                     ThreadStats& stats, const VolPathParams& prm, const EffectMask& mask);
 
 // `path`'s twin for scenes with media (Integrator::for_scene).
-std::unique_ptr<Integrator> make_volpath_integrator(const IntegratorDesc& d);
+std::unique_ptr<Integrator> make_volpath_integrator(const VolPathParams& prm);
 
 }  // namespace rm

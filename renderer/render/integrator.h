@@ -108,13 +108,31 @@ inline int strategy_index(int s, int t) {
 }
 inline int num_strategies(int max_depth) { return max_depth * (max_depth + 3) / 2; }
 
+// What an estimator renders and how the render driver runs it, declared with
+// the estimator (render/registry.h).
+enum class Driver {
+    Camera,     // sample() per camera ray (render.cpp)
+    Light,      // trace_light_path per light path (light_render.cpp)
+    OwnPasses,  // drive(): passes of its own (photon mapping)
+};
+struct Capabilities {
+    // Transports light through participating media. The render driver
+    // refuses a scene with media for one that does not (rather than render
+    // it as if the media were vacuum).
+    bool media = false;
+    // Renders the dipole BSSRDF (scene/dipole.h); the render driver refuses
+    // a dipole scene for any other, by name.
+    bool dipole = false;
+    Driver driver = Driver::Camera;
+};
+
 class Integrator {
 public:
     virtual ~Integrator() = default;
     // Light tracers (ptracer) trace light paths instead of camera rays: the
     // render driver sends them to render_light_paths (light_render.cpp),
     // which calls trace_light_path and never sample().
-    virtual bool is_light_tracer() const { return false; }
+    bool is_light_tracer() const { return caps.driver == Driver::Light; }
     // Traces one light path and appends its splats to `out`. A pixel's
     // estimate is the filter-weighted sum of the splats of M light paths,
     // divided by M.
@@ -124,41 +142,39 @@ public:
     // Estimators with passes of their own (photon mapping: photon passes
     // before or between camera passes) run the render themselves:
     // render() hands them the whole job (render.h's PollFn for `poll`).
-    virtual bool owns_driver() const { return false; }
+    bool owns_driver() const { return caps.driver == Driver::OwnPasses; }
     virtual RenderOutput drive(const Scene& scene, const RenderOptions& opts,
                                const std::function<bool(uint64_t, uint64_t)>& poll) const;
     // Throws std::invalid_argument when this estimator cannot render `scene`.
     virtual void check_scene(const Scene&) const {}
     // Depth up to which the light-path driver keeps per-strategy images (0: none).
     virtual int strategy_depth() const { return 0; }
-    // Whether this estimator transports light through participating media.
-    // The render driver refuses a scene with media for one that does not
-    // (rather than render it as if the media were vacuum).
-    virtual bool supports_media() const { return false; }
-    // Whether this estimator renders the dipole BSSRDF (scene/dipole.h).
-    // Only the camera-path loops (path, volpath) sample its exit points;
-    // the render driver refuses a dipole scene for any other, by name.
-    virtual bool supports_dipole() const { return false; }
+    bool supports_media() const { return caps.media; }
+    bool supports_dipole() const { return caps.dipole; }
     // The estimator that renders `scene` (called once per render, before any
     // sample): `path` hands a scene with media to its media-aware loop
     // (volpath.cpp), so that its own surface loop has no media code at all.
     virtual const Integrator& for_scene(const Scene&) const { return *this; }
     std::string type;  // the estimator's name, for messages (set by make_integrator)
+    Capabilities caps;  // the estimator's declared capabilities (set by make_integrator)
     // Radiance along one camera ray, split by effect class, into `out`.
     virtual void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
                         ThreadStats& stats) const = 0;
     EffectMask mask = all_effects();
 };
 
-// Throws std::invalid_argument for an unknown type or a bad parameter.
+// The estimator `desc` names, its parameters checked against its declaration
+// (render/registry.h); throws ParamError (a std::invalid_argument) for an
+// unknown estimator or a bad parameter.
 std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& desc, const EffectMask& mask);
 
-// Test hook of bdpt.cpp: for the strategies (s, t) of n random sample
-// pairs, the MIS weight as bdpt computes it and as a brute-force product of
+// Test hook of bdpt.cpp (`bdpt`: an integrator make_integrator made for
+// estimator bdpt, else std::invalid_argument): for the strategies (s, t) of
+// n random sample pairs, the MIS weight as bdpt computes it and as a brute-force product of
 // every strategy's path density gives it, and the sum of bdpt's weights
 // over every strategy of the same path (`sums`); strategy = 1000 s + t,
 // plus 1000000 when the path has a medium vertex.
-void bdpt_mis_check(const Scene& scene, const IntegratorDesc& d, uint64_t seed, int n, std::vector<float>& fast,
+void bdpt_mis_check(const Scene& scene, const Integrator& bdpt, uint64_t seed, int n, std::vector<float>& fast,
                     std::vector<float>& brute, std::vector<float>& sums, std::vector<int>& strategy);
 
 // Power heuristic with beta = 2 (Veach 1997, eq. 9.13), for one sample per strategy.

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/params.h"
 #include "core/spectrum.h"
 
 namespace rm {
@@ -81,38 +82,12 @@ struct MediumDesc {
     float g = 0.f;                    // hg asymmetry, in (-1, 1)
 };
 
+// An integrator as the scene names it: the estimator and its parameters as
+// given. The estimator's declaration (render/registry.h) checks them and
+// fills in its defaults.
 struct IntegratorDesc {
-    std::string type = "path";  // direct path
-    int max_depth = -1;         // Mitsuba's meaning; -1 = unbounded
-    int rr_depth = 5;
-    bool hide_emitters = false;
-    // direct: sample counts per strategy (Mitsuba's direct integrator)
-    int emitter_samples = 1, bsdf_samples = 1;
-    // bdpt: MIS heuristic ("power", "balance", "uniform") and the power heuristic's exponent
-    std::string mis = "power";
-    float beta = 2.f;
-    // bdpt, ptracer: keep one image per strategy (s, t) of path depth s + t - 1 <= this (0: none)
-    int strategy_images = 0;
-    // photonmapper (Mitsuba 0.6's names in camelCase; radii relative to the
-    // radius of the scene's bounding sphere, as Mitsuba's are to the scene size)
-    int direct_samples = 16;         // directSamples
-    int global_photons = 250000;     // globalPhotons
-    int caustic_photons = 250000;    // causticPhotons
-    float global_lookup_radius = 0.05f;     // globalLookupRadius
-    float caustic_lookup_radius = 0.0125f;  // causticLookupRadius
-    int lookup_size = 120;           // lookupSize
-    int gather_rays = 32;            // final-gathering rays per camera sample
-    bool final_gather = true;        // false: the global map seen directly (shows its bias)
-    // photonmapper in scenes with media (issue 6): the volume photon map and ray marching
-    int volume_photons = 250000;     // volumePhotons
-    float volume_lookup_radius = 0.05f;  // maximum lookup radius, relative as above
-    int volume_lookup_size = 64;     // photons per volume radiance estimate
-    float step_size = 0.f;           // ray-marching step, world units; 0 = automatic
-    int volume_boundary_rays = 0;    // > 0: that many rays correct the estimate's volume at medium boundaries
-    // sppm (Mitsuba 0.6: photonCount, initialRadius, alpha)
-    int photon_count = 250000;       // photons emitted per pass
-    float initial_radius = 0.f;      // world units; 0 = automatic
-    float alpha = 0.7f;
+    std::string type = "path";
+    ParamSet params;
 };
 
 }  // namespace rm

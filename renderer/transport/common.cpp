@@ -3,10 +3,14 @@
 namespace rm {
 
 bool sample_light(const Scene& scene, const Vec3& p, Sampler& sampler, DirectSample& ds) {
-    size_t n = scene.emitters.size();
     float u_pick = sampler.next_1d();
     Vec2 u = sampler.next_2d();
     float u_extra = sampler.next_1d();
+    return sample_light(scene, p, u_pick, u, u_extra, ds);
+}
+
+bool sample_light(const Scene& scene, const Vec3& p, float u_pick, Vec2 u, float u_extra, DirectSample& ds) {
+    size_t n = scene.emitters.size();
     if (n == 0) return false;
     const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n)), n - 1)];
     ds = e.sample_direct(p, u, u_extra);
@@ -60,11 +64,14 @@ void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* 
     out.add(cls, beta * le * w);
 }
 
+float light_pdf_w(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it) {
+    float light_pdf = it ? e.pdf_direct(prev_p, it->p, it->n) : e.pdf_direct(prev_p, Vec3(0.f), Vec3(0.f));
+    return light_pdf * emitter_pick_prob(scene);
+}
+
 float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
                        float bsdf_pdf_w, float light_frac, float bsdf_frac) {
-    float light_pdf = it ? e.pdf_direct(prev_p, it->p, it->n) : e.pdf_direct(prev_p, Vec3(0.f), Vec3(0.f));
-    light_pdf *= emitter_pick_prob(scene);
-    return mis_power(bsdf_pdf_w * bsdf_frac, light_pdf * light_frac);
+    return mis_power(bsdf_pdf_w * bsdf_frac, light_pdf_w(scene, e, prev_p, it) * light_frac);
 }
 
 }  // namespace rm

@@ -12,6 +12,13 @@ inline float emitter_pick_prob(const Scene& s) { return s.emitters.empty() ? 0.f
 // (or a direction to it); always draws the same 4 random numbers. False
 // when the scene has no emitter or the sample carries nothing.
 bool sample_light(const Scene& scene, const Vec3& p, Sampler& sampler, DirectSample& ds);
+// The same for given random numbers (u_pick picks the emitter).
+bool sample_light(const Scene& scene, const Vec3& p, float u_pick, Vec2 u, float u_extra, DirectSample& ds);
+
+// Solid-angle density with which sample_light from `prev_p` reaches emitter
+// `e` at `it` (an area emitter's point), or along a direction to the
+// environment (`it` null), the emitter's pick included.
+float light_pdf_w(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it);
 
 // Next event estimation at `it` (Veach 1997, sec. 9.2: light sample weighted by
 // the power heuristic against BSDF sampling). Returns the contribution before

@@ -361,11 +361,4 @@ int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<Path
     return pc.classify();
 }
 
-void check_strategy_images(const char* integrator, int strategy_images) {
-    if (strategy_images < 0 || strategy_images > 16)
-        throw std::invalid_argument(std::string("integrator '") + integrator +
-                                    "': strategy_images must be a path depth in 0..16 (0: none), not " +
-                                    std::to_string(strategy_images));
-}
-
 }  // namespace rm

@@ -133,7 +133,4 @@ Color transmittance_to_sensor(const Scene& scene, const Interaction& from, int m
 // no vertices. For s = 0, z_{t-1} is the emitter.
 int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<PathVertex>& light, int s, int t);
 
-// Throws std::invalid_argument unless 0 <= strategy_images <= 16.
-void check_strategy_images(const char* integrator, int strategy_images);
-
 }  // namespace rm

@@ -77,8 +77,9 @@ film       hdrfilm: width [768], height [576] (1..16384), pixel_format
 rfilter    box (radius 0.5), tent: radius [1], gaussian: stddev [0.5]
                (radius = 4 stddev).
 sampler    independent: sample_count [4] -> SensorDesc.spp, seed (accepted).
-integrator direct path volpath ptracer bdpt photonmapper sppm; its parameters
-           (ints, floats, bools, strings) go unchecked to IntegratorDesc.params.
+integrator every estimator the core registers (radiometer.registry); its
+           parameters (ints, floats, bools, strings) go to IntegratorDesc.params,
+           checked against the estimator's declaration at render time.
 medium     homogeneous: sigma_t [1] + albedo [0.75] (Mitsuba 3), or sigma_a +
                sigma_s (Mitsuba 0.6's form; albedo = sigma_s / sigma_t, 0
                where sigma_t is 0), scale [1] multiplying the coefficients;

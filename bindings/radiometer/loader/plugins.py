@@ -2,6 +2,8 @@
 (the XML tag or the dict's `type`), and the category of each type."""
 from __future__ import annotations
 
+from ..registry import estimator_names
+
 PLUGINS = {
     "shape": ("obj", "ply", "rectangle", "cube", "disk", "sphere"),
     "bsdf": ("diffuse", "conductor", "roughconductor", "dielectric", "roughdielectric",
@@ -11,7 +13,7 @@ PLUGINS = {
     "film": ("hdrfilm",),
     "rfilter": ("box", "tent", "gaussian"),
     "sampler": ("independent",),
-    "integrator": ("direct", "path", "volpath", "ptracer", "bdpt", "photonmapper", "sppm"),
+    "integrator": estimator_names(),  # the core's registry
     "medium": ("homogeneous", "heterogeneous"),
     "phase": ("isotropic", "hg"),
     "volume": ("gridvolume", "constvolume"),

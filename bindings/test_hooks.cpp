@@ -1,0 +1,206 @@
+// Test-only bindings: hooks into production code for the statistical and
+// unit tests (tests/), kept out of module.cpp. Each calls the code the
+// estimators run (sample_light, light_pdf_w, Medium, Sensor, bdpt's MIS
+// check, ParamReader) rather than a copy of it.
+#include <pybind11/functional.h>
+
+#include "bindings.h"
+#include "convert.h"
+#include "render/registry.h"
+#include "scene/scene.h"
+#include "transport/common.h"
+
+namespace rm::bind {
+
+namespace {
+
+const Medium& medium_at(const Scene& s, int m) {
+    if (m < 0 || size_t(m) >= s.media.size()) throw py::index_error("no medium " + std::to_string(m));
+    return *s.media[size_t(m)];
+}
+
+using PointArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+// f(p) -> Color at each row of an (N, 3) array of world points: (N, 3).
+template <class F>
+py::array_t<float> per_point(const PointArray& pts, F f) {
+    py::array_t<float> out({pts.shape(0), py::ssize_t(3)});
+    auto p = pts.unchecked<2>();
+    auto o = out.mutable_unchecked<2>();
+    for (py::ssize_t i = 0; i < pts.shape(0); ++i) {
+        Color c = f(Vec3(float(p(i, 0)), float(p(i, 1)), float(p(i, 2))));
+        for (int k = 0; k < 3; ++k) o(i, k) = c[k];
+    }
+    return out;
+}
+
+}  // namespace
+
+void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
+    scene
+        // Tests of the majorant grid (tests/test_majorant_grid.py): sigma_t
+        // and the local majorant at N x 3 world points, N x 3 arrays.
+        .def("medium_sigma_t",
+             [](const Scene& s, int m, const PointArray& pts) {
+                 const Medium& med = medium_at(s, m);
+                 return per_point(pts, [&](const Vec3& p) {
+                     Color st, ss;
+                     med.coefficients(p, st, ss);
+                     return st;
+                 });
+             })
+        .def("medium_majorant",
+             [](const Scene& s, int m, const PointArray& pts) {
+                 const Medium& med = medium_at(s, m);
+                 return per_point(pts, [&](const Vec3& p) { return med.majorant_at(p); });
+             })
+        .def("medium_has_majorant_grid", [](const Scene& s, int m) { return medium_at(s, m).has_majorant_grid(); })
+        // `n` ratio-tracking estimates of the transmittance of o + d t, t in
+        // [0, t1) (Medium::segment_transmittance), seeded: an n x 3 array.
+        .def("medium_transmittance_samples",
+             [](const Scene& s, int m, py::object o, py::object d, float t1, int n, uint64_t seed) {
+                 const Medium& med = medium_at(s, m);
+                 Color oc = to_color(o), dc = to_color(d);
+                 Vec3 ov(oc.x, oc.y, oc.z), dv = normalize(Vec3(dc.x, dc.y, dc.z));
+                 py::array_t<float> out({py::ssize_t(n), py::ssize_t(3)});
+                 auto w = out.mutable_unchecked<2>();
+                 for (int i = 0; i < n; ++i) {
+                     Sampler sampler(seed, 0, uint64_t(i));
+                     Color tr = med.segment_transmittance(ov, dv, t1, sampler);
+                     for (int c = 0; c < 3; ++c) w(i, c) = tr[c];
+                 }
+                 return out;
+             },
+             py::arg("medium"), py::arg("o"), py::arg("d"), py::arg("t1"), py::arg("n"), py::arg("seed") = 0)
+        .def("sample_emitter_direction",
+             [](const Scene& s, py::object ref, py::object u) {
+                 // Next event estimation's light sample (sample_light, as estimate_direct
+                 // takes it): u columns = (pick, u.x, u.y, u_extra); pdf includes the pick.
+                 if (!s.committed()) throw py::value_error("scene is not committed");
+                 auto r = flat<float>(ref, 3, "ref");
+                 auto uu = flat<float>(u, 4, "u");
+                 size_t n = r.size() / 3;
+                 if (uu.size() != 4 * n) throw py::value_error("u must be (N, 4) for N reference points");
+                 std::vector<float> d(3 * n), pdf(n), rad(3 * n), delta(n);
+                 const float pick = emitter_pick_prob(s);
+                 for (size_t i = 0; i < n; ++i) {
+                     if (s.emitters.empty()) continue;
+                     DirectSample ds;
+                     sample_light(s, Vec3(r[3 * i], r[3 * i + 1], r[3 * i + 2]), uu[4 * i],
+                                  Vec2(uu[4 * i + 1], uu[4 * i + 2]), uu[4 * i + 3], ds);
+                     for (int k = 0; k < 3; ++k) { d[3 * i + k] = ds.d[k]; rad[3 * i + k] = ds.radiance[k]; }
+                     pdf[i] = ds.pdf_w * pick;
+                     delta[i] = ds.is_delta ? 1.f : 0.f;
+                 }
+                 py::dict out;
+                 py::ssize_t N = py::ssize_t(n);
+                 out["d"] = to_numpy(std::move(d), {N, 3});
+                 out["pdf"] = to_numpy(std::move(pdf), {N});
+                 out["radiance"] = to_numpy(std::move(rad), {N, 3});
+                 out["is_delta"] = to_numpy(std::move(delta), {N});
+                 return out;
+             },
+             py::arg("ref"), py::arg("u"))
+        .def("sample_sensor_rays",
+             [](const Scene& s, py::object film, py::object u) {
+                 // Rays the sensor generates for film positions (N, 2) (pixels,
+                 // continuous) and extra samples u (N, 5) = (u1, u2.xy, u3.xy).
+                 if (!s.sensor) throw py::value_error("scene has no sensor");
+                 auto f = flat<float>(film, 2, "film");
+                 auto uu = flat<float>(u, 5, "u");
+                 size_t n = f.size() / 2;
+                 if (uu.size() != 5 * n) throw py::value_error("u must be (N, 5) for N film positions");
+                 std::vector<float> o(3 * n), d(3 * n), w(3 * n);
+                 for (size_t i = 0; i < n; ++i) {
+                     SensorRay sr = s.sensor->sample_ray(Vec2(f[2 * i], f[2 * i + 1]), uu[5 * i],
+                                                         Vec2(uu[5 * i + 1], uu[5 * i + 2]),
+                                                         Vec2(uu[5 * i + 3], uu[5 * i + 4]));
+                     for (int k = 0; k < 3; ++k) { o[3 * i + k] = sr.ray.o[k]; d[3 * i + k] = sr.ray.d[k]; w[3 * i + k] = sr.weight[k]; }
+                 }
+                 py::dict r;
+                 py::ssize_t N = py::ssize_t(n);
+                 r["o"] = to_numpy(std::move(o), {N, 3});
+                 r["d"] = to_numpy(std::move(d), {N, 3});
+                 r["weight"] = to_numpy(std::move(w), {N, 3});
+                 return r;
+             },
+             py::arg("film"), py::arg("u"))
+        .def("pdf_emitter_direction",
+             [](const Scene& s, py::object ref, py::object dirs) {
+                 // The light-sampling density that MIS assigns to a ray leaving ref
+                 // along d (light_pdf_w, as mis_emission_hit takes it).
+                 if (!s.committed()) throw py::value_error("scene is not committed");
+                 auto r = flat<float>(ref, 3, "ref");
+                 auto dd = flat<float>(dirs, 3, "d");
+                 size_t n = dd.size() / 3;
+                 bool one_ref = r.size() == 3;
+                 if (!one_ref && r.size() != dd.size()) throw py::value_error("ref must be (1, 3) or match d");
+                 std::vector<float> out(n, 0.f);
+                 {
+                     py::gil_scoped_release nogil;
+                     for (size_t i = 0; i < n; ++i) {
+                         size_t j = one_ref ? 0 : i;
+                         Ray ray;
+                         ray.o = Vec3(r[3 * j], r[3 * j + 1], r[3 * j + 2]);
+                         ray.d = normalize(Vec3(dd[3 * i], dd[3 * i + 1], dd[3 * i + 2]));
+                         Interaction it;
+                         if (s.intersect(ray, it)) {
+                             int e = s.shapes[it.shape]->emitter;
+                             if (e >= 0) out[i] = light_pdf_w(s, *s.emitters[e], ray.o, &it);
+                         } else {
+                             for (const Emitter* env : s.environment) out[i] += light_pdf_w(s, *env, ray.o, nullptr);
+                         }
+                     }
+                 }
+                 return to_numpy(std::move(out), {py::ssize_t(n)});
+             },
+             py::arg("ref"), py::arg("d"));
+
+    m.def(
+        "bdpt_mis_check",
+        [](const Scene& scene, const IntegratorDesc& idesc, uint64_t seed, int n) {
+            if (!scene.committed()) throw py::value_error("bdpt_mis_check: scene is not committed");
+            std::unique_ptr<Integrator> bdpt = make_integrator(idesc, all_effects());
+            std::vector<float> fast, brute, sums;
+            std::vector<int> strategy;
+            {
+                py::gil_scoped_release nogil;
+                bdpt_mis_check(scene, *bdpt, seed, n, fast, brute, sums, strategy);
+            }
+            return py::make_tuple(py::array_t<float>(fast.size(), fast.data()),
+                                  py::array_t<float>(brute.size(), brute.data()),
+                                  py::array_t<float>(sums.size(), sums.data()),
+                                  py::array_t<int>(strategy.size(), strategy.data()));
+        },
+        py::arg("scene"), py::arg("integrator"), py::arg("seed"), py::arg("n"),
+        "test hook: bdpt's MIS weights (linear-time), brute-force ones and the linear-time weights' sum over "
+        "each path's strategies, for the strategies of n sample pairs");
+
+    // The unused-parameter check of a factory that reads only `reads`:
+    // resolves `params` for estimator `type` against its declaration, reads
+    // the parameters named in `reads` through a ParamReader and reports
+    // the rest (ParamError: SceneError naming the first unread one).
+    m.def(
+        "param_reader_check",
+        [](const std::string& type, const py::dict& params, const std::vector<std::string>& reads) {
+            const EstimatorInfo* info = find_estimator(type);
+            if (!info) throw py::value_error("param_reader_check: no estimator '" + type + "'");
+            ParamSet resolved = resolve_params(*info, type, to_param_set(params, type));
+            ParamReader reader(*info, type, resolved);
+            for (const std::string& r : reads) {
+                const ParamSpec* s = info->param(r);
+                if (!s) throw py::value_error("param_reader_check: '" + type + "' declares no '" + r + "'");
+                switch (s->type) {
+                    case ParamType::Bool: reader.get_bool(s->name); break;
+                    case ParamType::Int: reader.get_int(s->name); break;
+                    case ParamType::Float: reader.get_float(s->name); break;
+                    case ParamType::String: reader.get_string(s->name); break;
+                }
+            }
+            reader.report_unused();
+            return from_param_set(resolved);
+        },
+        py::arg("type"), py::arg("params"), py::arg("reads"));
+}
+
+}  // namespace rm::bind
