@@ -15,8 +15,8 @@
 //
 // Driver: bdpt splats (t = 1), so it runs through the light-path driver
 // (light_render.cpp): light path g = s W H + j also traces one camera path
-// through pixel j, its film position drawn by filter importance sampling as
-// render.cpp does, and its (t >= 2) contributions go to pixel j alone
+// through pixel j, its film position drawn by filter importance sampling
+// (camera_sample.h, as every camera path), and its (t >= 2) contributions go to pixel j alone
 // (Splat::pixel), scaled by W H so that the driver's division by spp W H
 // leaves the mean over the pixel's spp camera samples.
 //
@@ -84,6 +84,7 @@
 
 #include "film/film.h"
 #include "render/registry.h"
+#include "transport/camera_sample.h"
 #include "transport/subpath.h"
 
 namespace rm {
@@ -149,7 +150,6 @@ public:
     void generate_subpaths(const Scene& scene, Sampler& sampler, int pixel, EmissionSample& es,
                            ThreadStats& stats) const {
         const Sensor& sensor = *scene.sensor;
-        const int W = sensor.width, H = sensor.height;
         std::vector<PathVertex>& cam = cam_ref();
         std::vector<PathVertex>& light = light_ref();
         cam.clear();
@@ -157,14 +157,8 @@ public:
         ++stats.paths;
 
         // 1. The camera subpath through `pixel`, its film position drawn by
-        //    filter importance sampling (as render.cpp).
-        int px = pixel % W, py = pixel / W;
-        float fx = filter_->sample(sampler.next_1d(), -float(px) - 0.5f, float(W - px) - 0.5f);
-        float fy = filter_->sample(sampler.next_1d(), -float(py) - 0.5f, float(H - py) - 0.5f);
-        Vec2 film_pos(float(px) + 0.5f + fx, float(py) + 0.5f + fy);
-        float u1 = sampler.next_1d();
-        Vec2 u2 = sampler.next_2d(), u3 = sampler.next_2d();
-        SensorRay sr = sensor.sample_ray(film_pos, u1, u2, u3);
+        //    filter importance sampling (camera_sample.h).
+        SensorRay sr = sample_camera_ray(sensor, *filter_, pixel, sampler);
         PathVertex z0;
         z0.type = VType::Camera;
         z0.it.p = sr.ray.o;

@@ -56,7 +56,7 @@
 #include "transport/common.h"
 #include "transport/media_common.h"
 #include "core/warp.h"
-#include "render/render.h"
+#include "render/pass_loop.h"
 #include "render/registry.h"
 #include "transport/photon_trace.h"
 
@@ -165,6 +165,9 @@ public:
     }
 
     RenderOutput drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const override;
+    // Pass 1: the photon maps the scene calls for, and the ray-marching
+    // steps; false when cancelled.
+    bool photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMapStats>& info, ThreadStats& pstats) const;
 
     // Pass 2: the radiance along one camera ray, split four ways (top of file).
     void radiance(const Scene& scene, const Maps& maps, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
@@ -727,7 +730,7 @@ void PhotonMapper::radiance_media(const Scene& scene, const Maps& maps, Sampler&
 
 namespace {
 
-// The camera passes of photonmapper, through the ordinary tile driver.
+// The camera passes of photonmapper, through the camera driver.
 class PhotonMapperPass final : public Integrator {
 public:
     PhotonMapperPass(const PhotonMapper& pm, const Maps& maps) : pm_(pm), maps_(maps) {
@@ -747,23 +750,30 @@ private:
 
 }  // namespace
 
-RenderOutput empty_render_output(const Scene& scene, int threads, double seconds) {
-    RenderOutput out;
-    out.width = scene.sensor->width;
-    out.height = scene.sensor->height;
-    size_t n = size_t(out.width) * size_t(out.height) * 3;
-    out.image.assign(n, 0.f);
-    out.variance.assign(n, std::numeric_limits<float>::quiet_NaN());
-    out.effects.assign(kNumEffects, std::vector<float>(n, 0.f));
-    out.cancelled = true;
-    out.threads = threads;
-    out.seconds = seconds;
+RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
+    // 1. Pass 1, the photon maps: the loop's setup, whose time counts
+    //    against a time budget (and in the checkpoints' seconds).
+    PassLoop loop(scene, opts, poll);
+    Maps maps;
+    std::vector<PhotonMapStats> info;
+    ThreadStats pstats;
+    if (!photon_pass(loop, maps, info, pstats)) return loop.cancelled_output();
+    // 2. Pass 2, the camera passes, through the camera driver.
+    PhotonMapperPass pass(*this, maps);
+    pass.mask = mask;
+    RenderOutput out = render_camera_paths(loop, pass);
+    // 3. The photon passes' counters and maps.
+    out.stats.merge(pstats);
+    out.photon_maps = info;
+    out.seconds = loop.elapsed();
     return out;
 }
 
-RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
-    auto t0 = Clock::now();
-    int threads = render_threads(opts);
+bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMapStats>& info,
+                               ThreadStats& pstats) const {
+    const Scene& scene = loop.scene();
+    const RenderOptions& opts = loop.options();
+    int threads = loop.threads();
     const SceneFeatures& f = scene.features;
     bool lights = !scene.emitters.empty();
     bool long_paths = max_depth_ < 0 || max_depth_ >= 3;  // L S D E and L D D E have 3 segments
@@ -775,11 +785,7 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     Vec3 center;
     float radius;
     scene.bounding_sphere(center, radius);
-    Maps maps;
-    std::vector<PhotonMapStats> info;
-    ThreadStats pstats;
-    uint64_t total = opts.seconds > 0 ? 0 : uint64_t(scene.sensor->width) * scene.sensor->height * uint64_t(opts.spp);
-    std::function<bool()> poll_once = [&] { return !poll || poll(0, total); };
+    const std::function<bool()>& poll_once = loop.poll_once();
     // Traces one map's photons and files its stats; `make(photons)` builds
     // the tree(s) from them. False when cancelled.
     auto trace_and_build = [&](const char* name, const PhotonTraceSpec& spec, uint64_t target, auto&& make) {
@@ -815,7 +821,7 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
         PhotonTraceSpec spec = spec_for(1, 1);
         spec.caustic_only = true;
         if (!build("caustic", spec, uint64_t(caustic_photons_), maps.caustic))
-            return empty_render_output(scene, threads, since(t0));
+            return false;
         maps.has_caustic = true;
         maps.r2_caustic = sqr(caustic_radius_ * radius);
     }
@@ -823,7 +829,7 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
         PhotonTraceSpec spec = spec_for(2, final_gather_ ? 2 : 1);
         spec.indirect_only = !final_gather_;
         if (!build("global", spec, uint64_t(global_photons_), maps.global))
-            return empty_render_output(scene, threads, since(t0));
+            return false;
         maps.has_global = true;
         maps.r2_global = sqr(global_radius_ * radius);
     }
@@ -853,7 +859,7 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
             for (size_t m = 0; m < per.size(); ++m) maps.volume[m].build(std::move(per[m]), threads);
         };
         if (!trace_and_build("volume", spec, uint64_t(volume_photons_), per_medium))
-            return empty_render_output(scene, threads, since(t0));
+            return false;
         maps.has_volume = true;
         maps.r2_volume = sqr(volume_radius_ * radius);
     }
@@ -877,19 +883,7 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
             maps.step[m] = step_size_ > 0.f ? step_size_ : auto_step;
         }
     }
-    // The camera passes; a time budget counts the photon passes too.
-    RenderOptions o = opts;
-    if (o.seconds > 0) o.seconds = std::max(opts.seconds - since(t0), 1e-3);
-    PhotonMapperPass pass(*this, maps);
-    pass.mask = mask;
-    double photon_seconds = since(t0);
-    RenderOutput out = render(scene, pass, o, poll);
-    // Error-vs-time curves must count the photon passes.
-    for (Checkpoint& cp : out.checkpoints) cp.seconds += photon_seconds;
-    out.stats.merge(pstats);
-    out.photon_maps = info;
-    out.seconds = since(t0);
-    return out;
+    return true;
 }
 
 namespace {

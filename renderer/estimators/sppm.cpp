@@ -2,7 +2,7 @@
 // "Stochastic Progressive Photon Mapping"; the radius reduction of Hachisuka,
 // Ogaki & Jensen 2008, "Progressive Photon Mapping"). Each pass (one sample
 // per pixel):
-//   1. a camera ray per pixel (filter importance sampled, as render.cpp does)
+//   1. a camera ray per pixel (filter importance sampled: camera_sample.h)
 //      follows specular vertices to its first non-specular vertex x, the
 //      pass's visible point; emission on the way and direct light at x
 //      (one light sample, next event estimation) are added as in `path`;
@@ -39,10 +39,10 @@
 #include <stdexcept>
 #include <thread>
 
+#include "render/pass_loop.h"
+#include "transport/camera_sample.h"
 #include "transport/common.h"
-#include "render/parallel.h"
 #include "render/registry.h"
-#include "render/render.h"
 #include "transport/photon_trace.h"
 
 namespace rm {
@@ -114,6 +114,8 @@ public:
     RenderOutput drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const override;
 
 private:
+    class Passes;
+
     // Step 1: the camera path to its visible point; emission and direct light
     // along the way go to `out`.
     void camera_path(const Scene& scene, Sampler& sampler, Ray ray, EffectRadiance& out, VisiblePoint& vp,
@@ -164,57 +166,61 @@ private:
     float initial_radius_, alpha_;
 };
 
-RenderOutput Sppm::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
-    auto t0 = Clock::now();
-    const Sensor& sensor = *scene.sensor;
-    const SensorDesc& sd = scene.sensor_desc;
-    const int W = sensor.width, H = sensor.height;
-    const size_t pixels = size_t(W) * size_t(H);
-    int threads = render_threads(opts);
-    FilterSampler filter(sd.rfilter, sd.filter_radius, sd.filter_stddev);
-    Vec3 center;
-    float radius;
-    scene.bounding_sphere(center, radius);
-    const double r0 = initial_radius_ > 0.f ? initial_radius_ : 0.01 * radius;
-    std::vector<PixelStats> px(pixels);
-    for (auto& p : px) p.r2 = r0 * r0;
-    std::vector<VisiblePoint> vps(pixels);
-    // Photons are needed when a photon-mapped class can appear at all.
-    const SceneFeatures& f = scene.features;
-    bool photons_needed = !scene.emitters.empty() && f.has_smooth_bsdf && (max_depth_ < 0 || max_depth_ >= 3) &&
+// The passes of sppm on the pass loop: one pass of the loop's plan is
+// steps 1-3 of the top of the file, once per sample index.
+class Sppm::Passes final : public PassStep {
+public:
+    Passes(const Sppm& sppm, const Scene& scene) : sppm_(sppm), scene_(scene), filter_(make_filter(scene)) {
+        const size_t pixels = size_t(scene.sensor->width) * size_t(scene.sensor->height);
+        Vec3 center;
+        float radius;
+        scene.bounding_sphere(center, radius);
+        const double r0 = sppm.initial_radius_ > 0.f ? sppm.initial_radius_ : 0.01 * radius;
+        px_.resize(pixels);
+        for (auto& p : px_) p.r2 = r0 * r0;
+        vps_.resize(pixels);
+        // Photons are needed when a photon-mapped class can appear at all.
+        const SceneFeatures& f = scene.features;
+        const EffectMask& mask = sppm.mask;
+        photons_needed_ = !scene.emitters.empty() && f.has_smooth_bsdf && (sppm.max_depth_ < 0 || sppm.max_depth_ >= 3) &&
                           (mask[kIndirect] || (f.has_delta_bsdf && (mask[kCaustic] || mask[kSpecular])));
-    PhotonTraceSpec spec;
-    spec.max_depth = max_depth_ < 0 ? -1 : max_depth_ - 1;
-    spec.rr_depth = rr_depth_;
-    spec.store_direct = false;
-    spec.stream = 3;
+        spec_.max_depth = sppm.max_depth_ < 0 ? -1 : sppm.max_depth_ - 1;
+        spec_.rr_depth = sppm.rr_depth_;
+        spec_.store_direct = false;
+        spec_.stream = 3;
+        pms_.name = "sppm";
+        pms_.bytes_per_photon = double(PhotonMap::bytes_per_photon());
+    }
 
-    RenderOutput out;
-    out.width = W;
-    out.height = H;
-    out.threads = threads;
-    PhotonMapStats pms;
-    pms.name = "sppm";
-    pms.bytes_per_photon = double(PhotonMap::bytes_per_photon());
-    std::atomic<bool> cancel{false};
-    const uint64_t total = opts.seconds > 0 ? 0 : uint64_t(pixels) * uint64_t(opts.spp);
-    std::atomic<uint64_t> done{0};
-    std::function<bool()> poll_once = [&] { return !poll || poll(done.load(), total); };
-    std::vector<ThreadStats> tstats(static_cast<size_t>(threads));
-    ThreadStats pstats;
-    int passes = 0;
-    double sec_per_pass = 0;
-    std::vector<int> cps = checkpoint_plan(opts);
+    int pass(PassLoop& loop, int s0, int s1) override {
+        for (int s = s0; s < s1; ++s) {
+            // 1. Camera pass: visible points, emission and direct light (kept
+            //    in the visible points until step 3, so a cancel leaves the
+            //    finished passes untouched).
+            if (!loop.parallel_for(size_t(scene_.sensor->height),
+                                   [&](size_t y, int t) { camera_row(loop, s, int(y), loop.stats(t)); }))
+                return s;
+            // 2. Photon pass: photon_count light paths into this pass's map.
+            PhotonMap map;
+            if (photons_needed_ && !photon_pass(loop, s, map)) return s;
+            // 3. Gather and update every pixel's statistics (never cancelled:
+            //    a pass is either wholly in the estimate or not at all).
+            loop.parallel_commit(size_t(scene_.sensor->height),
+                                 [&](size_t y, int) { gather_row(map, int(y)); });
+        }
+        return s1;
+    }
 
     // The estimate after `n` passes (H&J 2009, eq. 10 plus the ray-traced part).
-    auto develop = [&](int n, std::vector<float>& image, std::vector<float>& variance,
-                       std::vector<std::vector<float>>* effects) {
+    void develop(int n, std::vector<float>& image, std::vector<float>& variance,
+                 std::vector<std::vector<float>>* effects) const override {
+        const size_t pixels = px_.size();
         image.assign(3 * pixels, 0.f);
         variance.assign(3 * pixels, std::numeric_limits<float>::quiet_NaN());
         if (effects) effects->assign(kNumEffects, std::vector<float>(3 * pixels, 0.f));
         if (n <= 0) return;
         for (size_t p = 0; p < pixels; ++p) {
-            const PixelStats& s = px[p];
+            const PixelStats& s = px_[p];
             double e[kNumEffects][3];
             for (int k = 0; k < kNumEffects; ++k)
                 for (int ch = 0; ch < 3; ++ch) e[k][ch] = s.ray[k][ch] / n;
@@ -235,132 +241,122 @@ RenderOutput Sppm::drive(const Scene& scene, const RenderOptions& opts, const Po
                 }
             }
         }
-    };
+    }
 
-    while (!out.cancelled) {
-        int s1 = next_pass_end(opts, cps, passes, since(t0), sec_per_pass);
-        if (s1 < 0) break;
-        auto pass_t0 = Clock::now();
-        int first = passes;
-        for (int s = passes; s < s1; ++s) {
-            // 1. Camera pass: visible points, emission and direct light (kept
-            //    in the visible points until step 3, so a cancel leaves the
-            //    finished passes untouched).
-            auto camera_row = [&](size_t y, int t) {
-                for (int x = 0; x < W; ++x) {
-                    size_t p = y * size_t(W) + size_t(x);
-                    Sampler sampler(opts.seed, p, uint64_t(s));
-                    float fx = filter.sample(sampler.next_1d(), -float(x) - 0.5f, float(W - x) - 0.5f);
-                    float fy = filter.sample(sampler.next_1d(), -float(y) - 0.5f, float(H - int(y)) - 0.5f);
-                    Vec2 film_pos(float(x) + 0.5f + fx, float(y) + 0.5f + fy);
-                    float u1 = sampler.next_1d();
-                    Vec2 u2 = sampler.next_2d(), u3 = sampler.next_2d();
-                    SensorRay sr = sensor.sample_ray(film_pos, u1, u2, u3);
-                    VisiblePoint& vp = vps[p];
-                    vp.bsdf = nullptr;
-                    vp.er = EffectRadiance();
-                    ++tstats[t].paths;
-                    camera_path(scene, sampler, sr.ray, vp.er, vp, tstats[t]);
-                    vp.beta *= sr.weight;
-                    Color tot(0.f);
-                    for (int k = 0; k < kNumEffects; ++k) {
-                        vp.er.by_effect[k] *= sr.weight;
-                        tot += vp.er.by_effect[k];
-                    }
-                    // A NaN or Inf sample is counted and dropped, never written.
-                    if (!is_finite(tot) || (vp.bsdf && !is_finite(vp.beta))) {
-                        bool nan = std::isnan(tot.x + tot.y + tot.z) || std::isnan(vp.beta.x + vp.beta.y + vp.beta.z);
-                        if (nan) ++tstats[t].nan_samples; else ++tstats[t].inf_samples;
-                        vp.er = EffectRadiance();
-                        vp.bsdf = nullptr;
-                    }
-                }
-                done.fetch_add(uint64_t(W), std::memory_order_relaxed);
-            };
-            if (!run_parallel(threads, size_t(H), camera_row, poll_once, cancel)) {
-                out.cancelled = true;
-                break;
+    void finish(RenderOutput& out) const override {
+        out.stats.merge(pstats_);
+        if (photons_needed_) out.photon_maps.push_back(pms_);
+    }
+
+private:
+    static FilterSampler make_filter(const Scene& scene) {
+        const SensorDesc& sd = scene.sensor_desc;
+        return FilterSampler(sd.rfilter, sd.filter_radius, sd.filter_stddev);
+    }
+
+    // Step 1 for the pixels of row y: pixel p's camera sample of pass s on
+    // Sampler(seed, p, s), to its visible point.
+    void camera_row(PassLoop& loop, int s, int y, ThreadStats& stats) {
+        const int W = scene_.sensor->width;
+        for (int x = 0; x < W; ++x) {
+            size_t p = size_t(y) * size_t(W) + size_t(x);
+            Sampler sampler(loop.seed(), p, uint64_t(s));
+            SensorRay sr = sample_camera_ray(*scene_.sensor, filter_, int(p), sampler);
+            VisiblePoint& vp = vps_[p];
+            vp.bsdf = nullptr;
+            vp.er = EffectRadiance();
+            ++stats.paths;
+            sppm_.camera_path(scene_, sampler, sr.ray, vp.er, vp, stats);
+            vp.beta *= sr.weight;
+            Color tot(0.f);
+            for (int k = 0; k < kNumEffects; ++k) {
+                vp.er.by_effect[k] *= sr.weight;
+                tot += vp.er.by_effect[k];
             }
-            // 2. Photon pass: photon_count light paths into this pass's map.
-            PhotonMap map;
-            if (photons_needed) {
-                PhotonPass pp = trace_photon_paths(scene, spec, opts.seed, uint64_t(s), uint64_t(photon_count_),
-                                                   threads, poll_once, pstats);
-                if (pp.cancelled) {
-                    out.cancelled = true;
-                    break;
-                }
-                pms.photons += pp.photons.size();
-                pms.paths += pp.paths;
-                pms.trace_seconds += pp.seconds;
-                auto tb = Clock::now();
-                map.build(std::move(pp.photons), threads);
-                pms.build_seconds += since(tb);
+            // A NaN or Inf sample is counted and dropped, never written.
+            if (!keep_finite(stats, tot, vp.bsdf ? vp.beta : Color(0.f))) {
+                vp.er = EffectRadiance();
+                vp.bsdf = nullptr;
             }
-            // 3. Gather and update every pixel's statistics (never cancelled:
-            //    a pass is either wholly in the estimate or not at all).
-            auto gather_row = [&](size_t y, int) {
-                thread_local std::vector<Neighbour> nb;
-                BsdfContext ctx;
-                for (int x = 0; x < W; ++x) {
-                    size_t p = y * size_t(W) + size_t(x);
-                    const VisiblePoint& vp = vps[p];
-                    PixelStats& ps = px[p];
-                    Color phi[3] = {Color(0.f), Color(0.f), Color(0.f)};
-                    double m = 0;
-                    if (vp.bsdf && !map.empty()) {
-                        int budget = max_depth_ < 0 ? 255 : max_depth_ - vp.c;
-                        map.range(vp.it.p, float(ps.r2), nb);
-                        for (const Neighbour& n : nb) {
-                            const Photon& ph = map.photons()[n.idx];
-                            if (photon_depth(ph) > budget) continue;
-                            Vec3 wp = vp.it.to_local(ph.wi);
-                            float c = std::fabs(wp.z);
-                            if (!(c > 1e-7f)) continue;
-                            Color fr = vp.bsdf->eval(ctx, vp.wi, wp) * (1.f / c);
-                            if (is_black(fr)) continue;  // photons x cannot reflect (back side) do not count
-                            int j = vp.via_specular ? 2 : ((ph.flags & kPhotonIndirect) ? 1 : 0);
-                            m += 1;
-                            if (mask[kTauClasses[j]]) phi[j] += vp.beta * fr * ph.power;
-                        }
-                    }
-                    Color value = vp.er.total() + (phi[0] + phi[1] + phi[2]) * float(1.0 / (kPi * ps.r2));
-                    for (int k = 0; k < kNumEffects; ++k)
-                        for (int ch = 0; ch < 3; ++ch) ps.ray[k][ch] += vp.er.by_effect[k][ch];
-                    // H&J 2009, eqs. 6-8 (radius and flux reduction).
-                    double ratio = m > 0 ? (ps.n + alpha_ * m) / (ps.n + m) : 1.0;
-                    for (int j = 0; j < 3; ++j)
-                        for (int ch = 0; ch < 3; ++ch) ps.tau[j][ch] = (ps.tau[j][ch] + phi[j][ch]) * ratio;
-                    ps.r2 *= ratio;
-                    ps.n += alpha_ * m;
-                    for (int ch = 0; ch < 3; ++ch) {
-                        ps.sum[ch] += value[ch];
-                        ps.sum_sq[ch] += double(value[ch]) * double(value[ch]);
-                    }
-                }
-            };
-            std::atomic<bool> no_cancel{false};
-            run_parallel(threads, size_t(H), gather_row, [] { return true; }, no_cancel);
-            passes = s + 1;
         }
-        if (out.cancelled) break;
-        sec_per_pass = since(pass_t0) / std::max(1, passes - first);
-        if (poll && !poll(done.load(), total)) out.cancelled = true;
-        if (std::binary_search(cps.begin(), cps.end(), passes)) {
-            Checkpoint cp;
-            cp.spp = passes;
-            cp.seconds = since(t0);
-            develop(passes, cp.image, cp.variance, nullptr);
-            out.checkpoints.push_back(std::move(cp));
+        loop.add_done(uint64_t(W));
+    }
+
+    // Step 2: pass s's photon paths into `map`; false when cancelled.
+    bool photon_pass(PassLoop& loop, int s, PhotonMap& map) {
+        PhotonPass pp = trace_photon_paths(scene_, spec_, loop.seed(), uint64_t(s), uint64_t(sppm_.photon_count_),
+                                           loop.threads(), loop.poll_once(), pstats_);
+        if (pp.cancelled) return false;
+        pms_.photons += pp.photons.size();
+        pms_.paths += pp.paths;
+        pms_.trace_seconds += pp.seconds;
+        auto tb = Clock::now();
+        map.build(std::move(pp.photons), loop.threads());
+        pms_.build_seconds += since(tb);
+        return true;
+    }
+
+    // Step 3 for the pixels of row y: the photons within each pixel's
+    // radius of its visible point, and its statistics' update.
+    void gather_row(const PhotonMap& map, int y) {
+        const int W = scene_.sensor->width;
+        const EffectMask& mask = sppm_.mask;
+        const float alpha = sppm_.alpha_;
+        thread_local std::vector<Neighbour> nb;
+        BsdfContext ctx;
+        for (int x = 0; x < W; ++x) {
+            size_t p = size_t(y) * size_t(W) + size_t(x);
+            const VisiblePoint& vp = vps_[p];
+            PixelStats& ps = px_[p];
+            Color phi[3] = {Color(0.f), Color(0.f), Color(0.f)};
+            double m = 0;
+            if (vp.bsdf && !map.empty()) {
+                int budget = sppm_.max_depth_ < 0 ? 255 : sppm_.max_depth_ - vp.c;
+                map.range(vp.it.p, float(ps.r2), nb);
+                for (const Neighbour& n : nb) {
+                    const Photon& ph = map.photons()[n.idx];
+                    if (photon_depth(ph) > budget) continue;
+                    Vec3 wp = vp.it.to_local(ph.wi);
+                    float c = std::fabs(wp.z);
+                    if (!(c > 1e-7f)) continue;
+                    Color fr = vp.bsdf->eval(ctx, vp.wi, wp) * (1.f / c);
+                    if (is_black(fr)) continue;  // photons x cannot reflect (back side) do not count
+                    int j = vp.via_specular ? 2 : ((ph.flags & kPhotonIndirect) ? 1 : 0);
+                    m += 1;
+                    if (mask[kTauClasses[j]]) phi[j] += vp.beta * fr * ph.power;
+                }
+            }
+            Color value = vp.er.total() + (phi[0] + phi[1] + phi[2]) * float(1.0 / (kPi * ps.r2));
+            for (int k = 0; k < kNumEffects; ++k)
+                for (int ch = 0; ch < 3; ++ch) ps.ray[k][ch] += vp.er.by_effect[k][ch];
+            // H&J 2009, eqs. 6-8 (radius and flux reduction).
+            double ratio = m > 0 ? (ps.n + alpha * m) / (ps.n + m) : 1.0;
+            for (int j = 0; j < 3; ++j)
+                for (int ch = 0; ch < 3; ++ch) ps.tau[j][ch] = (ps.tau[j][ch] + phi[j][ch]) * ratio;
+            ps.r2 *= ratio;
+            ps.n += alpha * m;
+            for (int ch = 0; ch < 3; ++ch) {
+                ps.sum[ch] += value[ch];
+                ps.sum_sq[ch] += double(value[ch]) * double(value[ch]);
+            }
         }
     }
-    for (auto& t : tstats) out.stats.merge(t);
-    out.stats.merge(pstats);
-    if (photons_needed) out.photon_maps.push_back(pms);
-    out.spp = passes;
-    out.seconds = since(t0);
-    develop(passes, out.image, out.variance, &out.effects);
-    return out;
+
+    const Sppm& sppm_;
+    const Scene& scene_;
+    FilterSampler filter_;
+    std::vector<PixelStats> px_;
+    std::vector<VisiblePoint> vps_;
+    bool photons_needed_ = false;
+    PhotonTraceSpec spec_;
+    PhotonMapStats pms_;
+    ThreadStats pstats_;  // photon tracing's counters
+};
+
+RenderOutput Sppm::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
+    PassLoop loop(scene, opts, poll);
+    Passes passes(*this, scene);
+    return loop.run(passes);
 }
 
 namespace {

@@ -85,7 +85,7 @@ struct PathClass {
 // `value` at the continuous film position `film`, filed under `effect`. The
 // driver spreads it over the pixels whose filter footprint covers `film`.
 // A splat with pixel >= 0 is a camera sample of that pixel (bdpt's camera
-// subpaths, drawn by filter importance sampling as render.cpp does): it is
+// subpaths, drawn by filter importance sampling: camera_sample.h): it is
 // added to that pixel alone, unfiltered, and its value is already scaled by
 // W * H so that the driver's division by M = spp * W * H leaves the mean over
 // the pixel's spp camera samples.
@@ -141,7 +141,8 @@ public:
     virtual void trace_light_path(const Scene&, Sampler&, int pixel, std::vector<Splat>& out, ThreadStats&) const {}
     // Estimators with passes of their own (photon mapping: photon passes
     // before or between camera passes) run the render themselves:
-    // render() hands them the whole job (render.h's PollFn for `poll`).
+    // render() hands them the whole job (render.h's PollFn for `poll`),
+    // which they run as a PassStep on a PassLoop (pass_loop.h).
     bool owns_driver() const { return caps.driver == Driver::OwnPasses; }
     virtual RenderOutput drive(const Scene& scene, const RenderOptions& opts,
                                const std::function<bool(uint64_t, uint64_t)>& poll) const;

@@ -31,24 +31,16 @@
 // sigma^2 for independent paths of variance sigma^2, whatever the n_b). It
 // has B - 1 = 31 degrees of freedom.
 #include <algorithm>
-#include <atomic>
-#include <chrono>
 #include <cmath>
-#include <condition_variable>
 #include <limits>
-#include <mutex>
 #include <stdexcept>
-#include <thread>
+#include <string>
 
-#include "render/parallel.h"
-#include "render/render.h"
+#include "render/pass_loop.h"
 
 namespace rm {
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 constexpr int kBatches = 32;
 
@@ -209,14 +201,85 @@ private:
     std::vector<double> norm_x_, norm_y_;
 };
 
+// The light driver's pass: the light paths of samples [s0, s1) per pixel,
+// in chunks of up to kChunkItems work items (bounds the splats in memory).
+class LightStep final : public PassStep {
+public:
+    LightStep(const Scene& scene, const Integrator& integrator, const FilterSampler& filter, int n_strat, int threads)
+        : scene_(scene), integrator_(integrator), pixels_(uint64_t(scene.sensor->width) * uint64_t(scene.sensor->height)),
+          n_strat_(n_strat), film_(scene.sensor->width, scene.sensor->height, filter, n_strat),
+          stripes_(std::min(scene.sensor->height, threads * 4)), items_(kChunkItems) {}
+
+    int pass(PassLoop& loop, int s0, int s1) override {
+        const uint64_t g_end = uint64_t(s1) * pixels_;
+        while (paths_done_ < g_end) {
+            // 1. Trace a chunk's items over threads, each into its own splat list.
+            const uint64_t g0 = paths_done_, chunk_paths = std::min(g_end - g0, kChunkItems * kItemPaths);
+            size_t n_items = size_t((chunk_paths + kItemPaths - 1) / kItemPaths);
+            auto trace_item = [&](size_t i, int t) {
+                uint64_t a = g0 + i * kItemPaths, b = std::min(g0 + chunk_paths, a + kItemPaths);
+                trace_paths(loop, a, b, items_[i], loop.stats(t));
+            };
+            // A cancel drops the unfinished chunk; finished chunks stand, and
+            // the estimate uses every light path they traced.
+            if (!loop.parallel_for(n_items, trace_item)) return int(paths_done_ / pixels_);
+            // 2. Add the splats to the film in item order, rows shared out among threads.
+            const int H = scene_.sensor->height;
+            auto merge_stripe = [&](size_t i, int) {
+                int y0 = int(int64_t(H) * int64_t(i) / stripes_), y1 = int(int64_t(H) * int64_t(i + 1) / stripes_);
+                film_.merge(items_, n_items, y0, y1);
+            };
+            loop.parallel_commit(size_t(stripes_), merge_stripe);
+            paths_done_ += chunk_paths;
+        }
+        return s1;
+    }
+
+    // The estimate of every light path in the film (after a cancel, more
+    // than spp * W * H of them).
+    void develop(int, std::vector<float>& image, std::vector<float>& variance,
+                 std::vector<std::vector<float>>* effects) const override {
+        film_.develop(paths_done_, image, variance, effects);
+    }
+
+    void finish(RenderOutput& out) const override {
+        if (n_strat_ > 0) film_.develop_strategies(paths_done_, out.strategies, out.strategies_unweighted);
+    }
+
+private:
+    // Light paths g in [a, b), each on Sampler(seed, g mod W H, g / (W H)),
+    // their finite splats into `dst` with their batch.
+    void trace_paths(PassLoop& loop, uint64_t a, uint64_t b, std::vector<ItemSplat>& dst, ThreadStats& stats) const {
+        dst.clear();
+        std::vector<Splat> splats;
+        for (uint64_t g = a; g < b; ++g) {
+            if (loop.cancelled()) return;
+            Sampler sampler(loop.seed(), g % pixels_, g / pixels_);
+            splats.clear();
+            integrator_.trace_light_path(scene_, sampler, int(g % pixels_), splats, stats);
+            for (const Splat& s : splats)
+                if (keep_finite(stats, s.value)) dst.push_back({s, batch_of(g, pixels_)});
+        }
+        loop.add_done(b - a);
+    }
+
+    const Scene& scene_;
+    const Integrator& integrator_;
+    const uint64_t pixels_;
+    const int n_strat_;
+    SplatFilm film_;
+    const int stripes_;
+    std::vector<std::vector<ItemSplat>> items_;
+    uint64_t paths_done_ = 0;  // light paths [0, paths_done_) are in the film
+};
+
 }  // namespace
 
 RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator, const RenderOptions& opts,
                                 const PollFn& poll) {
     integrator.check_scene(scene);
-    const Sensor& sensor = *scene.sensor;
     const SensorDesc& sd = scene.sensor_desc;
-    int W = sensor.width, H = sensor.height;
+    int W = scene.sensor->width, H = scene.sensor->height;
     FilterSampler filter(sd.rfilter, sd.filter_radius, sd.filter_stddev);
     const int n_strat = integrator.strategy_depth() > 0 ? num_strategies(integrator.strategy_depth()) : 0;
     double film_bytes = double(W) * double(H) * 3.0 * (kNumEffects + kBatches + 2 * n_strat) * sizeof(double);
@@ -224,98 +287,9 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
         throw std::invalid_argument("render: a " + std::to_string(W) + "x" + std::to_string(H) +
                                     " film needs " + std::to_string(int(film_bytes / (1ull << 30))) +
                                     " GiB of light-tracing buffers (limit 16 GiB); lower the resolution or strategy_images");
-    SplatFilm film(W, H, filter, n_strat);
-
-    int threads = render_threads(opts);
-    RenderOutput out;
-    out.width = W;
-    out.height = H;
-    out.threads = threads;
-    std::atomic<bool> cancel{false};
-    auto t0 = Clock::now();
-    std::vector<int> cps = checkpoint_plan(opts);
-
-    const uint64_t pixels = uint64_t(W) * uint64_t(H);
-    const uint64_t total = opts.seconds > 0 ? 0 : pixels * uint64_t(opts.spp);
-    uint64_t paths_done = 0;  // light paths [0, paths_done) are in the film
-    std::atomic<uint64_t> in_flight{0};
-    int spp_done = 0;
-    double sec_per_spp = 0;
-    ThreadStats stats;
-    std::vector<std::vector<ItemSplat>> items(kChunkItems);
-    std::vector<ThreadStats> tstats(threads);
-    auto poll_once = [&]() { return !poll || poll(paths_done + in_flight.load(), total); };
-
-    while (!out.cancelled) {
-        // The pass plan of render.cpp (same bytes for a seed under an spp budget).
-        int s1 = next_pass_end(opts, cps, spp_done, since(t0), sec_per_spp);
-        if (s1 < 0) break;
-        auto pass_t0 = Clock::now();
-        const uint64_t g_end = uint64_t(s1) * pixels;
-        // Chunks of up to kChunkItems work items: trace, then add to the film.
-        while (paths_done < g_end) {
-            uint64_t chunk_paths = std::min(g_end - paths_done, kChunkItems * kItemPaths);
-            size_t n_items = size_t((chunk_paths + kItemPaths - 1) / kItemPaths);
-            const uint64_t g0 = paths_done;
-            in_flight = 0;
-            auto trace_item = [&](size_t i, int t) {
-                std::vector<ItemSplat>& dst = items[i];
-                dst.clear();
-                std::vector<Splat> splats;
-                uint64_t a = g0 + i * kItemPaths, b = std::min(g0 + chunk_paths, a + kItemPaths);
-                for (uint64_t g = a; g < b; ++g) {
-                    if (cancel.load(std::memory_order_relaxed)) return;
-                    Sampler sampler(opts.seed, g % pixels, g / pixels);
-                    splats.clear();
-                    integrator.trace_light_path(scene, sampler, int(g % pixels), splats, tstats[t]);
-                    for (const Splat& s : splats) {
-                        // A NaN or Inf contribution is counted and dropped, never written.
-                        if (!is_finite(s.value)) {
-                            bool nan = std::isnan(s.value.x) || std::isnan(s.value.y) || std::isnan(s.value.z);
-                            if (nan) ++tstats[t].nan_samples; else ++tstats[t].inf_samples;
-                            continue;
-                        }
-                        dst.push_back({s, batch_of(g, pixels)});
-                    }
-                }
-                in_flight.fetch_add(b - a, std::memory_order_relaxed);
-            };
-            if (!run_parallel(threads, n_items, trace_item, poll_once, cancel)) {
-                out.cancelled = true;  // the unfinished chunk is dropped; finished chunks stand
-                break;
-            }
-            int stripes = std::min(H, threads * 4);
-            auto merge_stripe = [&](size_t i, int) {
-                int y0 = int(int64_t(H) * int64_t(i) / stripes), y1 = int(int64_t(H) * int64_t(i + 1) / stripes);
-                film.merge(items, n_items, y0, y1);
-            };
-            std::atomic<bool> no_cancel{false};
-            run_parallel(threads, size_t(stripes), merge_stripe, [] { return true; }, no_cancel);
-            paths_done += chunk_paths;
-            in_flight = 0;
-        }
-        if (out.cancelled) break;
-        double pass_sec = since(pass_t0);
-        sec_per_spp = pass_sec / (s1 - spp_done);
-        spp_done = s1;
-        if (poll && !poll(paths_done, total)) out.cancelled = true;
-        if (std::binary_search(cps.begin(), cps.end(), spp_done)) {
-            Checkpoint cp;
-            cp.spp = spp_done;
-            cp.seconds = since(t0);
-            film.develop(paths_done, cp.image, cp.variance, nullptr);
-            out.checkpoints.push_back(std::move(cp));
-        }
-    }
-    for (auto& s : tstats) stats.merge(s);
-    // A cancel inside a pass keeps its finished chunks: the estimate uses
-    // every light path traced, and spp reports whole samples per pixel.
-    out.spp = int(paths_done / pixels);
-    out.seconds = since(t0);
-    out.stats = stats;
-    film.develop(paths_done, out.image, out.variance, &out.effects);
-    if (n_strat > 0) film.develop_strategies(paths_done, out.strategies, out.strategies_unweighted);
-    return out;
+    PassLoop loop(scene, opts, poll);
+    LightStep step(scene, integrator, filter, n_strat, loop.threads());
+    return loop.run(step);
 }
 
 }  // namespace rm

@@ -1,6 +1,6 @@
 // A work queue over `threads` threads that the calling thread polls while it
-// runs: shared by the drivers that are not tile loops (light_render.cpp, the
-// photon passes of photon/).
+// runs: the threads of every driver (through the pass loop, pass_loop.h) and
+// of the photon tracers.
 #pragma once
 #include <atomic>
 #include <chrono>

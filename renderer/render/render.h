@@ -1,7 +1,10 @@
-// The render driver: tiles over threads, passes over samples, wall-clock
-// budgets, checkpoints, progress and cancellation. Results are identical for
-// a given seed whatever the thread count: every (pixel, sample) has its own
-// random stream and each pixel's samples are accumulated in order.
+// The render entry point and what it returns. render() checks the scene
+// against the estimator and hands it to its driver: the camera driver
+// (camera_driver.cpp), the light driver (light_render.cpp), or the
+// estimator's own passes (Integrator::drive); all of them run on the one
+// pass loop (pass_loop.h), which owns budgets, checkpoints, progress and
+// cancellation. Results are identical for a given seed whatever the thread
+// count.
 #pragma once
 #include <cstdint>
 #include <functional>
@@ -60,23 +63,12 @@ using PollFn = std::function<bool(uint64_t done, uint64_t total)>;
 
 RenderOutput render(const Scene& scene, const Integrator& integrator, const RenderOptions& opts, const PollFn& poll);
 
-// Threads a render uses: opts.threads, or all hardware threads when 0.
-int render_threads(const RenderOptions& opts);
-// The checkpoints a render keeps: opts.checkpoints sorted, without repeats.
-std::vector<int> checkpoint_plan(const RenderOptions& opts);
+// The driver of camera estimators (Integrator::sample along camera rays).
+RenderOutput render_camera_paths(const Scene& scene, const Integrator& integrator, const RenderOptions& opts,
+                                 const PollFn& poll);
 
-// End (exclusive sample index) of the next pass of samples per pixel after
-// spp_done, or -1 when the budget is spent; shared by every render driver so
-// their pass plans (and hence their bytes for a seed) follow one rule.
-int next_pass_end(const RenderOptions& opts, const std::vector<int>& checkpoints, int spp_done, double elapsed,
-                  double sec_per_spp);
-
-// An output with no samples (zero image, NaN variance, cancelled): what a
-// render cancelled before its first camera pass returns.
-RenderOutput empty_render_output(const Scene& scene, int threads, double seconds);
-
-// The driver of light-tracing estimators (integrator.is_light_tracer()),
-// called by render(): light paths splatted onto the film (light_render.cpp).
+// The driver of light-tracing estimators (integrator.is_light_tracer()):
+// light paths splatted onto the film (light_render.cpp).
 RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator, const RenderOptions& opts,
                                 const PollFn& poll);
 

@@ -1,0 +1,100 @@
+// The camera driver: camera rays through every pixel, tile by tile, on the
+// pass loop. Results are identical for a given seed whatever the thread
+// count: every (pixel, sample) has its own random stream, each pixel's
+// samples are accumulated in order by one thread, and a pass joins the film
+// only when complete.
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+#include "render/pass_loop.h"
+#include "transport/camera_sample.h"
+
+namespace rm {
+
+namespace {
+
+constexpr int kTile = 16;
+
+class CameraStep final : public PassStep {
+public:
+    CameraStep(const Scene& scene, const Integrator& integrator)
+        : scene_(scene), integrator_(integrator), W_(scene.sensor->width), H_(scene.sensor->height),
+          filter_(scene.sensor_desc.rfilter, scene.sensor_desc.filter_radius, scene.sensor_desc.filter_stddev),
+          film_(W_, H_), pass_film_(W_, H_), tiles_x_((W_ + kTile - 1) / kTile), tiles_y_((H_ + kTile - 1) / kTile) {}
+
+    int pass(PassLoop& loop, int s0, int s1) override {
+        // 1. Tiles over threads, into the film of the pass in flight.
+        auto tile = [&](size_t i, int t) { render_tile(loop, int(i), s0, s1, loop.stats(t)); };
+        if (!loop.parallel_for(size_t(tiles_x_) * size_t(tiles_y_), tile)) return s0;  // the unfinished pass is dropped
+        // 2. The complete pass joins the finished ones.
+        film_.merge_and_clear(pass_film_);
+        return s1;
+    }
+
+    void develop(int spp, std::vector<float>& image, std::vector<float>& variance,
+                 std::vector<std::vector<float>>* effects) const override {
+        film_.develop(spp, image, variance, effects);
+    }
+
+private:
+    void render_tile(PassLoop& loop, int tile, int s0, int s1, ThreadStats& stats) {
+        int x0 = (tile % tiles_x_) * kTile, y0 = (tile / tiles_x_) * kTile;
+        int x1 = std::min(x0 + kTile, W_), y1 = std::min(y0 + kTile, H_);
+        for (int y = y0; y < y1; ++y)
+            for (int x = x0; x < x1; ++x) {
+                if (loop.cancelled()) return;
+                int pixel = y * W_ + x;
+                for (int s = s0; s < s1; ++s) {
+                    // 1. The sample's own stream and its filter-sampled camera ray.
+                    Sampler sampler(loop.seed(), uint64_t(pixel), uint64_t(s));
+                    SensorRay sr = sample_camera_ray(*scene_.sensor, filter_, pixel, sampler);
+                    // 2. The estimator's radiance along it, by effect, times the ray's weight.
+                    EffectRadiance er;
+                    ++stats.paths;
+                    integrator_.sample(scene_, sampler, sr.ray, er, stats);
+                    Color total(0.f);
+                    for (int k = 0; k < kNumEffects; ++k) {
+                        er.by_effect[k] *= sr.weight;
+                        total += er.by_effect[k];
+                    }
+                    // 3. Into the pass's film, unless NaN or Inf (counted, dropped).
+                    if (!keep_finite(stats, total)) er = EffectRadiance();
+                    pass_film_.add(pixel, er);
+                }
+            }
+        loop.add_done(uint64_t(s1 - s0) * uint64_t((x1 - x0) * (y1 - y0)));
+    }
+
+    const Scene& scene_;
+    const Integrator& integrator_;
+    const int W_, H_;
+    FilterSampler filter_;
+    Film film_;       // finished passes
+    Film pass_film_;  // the pass in flight; merged only when complete
+    const int tiles_x_, tiles_y_;
+};
+
+}  // namespace
+
+RenderOutput render_camera_paths(PassLoop& loop, const Integrator& integrator) {
+    const Scene& scene = loop.scene();
+    int W = scene.sensor->width, H = scene.sensor->height;
+    // Two films of 27 doubles per pixel (estimate, squares, 7 effects): say
+    // so up front rather than fail inside an allocation.
+    double film_bytes = 2.0 * double(W) * double(H) * (3 + 3 + 3 * kNumEffects) * sizeof(double);
+    if (film_bytes > 16.0 * (1ull << 30))
+        throw std::invalid_argument("render: a " + std::to_string(W) + "x" + std::to_string(H) + " film needs " +
+                                    std::to_string(int(film_bytes / (1ull << 30))) +
+                                    " GiB of accumulation buffers (limit 16 GiB); lower the resolution");
+    CameraStep step(scene, integrator);
+    return loop.run(step);
+}
+
+RenderOutput render_camera_paths(const Scene& scene, const Integrator& integrator, const RenderOptions& opts,
+                                 const PollFn& poll) {
+    PassLoop loop(scene, opts, poll);
+    return render_camera_paths(loop, integrator);
+}
+
+}  // namespace rm
