@@ -19,9 +19,15 @@ constexpr int kTile = 16;
 class CameraStep final : public PassStep {
 public:
     CameraStep(const Scene& scene, const Integrator& integrator)
-        : scene_(scene), integrator_(integrator), W_(scene.sensor->width), H_(scene.sensor->height),
+        : scene_(scene),
+          integrator_(integrator),
+          W_(scene.sensor->width),
+          H_(scene.sensor->height),
           filter_(scene.sensor_desc.rfilter, scene.sensor_desc.filter_radius, scene.sensor_desc.filter_stddev),
-          film_(W_, H_), pass_film_(W_, H_), tiles_x_((W_ + kTile - 1) / kTile), tiles_y_((H_ + kTile - 1) / kTile) {}
+          film_(W_, H_),
+          pass_film_(W_, H_),
+          tiles_x_((W_ + kTile - 1) / kTile),
+          tiles_y_((H_ + kTile - 1) / kTile) {}
 
     int pass(PassLoop& loop, int s0, int s1) override {
         // 1. Tiles over threads, into the film of the pass in flight.

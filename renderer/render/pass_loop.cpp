@@ -35,7 +35,10 @@ int next_pass_end(const RenderOptions& opts, const std::vector<int>& checkpoints
     if (spp_done >= cap) return -1;
     int s1 = cap;
     for (int c : checkpoints)
-        if (c > spp_done) { s1 = std::min(s1, c); break; }
+        if (c > spp_done) {
+            s1 = std::min(s1, c);
+            break;
+        }
     if (opts.seconds > 0) {
         double left = opts.seconds - elapsed;
         if (left <= 0) return -1;

@@ -121,10 +121,12 @@ private:
 // Inf sample in `stats` and returns false.
 inline bool keep_finite(ThreadStats& stats, const Color& a, const Color& b = Color(0.f)) {
     if (is_finite(a) && is_finite(b)) return true;
-    bool nan = std::isnan(a.x) || std::isnan(a.y) || std::isnan(a.z) || std::isnan(b.x) || std::isnan(b.y) ||
-               std::isnan(b.z);
-    if (nan) ++stats.nan_samples;
-    else ++stats.inf_samples;
+    bool nan =
+        std::isnan(a.x) || std::isnan(a.y) || std::isnan(a.z) || std::isnan(b.x) || std::isnan(b.y) || std::isnan(b.z);
+    if (nan)
+        ++stats.nan_samples;
+    else
+        ++stats.inf_samples;
     return false;
 }
 
