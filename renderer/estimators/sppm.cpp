@@ -182,7 +182,8 @@ public:
         // Photons are needed when a photon-mapped class can appear at all.
         const SceneFeatures& f = scene.features;
         const EffectMask& mask = sppm.mask;
-        photons_needed_ = !scene.emitters.empty() && f.has_smooth_bsdf && (sppm.max_depth_ < 0 || sppm.max_depth_ >= 3) &&
+        const bool long_paths = sppm.max_depth_ < 0 || sppm.max_depth_ >= 3;
+        photons_needed_ = !scene.emitters.empty() && f.has_smooth_bsdf && long_paths &&
                           (mask[kIndirect] || (f.has_delta_bsdf && (mask[kCaustic] || mask[kSpecular])));
         spec_.max_depth = sppm.max_depth_ < 0 ? -1 : sppm.max_depth_ - 1;
         spec_.rr_depth = sppm.rr_depth_;

@@ -206,9 +206,13 @@ private:
 class LightStep final : public PassStep {
 public:
     LightStep(const Scene& scene, const Integrator& integrator, const FilterSampler& filter, int n_strat, int threads)
-        : scene_(scene), integrator_(integrator), pixels_(uint64_t(scene.sensor->width) * uint64_t(scene.sensor->height)),
-          n_strat_(n_strat), film_(scene.sensor->width, scene.sensor->height, filter, n_strat),
-          stripes_(std::min(scene.sensor->height, threads * 4)), items_(kChunkItems) {}
+        : scene_(scene),
+          integrator_(integrator),
+          pixels_(uint64_t(scene.sensor->width) * uint64_t(scene.sensor->height)),
+          n_strat_(n_strat),
+          film_(scene.sensor->width, scene.sensor->height, filter, n_strat),
+          stripes_(std::min(scene.sensor->height, threads * 4)),
+          items_(kChunkItems) {}
 
     int pass(PassLoop& loop, int s0, int s1) override {
         const uint64_t g_end = uint64_t(s1) * pixels_;

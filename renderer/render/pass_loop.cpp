@@ -47,8 +47,9 @@ int next_pass_end(const RenderOptions& opts, const std::vector<int>& checkpoints
         int n = int(std::min(1e6, std::max(1.0, std::floor(left / 8.0 / std::max(sec_per_spp, 1e-9)))));
         return std::min(s1, spp_done + n);
     }
-    // 1, 2, 4, ... 64, then 64 more at a time: early passes are quick, so a
-    // cancel soon keeps something, and the plan ignores timing.
+    // 1, 2, 4, ... 64, then 64 more at a time (the waves of pbrt-v4's
+    // ImageTileIntegrator::Render): early passes are quick, so a cancel soon
+    // keeps something, and the plan ignores timing.
     return std::min(s1, spp_done == 0 ? 1 : spp_done + std::min(spp_done, 64));
 }
 
