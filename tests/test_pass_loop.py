@@ -12,16 +12,22 @@ import pytest
 
 import radiometer as rm
 
-# One of each driver; photon counts small so that a pass takes milliseconds.
-DRIVERS = {
-    "path": {"type": "path"},
-    "direct": {"type": "direct"},
-    "ptracer": {"type": "ptracer"},
-    "bdpt": {"type": "bdpt"},
-    "photonmapper": {"type": "photonmapper", "global_photons": 5000, "caustic_photons": 5000,
-                     "direct_samples": 1, "gather_rays": 2},
-    "sppm": {"type": "sppm", "photon_count": 2000},
+# Every registered estimator, and so every driver; small photon budgets so
+# that a pass takes milliseconds (the others at their defaults).
+ESTIMATORS = sorted(rm.estimators())
+FAST = {
+    "photonmapper": {"global_photons": 5000, "caustic_photons": 5000, "direct_samples": 1, "gather_rays": 2},
+    "sppm": {"photon_count": 2000},
 }
+
+
+def _integrator(name):
+    return {"type": name, **FAST.get(name, {})}
+
+
+def test_every_kind_of_driver_is_covered():
+    drivers = {e["capabilities"]["driver"] for e in rm.estimators().values()}
+    assert {"camera", "light", "own"} <= drivers
 
 
 @pytest.fixture(scope="module")
@@ -29,10 +35,10 @@ def tiny_cornell(cornell_path):
     return rm.load_file(cornell_path, res=16, spp=4)
 
 
-@pytest.mark.parametrize("name", sorted(DRIVERS))
+@pytest.mark.parametrize("name", ESTIMATORS)
 def test_checkpoints_and_progress_on_every_driver(tiny_cornell, name):
     calls = []
-    res = rm.render(tiny_cornell, integrator=dict(DRIVERS[name]), spp=4, seed=1, checkpoints=[1, 2, 4],
+    res = rm.render(tiny_cornell, integrator=_integrator(name), spp=4, seed=1, checkpoints=[1, 2, 4],
                     threads=2, progress=lambda d, t: calls.append((d, t)))
     assert res.spp == 4
     assert [c[0] for c in res.checkpoints] == [1, 2, 4]
@@ -45,14 +51,14 @@ def test_checkpoints_and_progress_on_every_driver(tiny_cornell, name):
     assert all(b[0] >= a[0] for a, b in zip(calls, calls[1:]))
 
 
-@pytest.mark.parametrize("name", sorted(DRIVERS))
+@pytest.mark.parametrize("name", ESTIMATORS)
 def test_time_budget_on_every_driver(tiny_cornell, name):
     t0 = time.monotonic()
-    res = rm.render(tiny_cornell, integrator=dict(DRIVERS[name]), seconds=0.3, seed=1, threads=2)
+    res = rm.render(tiny_cornell, integrator=_integrator(name), seconds=0.3, seed=1, threads=2)
     wall = time.monotonic() - t0
     assert res.spp >= 1
     assert res.seconds < 1.2 and wall < 2.0  # a budget, not a wish (generous: 4x)
-    capped = rm.render(tiny_cornell, integrator=dict(DRIVERS[name]), seconds=30, spp=3, seed=1, threads=2)
+    capped = rm.render(tiny_cornell, integrator=_integrator(name), seconds=30, spp=3, seed=1, threads=2)
     assert capped.spp == 3
 
 
@@ -72,10 +78,10 @@ def _interrupt_after(seconds, render):
         signal.signal(signal.SIGINT, previous)
 
 
-@pytest.mark.parametrize("name", sorted(DRIVERS))
+@pytest.mark.parametrize("name", ESTIMATORS)
 def test_ctrl_c_keeps_finished_passes_on_every_driver(tiny_cornell, name):
     r, wall = _interrupt_after(
-        0.5, lambda: rm.render(tiny_cornell, integrator=dict(DRIVERS[name]), spp=1 << 20, seed=1, threads=2))
+        0.5, lambda: rm.render(tiny_cornell, integrator=_integrator(name), spp=1 << 20, seed=1, threads=2))
     assert wall < 10
     assert 0 < r.spp < 1 << 20
     assert np.isfinite(r.image).all() and r.image.mean() > 0
