@@ -181,6 +181,25 @@ def test_report_refuses_a_run_id_that_is_a_path(tmp_path):
     assert not (tmp_path / "evil").exists()
 
 
+@pytest.mark.parametrize("field, value", [("scene", "../../../evil"), ("exr", "../../secret.exr"),
+                                          ("exr", "/etc/secret.exr")])
+def test_report_refuses_a_job_that_points_outside(tmp_path, field, value):
+    """The page names images after each job's scene and reads its EXR under the store's folder."""
+    from test_compare import _record
+
+    from radiometer.benchmarks import report
+
+    db = tmp_path / "r" / runner.STORE_NAME
+    rec = dict(_record("cornell_box", "path", 0, 0.01, 1.0), exr="runs/x/cornell_box/path.exr")
+    rec[field] = value
+    with Store(db) as st:
+        st.add_run("r1", "m", "-", "", "c", {}, "2026-01-01T00:00:00+00:00")
+        st.add_job("r1", rec)
+    with pytest.raises(ValueError, match=repr(value).replace(".", r"\.")):
+        report.write(db, "r1", log=lambda *a: None)
+    assert not (tmp_path / "r" / "reports").exists()
+
+
 # -- --resume ---------------------------------------------------------------------------
 
 
