@@ -75,6 +75,20 @@ def judge(a, b, factor: float, lower_is_better: bool = True) -> tuple:
     return ratio, "regression" if worse else "improvement"
 
 
+def check_options(metric: str = "relmse", factor: float = 1.1):
+    """Refuses a metric or factor that would turn the regression gate off
+    silently: a metric no record holds (every configuration then reads
+    "n<2"), or a factor below 1 or not finite (1/factor..factor is then
+    empty, or everything)."""
+    from radiometer.analysis.metrics import METRICS
+
+    if metric not in METRICS:
+        raise ValueError(f"--metric: unknown metric {metric!r} (known: {', '.join(METRICS)})")
+    if isinstance(factor, bool) or not isinstance(factor, (int, float)) or not math.isfinite(factor) or factor < 1:
+        raise ValueError(f"--factor: expected a finite number >= 1 (the smallest ratio B/A that counts as a "
+                         f"change), got {factor!r}")
+
+
 def open_run(arg: str, default_store: Path):
     """A run argument: a store file (its latest run), STORE:RUN, or a run id
     (or unique prefix) in the default store. Returns (label, records)."""
@@ -88,7 +102,7 @@ def open_run(arg: str, default_store: Path):
         store_path, run = Path(default_store), arg
         if not store_path.is_file():
             raise FileNotFoundError(f"{arg}: not a store file, and the default store {store_path} does not exist")
-    with Store(store_path) as s:
+    with Store(store_path, readonly=True) as s:
         rid = s.resolve_run(run)
         return f"{store_path}:{rid}", s.jobs(rid)
 
@@ -103,6 +117,7 @@ def _groups(records):
 def compare_records(recs_a, recs_b, metric: str = "relmse", factor: float = 1.1) -> list:
     from radiometer.analysis.tables import budget_label
 
+    check_options(metric, factor)
     ga, gb = _groups(recs_a), _groups(recs_b)
     out = []
     for key in sorted(set(ga) | set(gb), key=lambda k: (ga.get(k) or gb.get(k))[0]["scene"] + "/" +

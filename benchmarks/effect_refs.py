@@ -12,7 +12,9 @@ reported as unavailable, with the z-test's summary as the reason.
 
 They are cached under <results>/refs/<scene>-<hash>.exr, the hash covering
 the scene's parameters, the estimator, its budget and seed, so a cache
-survives commits (the z-test re-decides whenever one is made). A 64 x 64
+survives commits (the z-test re-decides whenever one is made). A cached
+file that does not read back whole (a copy cut short, a full disk) is
+remade, not trusted and not fatal to every later run. A 64 x 64
 reference with its seven effect layers is about 0.3 MB; they are not
 committed.
 """
@@ -36,6 +38,20 @@ def ref_path(root, scene: str, params: dict, spp: int) -> Path:
     return Path(root) / "refs" / f"{scene}-{hashlib.sha1(key.encode()).hexdigest()[:12]}.exr"
 
 
+def cached(out: Path) -> tuple:
+    """(metadata, None) of the cached reference `out`; (None, None) when
+    there is none; (None, why) when the file does not read back whole
+    (truncated or corrupt), which the caller remakes (write_exr replaces it)."""
+    import radiometer as rm
+
+    if not out.exists():
+        return None, None
+    try:
+        return rm.read_exr(out).metadata, None
+    except ValueError as e:  # read_exr: "... is truncated or corrupt" / "not a readable EXR file"
+        return None, f"cached per-effect reference {out} is truncated or corrupt ({e})"
+
+
 def _splatted(scene) -> bool:
     return scene.desc.sensor.rfilter != "box"
 
@@ -51,6 +67,9 @@ def make(scene: str, params: dict, spp: int, out: Path, threads: int = 0, progre
     spec = _scenes.get(scene)
     if spec.kind != "mitsuba":
         raise ValueError(f"{scene}: analytic scenes have exact per-effect references")
+    if isinstance(spp, bool) or not isinstance(spp, int) or spp < 2:
+        raise ValueError(f"{scene}: per-effect reference spp: expected an integer >= 2 (its z-test needs the "
+                         f"per-pixel variance of at least two samples), got {spp!r}")
     s = rm.load_file(spec.xml, **params)
     integ = {"type": spec.effect_ref_estimator, "max_depth": _scenes.max_depth(spec, params)}
     t0 = time.monotonic()
@@ -86,7 +105,10 @@ def ensure(root, jobs, spp_override=None, threads: int = 0, log=print) -> dict:
         spec = _scenes.get(scene)
         spp = spp_override or spec.effect_ref_spp
         out = ref_path(root, scene, params, spp)
-        if not out.exists():
+        m, broken = cached(out)
+        if broken:
+            log(f"{broken}; remaking it")
+        if m is None:
             try:
                 rm.load_file(spec.xml, **params)
             except (rm.SceneError, ValueError) as e:
@@ -103,9 +125,8 @@ def ensure(root, jobs, spp_override=None, threads: int = 0, log=print) -> dict:
                     bar.n = int(done * spp / total) if total else 0
                     bar.refresh()
 
-                meta = make(scene, params, spp, out, threads=threads, progress=progress)
-            log(f"  {meta['effects_kind']} ({meta['make_seconds']:.0f} s)")
-        m = rm.read_exr(out).metadata
+                m = make(scene, params, spp, out, threads=threads, progress=progress)
+            log(f"  {m['effects_kind']} ({m['make_seconds']:.0f} s)")
         if int(m.get("accepted", 0)):
             for j in js:
                 j.effect_ref = str(out)

@@ -1,9 +1,12 @@
 """Benchmark matrices: TOML files of scenes x estimators x budgets x seeds.
 
-    name = "default"              # names the run in the store (required)
+    name = "default"              # names the run in the store and its files: letters, digits, . _ + -
+                                  # (required)
     seeds = [0, 1, 2]             # one job per seed (required)
-    threads = 1                   # render threads per job; the local pool runs cores // threads jobs at once
-    budgets = [{ seconds = 4.0 }] # each { spp = N } or { seconds = S } (required)
+    threads = 1                   # render threads per job (0..1024, 0 = all cores); the local pool runs
+                                  # cores // threads jobs at once
+    budgets = [{ seconds = 4.0 }] # each { spp = N } (1..2^24) or { seconds = S } (finite, at most a week)
+                                  # (required)
     target_relmse = 0.05          # for time-to-error (optional)
 
     [scenes.cornell_box]          # a scene of reference_scenes/registry.py
@@ -17,7 +20,7 @@
     mis = "balance"               # every other key is an estimator parameter
 
     [effect_refs]                 # per-effect references of Mitsuba-referenced scenes (optional)
-    spp = 8192                    # overrides the scene's budget (smoke matrices use a few spp)
+    spp = 8192                    # overrides the scene's budget (smoke matrices use a few spp; >= 2)
 
 An estimator that takes max_depth gets the scene's unless the matrix sets
 one. Everything is checked when the file is read; an error names the file
@@ -29,6 +32,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
+import re
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -43,6 +48,22 @@ TOP_KEYS = {"name", "description", "seeds", "threads", "budgets", "target_relmse
 
 class MatrixError(ValueError):
     """A matrix file that cannot run; the message names the file and key."""
+
+
+# The matrix name goes into run ids, and run ids and estimator labels into
+# paths under the results folder (runs/RUN/SCENE/LABEL-...exr, reports/RUN):
+# each must be one plain file-name component, never a path.
+PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*\Z")
+# What render() accepts: at most 2^24 samples per pixel and 1024 threads
+# (0 = all cores). A seconds budget longer than a week is a typo.
+MAX_SPP = 1 << 24
+MAX_THREADS = 1024
+MAX_SECONDS = 7 * 24 * 3600
+
+
+def plain_name(s) -> bool:
+    """True when `s` can name a file or folder of the results tree by itself."""
+    return isinstance(s, str) and len(s) <= 128 and PLAIN_NAME.match(s) is not None
 
 
 @dataclass
@@ -96,6 +117,8 @@ def resolve_path(arg: Optional[str]) -> Path:
     if arg is None:
         arg = "default"
     p = Path(arg)
+    if p.is_dir():
+        raise MatrixError(f"{arg}: a folder, not a matrix file (give a .toml file, or a matrix name in benchmarks/)")
     if p.exists():
         return p
     cand = HERE / (arg if arg.endswith(".toml") else arg + ".toml")
@@ -105,15 +128,28 @@ def resolve_path(arg: Optional[str]) -> Path:
     raise MatrixError(f"{arg}: no such matrix file, and not a matrix in benchmarks/ (known: {', '.join(known)})")
 
 
-def _check_int(v, where, lo=None):
-    if isinstance(v, bool) or not isinstance(v, int) or (lo is not None and v < lo):
-        raise MatrixError(f"{where}: expected an integer{'' if lo is None else f' >= {lo}'}, got {v!r}")
+def _check_int(v, where, lo=None, hi=None):
+    if isinstance(v, bool) or not isinstance(v, int) or (lo is not None and v < lo) or (hi is not None and v > hi):
+        want = "" if lo is None else f" >= {lo}" if hi is None else f" in {lo}..{hi}"
+        raise MatrixError(f"{where}: expected an integer{want}, got {v!r}")
+    return v
+
+
+def _check_positive(v, where, hi=None):
+    """A positive finite number (at most `hi`)."""
+    if (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not v > 0
+            or (hi is not None and v > hi)):
+        want = "a positive finite number" if hi is None else f"a finite number in (0, {hi}]"
+        raise MatrixError(f"{where}: expected {want}, got {v!r}")
     return v
 
 
 def load(arg: Optional[str]) -> Matrix:
     path = resolve_path(arg)
-    text = path.read_text()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise MatrixError(f"{path}: not UTF-8 text, so not a TOML matrix ({e.reason} at byte {e.start})") from None
     try:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -134,20 +170,26 @@ def parse(d: dict, path: str = "<dict>", text: str = "") -> Matrix:
         if k not in d:
             raise err(k, "missing")
     name = d["name"]
-    if not isinstance(name, str) or not name:
-        raise err("name", f"expected a non-empty string, got {name!r}")
+    if not plain_name(name):
+        raise err("name", f"expected one plain word of letters, digits and . _ + - (it names files of the "
+                          f"run), starting with a letter or digit, got {name!r}")
+    if isinstance(d["estimators"], dict):
+        for label in d["estimators"]:
+            if not plain_name(label):
+                raise err(f"estimators.{label}", "an estimator label names the files of its jobs: expected one "
+                                                 "plain word of letters, digits and . _ + -")
     seeds = d["seeds"]
     if not isinstance(seeds, list) or not seeds:
         raise err("seeds", f"expected a non-empty list of integers, got {seeds!r}")
     for i, s in enumerate(seeds):
         _check_int(s, f"{path}: seeds[{i}]", 0)
-    threads = _check_int(d.get("threads", 1), f"{path}: threads", 0)
+    threads = _check_int(d.get("threads", 1), f"{path}: threads", 0, MAX_THREADS)
     checkpoints = d.get("checkpoints", True)
     if not isinstance(checkpoints, bool):
         raise err("checkpoints", f"expected true or false, got {checkpoints!r}")
     target = d.get("target_relmse")
-    if target is not None and (isinstance(target, bool) or not isinstance(target, (int, float)) or not target > 0):
-        raise err("target_relmse", f"expected a positive number, got {target!r}")
+    if target is not None:
+        _check_positive(target, f"{path}: target_relmse")
     budgets = d["budgets"]
     if not isinstance(budgets, list) or not budgets:
         raise err("budgets", "expected a non-empty list of tables like { spp = 64 } or { seconds = 2.0 }")
@@ -157,9 +199,9 @@ def parse(d: dict, path: str = "<dict>", text: str = "") -> Matrix:
             raise err(where, f"expected {{ spp = N }} or {{ seconds = S }}, got {b!r}")
         (k, v), = b.items()
         if k == "spp":
-            _check_int(v, f"{path}: {where}.spp", 1)
-        elif isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
-            raise err(f"{where}.seconds", f"expected a positive number, got {v!r}")
+            _check_int(v, f"{path}: {where}.spp", 1, MAX_SPP)
+        else:
+            _check_positive(v, f"{path}: {where}.seconds", MAX_SECONDS)
     effect_ref_spp = None
     if "effect_refs" in d:
         er = d["effect_refs"]
@@ -169,7 +211,8 @@ def parse(d: dict, path: str = "<dict>", text: str = "") -> Matrix:
             if k != "spp":
                 raise err(f"effect_refs.{k}", "unknown key (known: spp)")
         if "spp" in er:
-            effect_ref_spp = _check_int(er["spp"], f"{path}: effect_refs.spp", 1)
+            # Two samples at least: the reference's z-test needs its per-pixel variance.
+            effect_ref_spp = _check_int(er["spp"], f"{path}: effect_refs.spp", 2, MAX_SPP)
 
     # Estimators: label -> (type, params), checked by the renderer's own validation.
     ests = d["estimators"]

@@ -192,8 +192,19 @@ class _LocalPool:
 class _DaskPool:
     def __init__(self, address):
         from distributed import Client
+        from distributed.comm.addressing import resolve_address
 
-        self.client = Client(address, set_as_default=False)
+        # The address is parsed first: a Client given a malformed one fails
+        # half-built and its finaliser then prints a traceback of its own.
+        try:
+            resolve_address(address)
+        except (ValueError, OSError) as e:
+            raise ValueError(f"--scheduler {address}: {e}") from None
+        self.address = address
+        try:  # waits up to distributed.comm.timeouts.connect (30 s by default)
+            self.client = Client(address, set_as_default=False)
+        except OSError as e:
+            raise ConnectionError(f"--scheduler {address}: cannot reach the Dask scheduler ({e})") from None
         info = self.client.scheduler_info()
         self.workers = max(1, sum(w.get("nthreads", 1) for w in info.get("workers", {}).values()))
 
@@ -210,12 +221,41 @@ class _DaskPool:
             time.sleep(0.02)
 
     def shutdown(self):
-        self.client.close()
+        if self.client.status not in ("closing", "closed"):
+            self.client.close()
 
 
 def _crash_record(job: dict, commit, machine, err: str) -> dict:
     return dict(job, status="failed", error=err, commit=commit, machine=machine, started=None, finished=now(),
                 metrics={}, effect_metrics={}, curve=[], exr=None)
+
+
+def summary(records) -> tuple:
+    """(exit status, message) of a finished run from its job records: 1 when
+    no job ran or any failed (an exception in a job is a bug to look at),
+    else 0; the message counts each status and quotes each distinct reason
+    once."""
+    counts = {k: 0 for k in ("ok", "unsupported", "failed")}
+    reasons = {"unsupported": {}, "failed": {}}
+    for r in records:
+        counts[r["status"]] += 1
+        if r["status"] in reasons:
+            err = (r.get("error") or "").strip()
+            last = err.splitlines()[-1] if err else "(no message)"  # a traceback's last line says what
+            reasons[r["status"]][last] = reasons[r["status"]].get(last, 0) + 1
+    n = len(records)
+    head = f"{counts['ok']} ok, {counts['unsupported']} unsupported, {counts['failed']} failed"
+    if n == 0:
+        return 1, "no job in the run"
+    lines = []
+    for status in ("failed", "unsupported"):
+        for why, k in reasons[status].items():
+            lines.append(f"  {status} x{k}: {why}")
+    if counts["ok"] == 0:
+        return 1, f"no job ran: {head} of {n}\n" + "\n".join(lines)
+    if counts["failed"]:
+        return 1, f"{head} of {n}\n" + "\n".join(lines)
+    return 0, head
 
 
 def run(matrix_arg: Optional[str] = None, root=DEFAULT_ROOT, scheduler: Optional[str] = None,
@@ -226,7 +266,20 @@ def run(matrix_arg: Optional[str] = None, root=DEFAULT_ROOT, scheduler: Optional
     jobs are skipped. Returns the run id."""
     log = log or (lambda *a: print(*a, file=sys.stderr, flush=True))
     mat = matrix_arg if isinstance(matrix_arg, _matrix.Matrix) else _matrix.load(matrix_arg)
-    root = Path(root)
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ValueError(f"--workers: expected an integer >= 1, got {workers!r}")
+    # Connect to the cluster before anything is written: a scheduler that
+    # cannot be reached leaves no empty run behind.
+    cores = os.cpu_count() or 1
+    pool = _DaskPool(scheduler) if scheduler else None
+    try:
+        return _run(mat, Path(root), pool, workers, cores, resume, progress, log)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+
+
+def _run(mat, root: Path, pool, workers, cores, resume, progress, log) -> str:
     root.mkdir(parents=True, exist_ok=True)
     store = Store(root / STORE_NAME)
     commit, machine = commit_id(), machine_info()
@@ -235,6 +288,10 @@ def run(matrix_arg: Optional[str] = None, root=DEFAULT_ROOT, scheduler: Optional
         run_id = store.latest_run(mat.name) if resume == "latest" else store.resolve_run(resume)
         if run_id is None:
             raise KeyError(f"--resume: {store.path} holds no run of matrix '{mat.name}'")
+        theirs = store.run(run_id)["matrix"]
+        if theirs != mat.name:
+            raise ValueError(f"--resume {resume}: run {run_id} in {store.path} is of matrix '{theirs}', not "
+                             f"'{mat.name}' ({mat.path}); resume it with its own matrix")
         done = store.job_keys(run_id)
         todo = [j for j in jobs if j.key not in done]
         log(f"resuming run {run_id}: {len(jobs) - len(todo)} of {len(jobs)} jobs already recorded, {len(todo)} to run")
@@ -253,10 +310,10 @@ def run(matrix_arg: Optional[str] = None, root=DEFAULT_ROOT, scheduler: Optional
         unloadable = sorted(s for s, n in notes.items() if "does not load" in n)
         if unloadable:
             log(f"  scenes our loader refuses (their jobs are recorded as unsupported): {', '.join(unloadable)}")
-    cores = os.cpu_count() or 1
-    pool = _DaskPool(scheduler) if scheduler else _LocalPool(workers or max(1, cores // max(1, mat.threads or cores)))
-    if scheduler:
-        log(f"Dask scheduler {scheduler}: {pool.workers} worker threads")
+    if pool is None:
+        pool = _LocalPool(workers or max(1, cores // max(1, mat.threads or cores)))
+    else:
+        log(f"Dask scheduler {pool.address}: {pool.workers} worker threads")
     from tqdm import tqdm
 
     bar = tqdm(total=len(todo), desc=f"bench {mat.name}", unit="job", file=sys.stderr,

@@ -61,16 +61,52 @@ CREATE INDEX IF NOT EXISTS jobs_run ON jobs(run_id);
 STATUSES = ("ok", "failed", "unsupported")
 
 
+TABLES = {"runs", "jobs"}
+
+
 class Store:
-    def __init__(self, path):
+    """A results store. `readonly=True` (compare, report, runs) opens an
+    existing store without writing to it: an empty file or someone else's
+    database is refused as it is, never given our tables. A writer (bench,
+    merge) creates a missing or empty file, and also refuses a database
+    that holds other tables."""
+
+    def __init__(self, path, readonly: bool = False):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.conn = sqlite3.connect(str(self.path), timeout=60)
+        self.readonly = readonly
+        if readonly:
+            if not self.path.is_file():
+                what = "a folder" if self.path.is_dir() else "no such file"
+                raise FileNotFoundError(f"{self.path}: {what}, not a results store")
+            # mode=ro: SQLite itself refuses every write through this connection.
+            self.conn = sqlite3.connect(self.path.resolve().as_uri() + "?mode=ro", uri=True, timeout=60)
+        else:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.conn = sqlite3.connect(str(self.path), timeout=60)
+        try:
+            self._check_tables()
+            if not readonly:
+                self.conn.execute("PRAGMA journal_mode=WAL")
+                self.conn.execute("PRAGMA synchronous=FULL")
+                with self.conn:
+                    self.conn.executescript(SCHEMA)
+        except BaseException:
+            self.conn.close()
+            raise
         self.conn.row_factory = sqlite3.Row
-        self.conn.execute("PRAGMA journal_mode=WAL")
-        self.conn.execute("PRAGMA synchronous=FULL")
-        with self.conn:
-            self.conn.executescript(SCHEMA)
+
+    def _check_tables(self):
+        try:
+            names = {r[0] for r in self.conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        except sqlite3.DatabaseError as e:
+            raise ValueError(f"{self.path}: not an SQLite database, so not a results store ({e})") from None
+        if TABLES <= names or (not names and not self.readonly):
+            return
+        if not names:
+            why = "an empty file" if self.path.stat().st_size == 0 else "an SQLite database without tables"
+        else:
+            why = f"an SQLite database with other tables: {', '.join(sorted(names))}"
+        raise ValueError(f"{self.path}: not a results store ({why}; a store has tables runs and jobs)")
 
     def close(self):
         self.conn.close()
@@ -163,16 +199,7 @@ class Store:
             raise FileNotFoundError(f"merge: {other} does not exist")
         if other.resolve() == self.path.resolve():
             raise ValueError(f"merge: {other} is this store")
-        # Validate the other file is a store before attaching.
-        probe = sqlite3.connect(str(other))
-        try:
-            names = {r[0] for r in probe.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-        except sqlite3.DatabaseError as e:
-            raise ValueError(f"merge: {other} is not an SQLite results store ({e})") from None
-        finally:
-            probe.close()
-        if not {"runs", "jobs"} <= names:
-            raise ValueError(f"merge: {other} is not a results store (no runs/jobs tables)")
+        Store(other, readonly=True).close()  # refuses anything but a results store, naming it
         before_r = self.conn.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
         before_j = self.conn.execute("SELECT COUNT(*) FROM jobs").fetchone()[0]
         self.conn.execute("ATTACH DATABASE ? AS other", (str(other),))

@@ -87,7 +87,25 @@ class _HelpIntegrator(argparse.Action):
         parser.exit(0)
 
 
+def _parse_effects(arg):
+    """--effects: None (all effect classes) or the named ones. An empty
+    string, or an empty name in the list, is a mistake, not "all"."""
+    if arg is None:
+        return None
+    known = f"(known: {', '.join(EFFECTS)})"
+    if not arg.strip():
+        raise ValueError(f"--effects: empty; name at least one effect class {known}, or leave --effects out for all")
+    names = [e.strip() for e in arg.split(",")]
+    if "" in names:
+        raise ValueError(f"--effects {arg!r}: an empty name in the list {known}")
+    for e in names:
+        if e not in EFFECTS:
+            raise ValueError(f"--effects: unknown effect class {e!r} {known}")
+    return names
+
+
 def cmd_render(a) -> int:
+    effects = _parse_effects(a.effects)
     scene = load_file(_scene_path(a.scene))
     integrator = _parse_integrator(a.integrator)
     if a.max_depth is not None:
@@ -96,7 +114,6 @@ def cmd_render(a) -> int:
         spec = _integrator_desc(integrator, scene.desc.integrator)
         spec["max_depth"] = a.max_depth
         integrator = spec
-    effects = a.effects.split(",") if a.effects else None
     out = Path(a.output)
     if not out.parent.exists():
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -179,7 +196,6 @@ def _effect_refs(a) -> int:
     """Makes (or lists) the per-effect references of the benchmark's
     Mitsuba-referenced scenes: long runs of our path tracer, kept only when
     their total passes the z-test against Mitsuba."""
-    from . import read_exr
     from .benchmarks import effect_refs
     from .reference_scenes import registry as scenes
 
@@ -192,9 +208,10 @@ def _effect_refs(a) -> int:
         params = dict(spec.fixed_params)
         spp = a.spp or spec.effect_ref_spp
         out = effect_refs.ref_path(a.results, n, params, spp)
-        if out.exists() and not a.force:
-            m = read_exr(out).metadata
-        else:
+        m, broken = (None, None) if a.force else effect_refs.cached(out)
+        if broken:
+            print(f"{broken}; {'listed as missing' if a.list else 'remaking it'}", file=sys.stderr)
+        if m is None:
             try:
                 load_file(spec.xml, **params)
             except SceneError as e:
@@ -221,15 +238,17 @@ def _print_effect_table(store_path: Path, run_id: str):
     from .analysis.tables import aggregate, effect_table_text
     from .benchmarks.store import Store
 
-    with Store(store_path) as st:
+    with Store(store_path, readonly=True) as st:
         recs = st.jobs(run_id)
     print(f"\nper-effect error (relMSE, mean over seeds; total against the scene's reference) -- run {run_id}")
     print(effect_table_text(aggregate(recs)))
 
 
 def cmd_bench(a) -> int:
-    """Runs a benchmark matrix, prints the per-effect error table and writes the report."""
+    """Runs a benchmark matrix, prints the per-effect error table and writes the report.
+    Exit status 1 when no job ran or a job failed (the reasons on stderr)."""
     from .benchmarks import runner
+    from .benchmarks.store import Store
 
     try:
         run_id = runner.run(a.matrix, root=a.results, scheduler=a.scheduler, workers=a.workers, resume=a.resume)
@@ -238,6 +257,12 @@ def cmd_bench(a) -> int:
               "'radiometer bench [MATRIX] --resume'", file=sys.stderr)
         return 130
     store = _store_path(a)
+    with Store(store, readonly=True) as st:
+        rc, summary = runner.summary(st.jobs(run_id))
+    if summary.startswith("no job"):  # nothing to tabulate or report
+        print(f"radiometer bench: error: run {run_id}: {summary}", file=sys.stderr)
+        print(f"results store: {store.resolve()} (run {run_id})")
+        return rc
     _print_effect_table(store, run_id)
     if not a.no_report:
         from .benchmarks import report
@@ -245,12 +270,15 @@ def cmd_bench(a) -> int:
         index = report.write(store, run_id, log=lambda m: print(m, file=sys.stderr))
         print(f"\nreport: {index.resolve()}")
     print(f"results store: {store.resolve()} (run {run_id})")
-    return 0
+    if rc:
+        print(f"radiometer bench: error: run {run_id}: {summary}", file=sys.stderr)
+    return rc
 
 
 def cmd_compare(a) -> int:
     from .benchmarks import compare
 
+    compare.check_options(a.metric, a.factor)  # before opening anything
     la, ra = compare.open_run(a.a, _store_path(a))
     lb, rb = compare.open_run(a.b, _store_path(a))
     changes = compare.compare_records(ra, rb, metric=a.metric, factor=a.factor)
@@ -298,7 +326,7 @@ def cmd_runs(a) -> int:
     store = _store_path(a)
     if not store.is_file():
         raise FileNotFoundError(f"no results store at {store}")
-    with Store(store) as st:
+    with Store(store, readonly=True) as st:
         for r in st.runs():
             print(f"{r['run_id']}  {r['matrix']}  {r['n_jobs']} jobs  commit {r['commit_id']}  "
                   f"{r['started']} .. {r['finished'] or '(unfinished)'}")
@@ -380,7 +408,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     try:
         return a.func(a)
-    except (SceneError, ValueError, FileNotFoundError, PermissionError, KeyError) as e:
+    except (SceneError, ValueError, OSError, KeyError) as e:  # OSError: files, folders, an unreachable scheduler
         if isinstance(e, KeyError):
             e = e.args[0] if e.args else e
         print(f"radiometer {a.cmd}: error: {e}", file=sys.stderr)
