@@ -1,0 +1,92 @@
+// `whitted`: Whitted ray tracing (Whitted 1980, "An Improved Illumination
+// Model for Shaded Display"), the seed's starting point: camera rays follow
+// delta reflection and refraction, and every surface with a smooth lobe
+// takes direct light from the emitters (point, spot, directional, area,
+// environment) by light sampling, with a shadow ray, and ends the path. So
+// it renders exactly the paths L E, L D E and L D? S+ E: emission,
+// direct, and what mirrors and glass show of those; indirect diffuse light
+// and caustics (L S+ D E) are missing by construction, the model error a
+// user of this estimator accepts.
+// Where Whitted traces both a reflected and a refracted ray at a dielectric,
+// one of them is sampled by the BSDF's own lobe selection (its Fresnel
+// term) with weight f / pdf: the same expectation without a ray tree that
+// doubles at every glass surface (pbrt-v3's WhittedIntegrator recurses into
+// both, SpecularReflect and SpecularTransmit).
+// Parameters: the registration below (pbrt-v3's `maxdepth`, default 5).
+#include "render/registry.h"
+#include "transport/common.h"
+
+namespace rm {
+
+namespace {
+
+class WhittedIntegrator final : public Integrator {
+public:
+    WhittedIntegrator(int max_depth, bool hide) : max_depth_(max_depth), hide_(hide) {}
+
+    void sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
+                ThreadStats& stats) const override {
+        Ray ray = camera_ray;
+        Color beta(1.f);
+        PathClass pc;
+        BsdfContext ctx;
+        for (int depth = 0;; ++depth) {
+            // 1. Find the next vertex, with the emission it shows: seen
+            //    directly or through delta lobes only (no other technique
+            //    reaches emitters from there, so no MIS weight).
+            Interaction it;
+            int cls = pc.classify();
+            bool count = !(depth == 0 && hide_) && mask[cls];
+            if (!trace_counting_emission(scene, ray, it, beta, cls, count, out, stats)) break;
+
+            // 2. Stop after max_depth segments, or when no requested class is reachable.
+            if (depth + 1 >= max_depth_ || !pc.can_reach(mask)) break;
+            const Bsdf& bsdf = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
+            Vec3 wi = it.to_local(it.wi);
+
+            // 3. A smooth lobe: direct light by light sampling alone (bsdf
+            //    fraction 0: the power heuristic's weight is then 1).
+            if (bsdf.has_smooth()) {
+                PathClass pn = pc;
+                pn.push(false);
+                if (mask[pn.classify()])
+                    out.add(pn.classify(), beta * estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f));
+                else  // keep the random stream aligned whatever the mask is (a light sample draws 4)
+                    sampler.next_1d(), sampler.next_2d(), sampler.next_1d();
+            }
+
+            // 4. Follow a delta lobe (reflection or refraction, chosen as the
+            //    BSDF samples it); a smooth sample ends the path.
+            BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+            if (!bs.is_delta || !(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
+            beta *= bs.weight;
+            if (bsdf.flags() != kNull) pc.push(true);
+            ray = it.spawn(it.to_world(bs.wo));
+        }
+    }
+
+private:
+    int max_depth_;
+    bool hide_;
+};
+
+[[maybe_unused]] const bool kRegistered = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "whitted";
+    e.doc = "Whitted ray tracing (1980): delta reflection and refraction, direct light at smooth surfaces; "
+            "no indirect light, no caustics";
+    e.params = {
+        ParamSpec::integer("max_depth", 5, "longest path in segments (pbrt-v3's maxdepth)").at_least(1).at_most(1024),
+        hide_emitters_param(),
+    };
+    e.caps.driver = Driver::Camera;
+    e.factory = [](ParamReader& p) {
+        int max_depth = p.get_int("max_depth");
+        return std::make_unique<WhittedIntegrator>(max_depth, p.get_bool("hide_emitters"));
+    };
+    return e;
+}());
+
+}  // namespace
+
+}  // namespace rm
