@@ -220,7 +220,7 @@ def test_core_render_checks_an_integrator_desc():
     with pytest.raises(rm.SceneError, match="integrator 'sppm': parameter 'alpha' must lie in \\(0, 1\\), got 1.5"):
         _core.render(scene.core(), d, [True] * 7, 1, 0.0, 0, 1, [], None)
     with pytest.raises(AttributeError):
-        d.photon_count
+        _ = d.photon_count
 
 
 # --- the command line -----------------------------------------------------------------

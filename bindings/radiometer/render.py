@@ -144,7 +144,8 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
         raise TypeError(f"render: expected a radiometer Scene (from load_file/load_dict), got {type(scene).__name__}")
     spec = _integrator_desc(integrator, scene.desc.integrator)
     if seconds is not None:
-        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds) or seconds <= 0:
+        if (isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds)
+                or seconds <= 0):
             raise ValueError(f"seconds: expected a positive finite number, got {seconds!r}")
     if spp is None:
         spp = 0 if seconds is not None else scene.desc.sensor.spp
