@@ -1,0 +1,124 @@
+"""Performance benchmark (not a test): CPU time per render of this tree's
+renderer against a build of an earlier commit, side by side on the same
+machine, interleaved (A B A B ...) so that load from other processes hits
+both alike. Our estimators on the Cornell box (256 x 256, 16 spp, max_depth
+8, one thread by default).
+
+    python -m radiometer.benchmarks.studies.cpu_time_vs_base --base /path/to/base/pkg \
+        [--integrators path,bdpt] [--repeats 7] [--study NAME]
+
+`--base` is a folder holding the earlier commit's `radiometer` package with
+its compiled `_core` module next to its Python files (e.g. `git archive
+<commit>` unpacked, `cmake --build` of its `_core` target, the .so copied
+into bindings/radiometer, analysis/ benchmarks/ reference_scenes/ copied
+inside it as the wheel lays them out). Each timed render runs in a fresh
+process (scene load and first-touch costs excluded: the process loads the
+scene, renders once untimed at 1 spp, then times one render). Reports, per
+estimator, the median of each side and their ratio (this tree / base), and
+writes benchmarks/results/<study>.json. Also says whether the two builds
+give the same image bytes for the same seed.
+
+Studies recorded with it: `media_free_when_absent` (path only: media
+support must cost nothing in a scene without media) and
+`plumbing_cpu_time` (every estimator across the registry / pass-loop /
+light-walk refactor).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+
+from radiometer.benchmarks.studies import record
+from radiometer.reference_scenes import registry
+
+SCENE = registry.get("cornell_box").xml
+
+CHILD = r"""
+import sys, time, hashlib, json
+base = sys.argv[1]
+if base != "-":
+    # Run the base package: drop this environment's editable finder so the
+    # import resolves to `base` first.
+    sys.meta_path = [f for f in sys.meta_path if "editable" not in repr(f).lower()]
+    sys.path.insert(0, base)
+import numpy as np
+import radiometer as rm
+scene = rm.load_file(sys.argv[2], res=int(sys.argv[3]))
+integ = dict(json.loads(sys.argv[7]), max_depth=int(sys.argv[5]))
+rm.render(scene, integrator=integ, spp=1, seed=0)
+threads = int(sys.argv[6])
+t0, c0 = time.perf_counter(), time.process_time()
+r = rm.render(scene, integrator=integ, spp=int(sys.argv[4]), seed=1, threads=threads)
+dt, dc = time.perf_counter() - t0, time.process_time() - c0
+print(dt, dc, hashlib.sha256(np.ascontiguousarray(r.image).tobytes()).hexdigest(), rm.__file__)
+"""
+
+
+# Estimator settings for the timing (photon counts sized like the default matrix's).
+SETTINGS = {"photonmapper": {"global_photons": 50000, "caustic_photons": 50000},
+            "sppm": {"photon_count": 20000}}
+
+
+def _run(base, res, spp, max_depth, threads, integrator="path"):
+    spec = json.dumps(dict(SETTINGS.get(integrator, {}), type=integrator))
+    out = subprocess.run([sys.executable, "-c", CHILD, base, str(SCENE), str(res), str(spp), str(max_depth),
+                          str(threads), spec], capture_output=True, text=True, check=True).stdout.split()
+    return float(out[0]), float(out[1]), out[2], out[3]
+
+
+def _measure(a, integrator):
+    times = {"this": [], "base": []}
+    cpu = {"this": [], "base": []}
+    hashes, files = {}, {}
+    for i in range(a.repeats):
+        for side, base in (("base", a.base), ("this", "-")) if i % 2 else (("this", "-"), ("base", a.base)):
+            dt, dc, h, f = _run(base, a.res, a.spp, a.max_depth, a.threads, integrator)
+            times[side].append(dt)
+            cpu[side].append(dc)
+            hashes[side], files[side] = h, f
+            print(f"{integrator:12s} {side:4s} wall {dt:.3f} s, cpu {dc:.3f} s  ({f})", flush=True)
+    assert files["this"] != files["base"], "both sides imported the same package"
+    med = {k: statistics.median(v) for k, v in times.items()}
+    med_cpu = {k: statistics.median(v) for k, v in cpu.items()}
+    ratio, ratio_cpu = med["this"] / med["base"], med_cpu["this"] / med_cpu["base"]
+    same = hashes["this"] == hashes["base"]
+    print(f"{integrator}: median wall this {med['this']:.3f} s, base {med['base']:.3f} s, ratio {ratio:.3f}; "
+          f"median cpu this {med_cpu['this']:.3f} s, base {med_cpu['base']:.3f} s, ratio {ratio_cpu:.3f}; "
+          f"same image bytes: {same}")
+    return {"seconds": times, "cpu_seconds": cpu, "median_s": med, "median_cpu_s": med_cpu,
+            "ratio_this_over_base": ratio, "ratio_cpu_this_over_base": ratio_cpu, "same_image_bytes": same}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--base", required=True, help="folder with the earlier commit's radiometer package")
+    ap.add_argument("--base-commit", default="", help="the earlier commit's hash, for the record")
+    ap.add_argument("--integrators", default="path", help="comma-separated estimators (default: path)")
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--res", type=int, default=256)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--max-depth", type=int, default=8)
+    ap.add_argument("--threads", type=int, default=1,
+                    help="render threads (default 1: on a loaded shared machine one thread's CPU time is the "
+                         "steadiest measure)")
+    ap.add_argument("--study", default="cpu_time_vs_base", help="the results file's name")
+    ap.add_argument("--out", default=None)
+    a = ap.parse_args(argv)
+    rows = {name: _measure(a, name) for name in a.integrators.split(",")}
+    params = {"res": a.res, "spp": a.spp, "max_depth": a.max_depth, "repeats": a.repeats,
+              "integrators": list(rows), "threads": a.threads, "base": a.base, "base_commit": a.base_commit,
+              "settings": {k: SETTINGS.get(k, {}) for k in rows}}
+    rec = {
+        "scene": "reference_scenes/cornell_box/scene.xml",
+        "timing": "wall seconds (time.perf_counter) and process CPU seconds (time.process_time, all threads) of "
+                  "one render per fresh process, after an untimed 1 spp render; sides interleaved",
+        "estimators": rows,
+    }
+    print("wrote", record.write(a.study, params, rec, out=a.out))
+
+
+if __name__ == "__main__":
+    main()
