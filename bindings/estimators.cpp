@@ -64,6 +64,15 @@ const char* driver_name(Driver d) {
     return "?";
 }
 
+const char* bias_name(Bias b) {
+    switch (b) {
+        case Bias::Unbiased: return "unbiased";
+        case Bias::Consistent: return "consistent";
+        case Bias::Biased: return "biased";
+    }
+    return "?";
+}
+
 py::object optional_number(bool has, double v, ParamType t) {
     if (!has) return py::none();
     if (t == ParamType::Int) return py::int_(int64_t(v));
@@ -100,6 +109,11 @@ py::dict estimator_schema(const EstimatorInfo& e) {
     caps["media"] = e.caps.media;
     caps["dipole"] = e.caps.dipole;
     caps["driver"] = driver_name(e.caps.driver);
+    caps["bias"] = bias_name(e.caps.bias);
+    py::list effects;
+    for (int k = 0; k < kNumEffects; ++k)
+        if (e.caps.effects[k]) effects.append(effect_name(k));
+    caps["effects"] = effects;
     d["capabilities"] = caps;
     py::dict params;
     for (const ParamSpec& s : e.params) params[py::str(s.name)] = param_schema(s);

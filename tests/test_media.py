@@ -178,7 +178,8 @@ def test_bad_media_xml_names_the_line(tmp_path):
         rm.load_file(p)
 
 
-@pytest.mark.parametrize("estimator", ["direct"])
+@pytest.mark.parametrize("estimator", sorted(n for n, e in rm.estimators().items()
+                                             if not e["capabilities"]["media"]))
 def test_estimators_without_media_refuse_media(estimator):
     """Rendering media as vacuum would be a silent error: refuse."""
     scene = rm.load_dict(slab_dict({"type": "homogeneous"}))

@@ -32,7 +32,10 @@ def test_schema_is_complete():
     for name, e in EST.items():
         assert e["name"] == name and e["doc"], name
         caps = e["capabilities"]
-        assert set(caps) == {"media", "dipole", "driver"} and caps["driver"] in ("camera", "light", "own"), name
+        assert set(caps) == {"media", "dipole", "driver", "bias", "effects"}, name
+        assert caps["driver"] in ("camera", "light", "own"), name
+        assert caps["bias"] in ("unbiased", "consistent", "biased"), name
+        assert caps["effects"] and set(caps["effects"]) <= set(rm.EFFECTS), name
         for k, p in e["params"].items():
             assert p["type"] in ("int", "float", "bool", "string") and p["doc"], (name, k)
             assert (p["default"] is None) == (p["ignored"] or bool(p["sets"])), (name, k)

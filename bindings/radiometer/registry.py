@@ -20,7 +20,7 @@ def _schema() -> dict:
 
 def estimators() -> dict:
     """name -> {"name", "aliases", "doc", "capabilities": {"media", "dipole",
-    "driver"}, "params": {name -> {"type", "default", "range", "min", "max",
+    "driver", "bias", "effects"}, "params": {name -> {"type", "default", "range", "min", "max",
     "min_open", "max_open", "choices", "special", "doc", "aliases",
     "ignored", "sets"}}}, by name; aliases (volpath) are not keys."""
     return copy.deepcopy(_schema())
@@ -83,6 +83,7 @@ def help_text(name: str) -> str:
         lines.append(f"  also called: {', '.join(e['aliases'])}")
     lines.append(f"  renders media and dipoles: {', '.join(renders) if renders else 'neither (refuses such scenes)'}")
     lines.append(f"  driver: {driver}")
+    lines.append(f"  bias: {caps['bias']}; renders completely: {', '.join(caps['effects'])}")
     used = {k: p for k, p in e["params"].items() if not p["ignored"] and not p["sets"]}
     other = {k: p for k, p in e["params"].items() if p["ignored"] or p["sets"]}
     rows = [("parameter", "type", "default", "allowed", "Mitsuba 0.6", "description")]

@@ -24,6 +24,7 @@ std::unique_ptr<Integrator> make_direct(ParamReader& p);
             .at_least(0),
     };
     e.caps.driver = Driver::Camera;
+    e.caps.effects = effect_mask({kEmission, kDirect});
     e.factory = make_direct;
     return e;
 }());

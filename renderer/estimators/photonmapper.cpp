@@ -112,6 +112,7 @@ std::unique_ptr<Integrator> make_photonmapper(ParamReader& p);
     };
     e.caps.media = true;
     e.caps.driver = Driver::OwnPasses;
+    e.caps.bias = Bias::Biased;
     e.factory = make_photonmapper;
     return e;
 }());

@@ -59,6 +59,7 @@ std::unique_ptr<Integrator> make_ptracer(ParamReader& p);
     };
     e.caps.media = true;
     e.caps.driver = Driver::Light;
+    e.caps.effects = effect_mask({kEmission, kDirect, kIndirect, kCaustic, kVolume, kSubsurface});  // no L..SE
     e.factory = make_ptracer;
     return e;
 }());

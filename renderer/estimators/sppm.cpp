@@ -73,6 +73,7 @@ std::unique_ptr<Integrator> make_sppm(ParamReader& p);
         ParamSpec::mitsuba_ignored("granularity", "Mitsuba's work-unit size: changes nothing here"),
     };
     e.caps.driver = Driver::OwnPasses;
+    e.caps.bias = Bias::Consistent;
     e.factory = make_sppm;
     return e;
 }());

@@ -80,6 +80,7 @@ private:
         hide_emitters_param(),
     };
     e.caps.driver = Driver::Camera;
+    e.caps.effects = effect_mask({kEmission, kDirect});  // L D S+ E only part of `specular`
     e.factory = [](ParamReader& p) {
         int max_depth = p.get_int("max_depth");
         return std::make_unique<WhittedIntegrator>(max_depth, p.get_bool("hide_emitters"));

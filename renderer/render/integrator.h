@@ -3,6 +3,7 @@
 #pragma once
 #include <array>
 #include <functional>
+#include <initializer_list>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -115,6 +116,13 @@ enum class Driver {
     Light,      // trace_light_path per light path (light_render.cpp)
     OwnPasses,  // drive(): passes of its own (photon mapping)
 };
+enum class Bias { Unbiased, Consistent, Biased };
+// The mask of just the classes listed (kEmission, kDirect, ...).
+inline EffectMask effect_mask(std::initializer_list<int> effects) {
+    EffectMask m{};
+    for (int e : effects) m[e] = true;
+    return m;
+}
 struct Capabilities {
     // Transports light through participating media. The render driver
     // refuses a scene with media for one that does not (rather than render
@@ -124,6 +132,17 @@ struct Capabilities {
     // a dipole scene for any other, by name.
     bool dipole = false;
     Driver driver = Driver::Camera;
+    // What the estimator's expectation is: the exact radiance of the classes
+    // in `effects` at every sample count (unbiased); the exact radiance only
+    // in the limit of many passes (consistent: progressive photon mapping's
+    // shrinking radius, Hachisuka et al. 2008); or off by a bias that more
+    // samples do not remove (biased: photon mapping's fixed photon count and
+    // density-estimation radius, Jensen 2001, ch. 7). The estimator matrix
+    // test (tests/test_estimator_matrix.py) holds each to what it declares.
+    Bias bias = Bias::Unbiased;
+    // The effect classes it renders completely; the others it renders only
+    // in part or not at all, by construction (whitted: no indirect light).
+    EffectMask effects = all_effects();
 };
 
 class Integrator {
