@@ -144,7 +144,7 @@ void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t
     // A photon of depth d is vertex y_d: max_depth segments are max_depth + 1 vertices.
     const int max_vertices = spec.max_depth < 0 ? INT_MAX : spec.max_depth + 1;
     EmissionSample es;
-    light_subpath(scene, sampler, max_vertices, spec.rr_depth, light, es, stats, &visit);
+    light_subpath(scene, sampler, max_vertices, spec.rr_depth, light, es, stats, &visit, false);
 }
 
 PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t target,

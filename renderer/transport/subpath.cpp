@@ -108,7 +108,7 @@ Vec3 far_point(const Scene& scene, const Ray& ray) {
 // (vertexcm.hxx): every vertex is handed to `visit` as it is made.
 void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode, int max_vertices,
                  int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const VertexVisitor* visit,
-                 const MediumTracker* media) {
+                 const MediumTracker* media, bool densities) {
     BsdfContext ctx{mode};
     Color thr(1.f);         // throughput since the start (Russian roulette without media)
     float eta_scale = 1.f;  // undoes radiance scaling by eta^2 (Russian roulette)
@@ -117,21 +117,22 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
     MediumTracker mt = media ? *media : MediumTracker{};
     SpectralThroughput th(media ? std::min(int(sampler.next_1d() * 3.f), 2) : 0, beta);
     const float beta0 = max_component(beta);
-    // A new vertex: its densities (above), then the visitor; false when the
-    // walk ends there (the visitor's choice, or max_vertices reached).
-    auto add_vertex = [&](PathVertex& v) {
-        const size_t n = path.size();  // index of v
+    // The vertex just placed at the end of `path`: its densities (above),
+    // then the visitor; false when the walk ends there (the visitor's
+    // choice, or max_vertices reached).
+    auto add_vertex = [&]() {
+        const size_t n = path.size() - 1;  // index of v
+        PathVertex& v = path[n];
         const PathVertex& prev = path[n - 1];
-        if (n == 1) {
+        if (densities && n == 1) {
             v.pdf_fwd = prev.type == VType::Camera ? camera_pdf_a(scene, prev, v) : pdf_to(scene, prev, nullptr, v);
-        } else if (prev.delta) {
+        } else if (densities && prev.delta) {
             v.pdf_fwd = 0.f;  // a delta: remap0 in the weights (pbrt-v4)
             path[n - 2].pdf_rev = 0.f;
-        } else {
+        } else if (densities) {
             v.pdf_fwd = pdf_to(scene, prev, &path[n - 2], v);
             path[n - 2].pdf_rev = pdf_to(scene, prev, &v, path[n - 2]);
         }
-        path.push_back(v);
         if (visit && !(*visit)(path)) return false;
         return int(path.size()) < max_vertices;
     };
@@ -165,7 +166,7 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
             FlightEvent event = free_flight(med, ray, hit ? it.t : ray.tmax, sampler, th, t);
             if (event == kAbsorbed) break;
             if (event == kScattered) {
-                PathVertex v;
+                PathVertex& v = path.emplace_back();
                 v.type = VType::Medium;
                 v.it.kind = VertexKind::Medium;
                 v.it.valid = true;
@@ -176,7 +177,7 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
                 v.phase = med.phase.get();
                 v.medium = mt.medium;
                 v.enclosed = mt.enclosed;
-                if (!add_vertex(v)) break;
+                if (!add_vertex()) break;
                 PhaseSample ps = v.phase->sample(v.it.wi, sampler.next_2d());
                 if (!(ps.pdf_w > 0.f)) break;
                 th.beta *= ps.weight;
@@ -190,7 +191,7 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
         //    Light vertex at infinity for the s = 0 strategy (pbrt-v4).
         if (!hit) {
             if (mode == TransportMode::Radiance && !scene.environment.empty()) {
-                PathVertex v;
+                PathVertex& v = path.emplace_back();
                 v.type = VType::Light;
                 v.infinite = true;
                 v.emitter = scene.environment[0];
@@ -198,7 +199,7 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
                 v.it.wi = -ray.d;
                 v.beta = th.beta;
                 v.medium = mt.medium;
-                add_vertex(v);
+                add_vertex();
             }
             break;
         }
@@ -213,20 +214,19 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
         }
 
         // 5. A surface vertex.
-        PathVertex v;
+        PathVertex& v = path.emplace_back();
         v.it = it;
         v.beta = th.beta;
         v.bsdf = bsdf;
         v.emitter = shape.emitter >= 0 ? scene.emitters[shape.emitter].get() : nullptr;
         v.medium = mt.medium;
-        if (!add_vertex(v)) break;
+        if (!add_vertex()) break;
 
         // 6. Sample the next direction (adjoint BSDF with the shading-normal
         //    correction in importance transport, common.h); the medium
         //    changes when the sample crosses a boundary.
-        PathVertex& cur = path.back();
         Vec3 wi = it.to_local(it.wi);
-        BsdfSample bs = cur.bsdf->sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+        BsdfSample bs = v.bsdf->sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
         if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
         Vec3 wo = it.to_world(bs.wo);
         Color f = bs.weight;
@@ -234,7 +234,7 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
         else eta_scale *= sqr(bs.eta);
         th.beta *= f;
         thr *= f;
-        cur.delta = bs.is_delta;
+        v.delta = bs.is_delta;
         if (media) mt.cross(it, wo, false);
         ray = it.spawn(wo);
 
@@ -255,7 +255,7 @@ static int emitter_shape(const Scene& scene, const Emitter& e) {
 
 bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
                    std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats,
-                   const VertexVisitor* visit) {
+                   const VertexVisitor* visit, bool densities) {
     light.clear();
     // 1. An emitter picked uniformly (as next event estimation) and a ray of
     //    light leaving it, its weight the flux Le |cos| / (pdf_a pdf_w) / pick
@@ -275,7 +275,7 @@ bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int r
     //    direction under light sampling (pbrt-v4's GenerateLightSubpath);
     //    y1's comes from the origin disk through emitter_pdf_to.
     float pick = emitter_pick_prob(scene);
-    PathVertex y0;
+    PathVertex& y0 = light.emplace_back();
     y0.type = VType::Light;
     y0.emitter = e;
     y0.it.p = es.p;
@@ -283,7 +283,7 @@ bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int r
     y0.it.eps = es.eps;
     y0.pdf_fwd = pick * es.pdf_a;
     y0.infinite = e->is_infinite();
-    if (y0.infinite) {  // seen from a point downstream of y0, the light lies along -es.d
+    if (y0.infinite && densities) {  // seen from a point downstream of y0, the light lies along -es.d
         PathVertex downstream;
         downstream.it.p = es.p + es.d;
         y0.pdf_fwd = light_origin_pdf(scene, y0, downstream);
@@ -301,12 +301,11 @@ bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int r
         y0.enclosed = mt.enclosed;
         if (y0.infinite) beta *= transmittance_from_infinity(scene, mt.medium);
     }
-    light.push_back(y0);
     if (visit && !(*visit)(light)) return true;
     if (is_black(beta)) return true;  // y0 alone: light from infinity that no unbounded medium lets through
     // 4. The adjoint walk.
     random_walk(scene, sampler, ray, beta, TransportMode::Importance, max_vertices, rr_depth, light, stats,
-                visit, scene.features.has_media ? &mt : nullptr);
+                visit, scene.features.has_media ? &mt : nullptr, densities);
     return true;
 }
 

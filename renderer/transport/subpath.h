@@ -101,10 +101,13 @@ using VertexVisitor = std::function<bool(const std::vector<PathVertex>&)>;
 // index-matched boundaries without making them vertices (they do not count
 // towards max_vertices, as in volpath). Russian roulette from rr_depth
 // scattering vertices on (common.h: Mitsuba's rule without media,
-// volpath's through them).
+// volpath's through them). `densities`: whether the vertices get their
+// pdf_fwd / pdf_rev (the MIS weights of bdpt and vertex merging read them;
+// light tracing and photon mapping read none and save their cost, a fifth
+// of photon tracing's time); no random numbers depend on it.
 void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode, int max_vertices,
                  int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const VertexVisitor* visit = nullptr,
-                 const MediumTracker* media = nullptr);
+                 const MediumTracker* media = nullptr, bool densities = true);
 
 // The light subpath y0 y1 .. of every light-tracing estimator (ptracer,
 // bdpt, photon tracing): an emitter picked uniformly (as next event
@@ -113,10 +116,10 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
 // numbers for its start. Returns false (and leaves `light` empty) when the
 // scene has no emitter or the sample failed. In a scene with media the
 // walk goes through them (random_walk's `media`), starting in the
-// emitter's medium (emitter_medium).
+// emitter's medium (emitter_medium). `densities` as in random_walk.
 bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
                    std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats,
-                   const VertexVisitor* visit = nullptr);
+                   const VertexVisitor* visit = nullptr, bool densities = true);
 
 // The sensor end of a connection from `ref`: Sensor::sample_direction, with
 // a point drawn on an area sensor (random numbers only for those, so a
