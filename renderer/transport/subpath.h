@@ -103,8 +103,8 @@ using VertexVisitor = std::function<bool(const std::vector<PathVertex>&)>;
 // scattering vertices on (common.h: Mitsuba's rule without media,
 // volpath's through them). `densities`: whether the vertices get their
 // pdf_fwd / pdf_rev (the MIS weights of bdpt and vertex merging read them;
-// light tracing and photon mapping read none and save their cost, a fifth
-// of photon tracing's time); no random numbers depend on it.
+// light tracing and photon mapping read none and save their cost, a tenth
+// to a fifth of photon tracing's time); no random numbers depend on it.
 void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode, int max_vertices,
                  int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const VertexVisitor* visit = nullptr,
                  const MediumTracker* media = nullptr, bool densities = true);
