@@ -540,9 +540,9 @@ private:
             // Next event estimation with a fresh emitter sample.
             PathVertex& z = cam[t - 1];
             if (!z.connectible() || (z.type != VType::Surface && z.type != VType::Medium)) return L;
-            size_t n = scene.emitters.size();
-            if (n == 0) return L;
-            const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n)), n - 1)];
+            const Emitter* picked = pick_emitter(scene, u_pick);
+            if (!picked) return L;
+            const Emitter& e = *picked;
             DirectSample ds = e.sample_direct(z.it.p, u_l, u_extra);
             if (!(ds.pdf_w > 0.f) || is_black(ds.radiance)) return L;
             Color f = scatter_value(z, ds.d, TransportMode::Radiance);

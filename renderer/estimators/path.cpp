@@ -129,13 +129,10 @@ public:
             // MIS densities of what this ray hits are taken from where it starts.
             prev_p = ray.o;
 
-            // 6. Russian roulette (Mitsuba: q = min(max(beta) * eta^2, 0.95)).
-            float rr_u = sampler.next_1d();
-            if (depth + 1 >= rr_depth_) {
-                float q = std::min(max_component(beta) * eta_scale, 0.95f);
-                if (!(rr_u < q)) break;
-                beta /= q;
-            }
+            // 6. Russian roulette (Mitsuba's rule, common.h).
+            if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta) * eta_scale,
+                                   sampler.next_1d(), beta))
+                break;
         }
     }
 

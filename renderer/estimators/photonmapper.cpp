@@ -221,12 +221,9 @@ public:
             beta *= bs.weight;
             if (bsdf.flags() != kNull) pc.push(true);
             ray = it.spawn(it.to_world(bs.wo));
-            float rr_u = sampler.next_1d();
-            if (depth + 1 >= rr_depth_) {
-                float q = std::min(max_component(beta), 0.95f);
-                if (!(rr_u < q)) break;
-                beta /= q;
-            }
+            if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta), sampler.next_1d(),
+                                   beta))
+                break;
         }
     }
 
@@ -720,12 +717,8 @@ void PhotonMapper::radiance_media(const Scene& scene, const Maps& maps, Sampler&
         Vec3 wo = it.to_world(bs.wo);
         mt.cross(it, wo, false);
         ray = it.spawn(wo);
-        float rr_u = sampler.next_1d();
-        if (cv >= rr_depth_) {
-            float q = std::min(max_component(beta), 0.95f);
-            if (!(rr_u < q)) break;
-            beta /= q;
-        }
+        if (!survives_roulette(RouletteRule::Capped, cv, rr_depth_, max_component(beta), sampler.next_1d(), beta))
+            break;
     }
 }
 

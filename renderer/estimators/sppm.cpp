@@ -152,12 +152,9 @@ private:
             beta *= bs.weight;
             if (bsdf.flags() != kNull) pc.push(true);
             ray = it.spawn(it.to_world(bs.wo));
-            float rr_u = sampler.next_1d();
-            if (depth + 1 >= rr_depth_) {
-                float q = std::min(max_component(beta), 0.95f);
-                if (!(rr_u < q)) return;
-                beta /= q;
-            }
+            if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta), sampler.next_1d(),
+                                   beta))
+                return;
         }
     }
 

@@ -63,24 +63,10 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
     SpectralThroughput th(std::min(int(sampler.next_1d() * 3.f), 2));
     Color& beta = th.beta;
     // Russian roulette only once the throughput has fallen below 1 (pbrt-v4's
-    // rule), not Mitsuba's min(throughput, 0.95) of the surface loop: in a
-    // medium the analog walk already ends paths by absorption, and a 5 %
-    // kill per event on top multiplies the weight of a long walk (hundreds of
-    // events in a dense, bright medium) by 1/0.95^n, a heavy tail that made
-    // every 512 spp render of translucent_slab fail the block test's mean z
-    // (-4 to -6; -1 without that roulette). Beyond kLongWalk events the 0.95
-    // cap returns, so that a walk in a dense white medium (albedo 1, which
-    // never absorbs) with max_depth -1 ends in about 20 more events instead
-    // of wandering for (size * sigma_t)^2 events.
-    constexpr int kLongWalk = 1024;
+    // rule, not Mitsuba's of the surface loop: common.h says why).
     auto roulette = [&](float rr_u) {
-        if (depth < prm.rr_depth) return true;
-        float q = max_component(beta) * eta_scale;
-        if (depth >= kLongWalk) q = std::min(q, 0.95f);
-        if (q >= 1.f) return true;
-        if (!(rr_u < q)) return false;
-        beta /= q;
-        return true;
+        return survives_roulette(RouletteRule::BelowStart, depth, prm.rr_depth, max_component(beta) * eta_scale, rr_u,
+                                 beta);
     };
     for (int guard = 0; guard < (1 << 20); ++guard) {
         // 1. Find the next surface along the ray.

@@ -10,10 +10,9 @@ bool sample_light(const Scene& scene, const Vec3& p, Sampler& sampler, DirectSam
 }
 
 bool sample_light(const Scene& scene, const Vec3& p, float u_pick, Vec2 u, float u_extra, DirectSample& ds) {
-    size_t n = scene.emitters.size();
-    if (n == 0) return false;
-    const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n)), n - 1)];
-    ds = e.sample_direct(p, u, u_extra);
+    const Emitter* e = pick_emitter(scene, u_pick);
+    if (!e) return false;
+    ds = e->sample_direct(p, u, u_extra);
     return ds.pdf_w > 0.f && !is_black(ds.radiance);
 }
 

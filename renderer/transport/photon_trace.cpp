@@ -1,10 +1,10 @@
 #include "transport/photon_trace.h"
 
 #include <chrono>
+#include <climits>
 
-#include "transport/common.h"
-#include "transport/media_common.h"
 #include "render/parallel.h"
+#include "transport/subpath.h"
 
 namespace rm {
 
@@ -48,215 +48,103 @@ void normalise(std::vector<Photon>& ph, uint64_t paths) {
 }
 
 
-// The shape an area emitter lies on (-1 for the others): where its light
-// starts decides the medium it starts in (emitter_medium).
-int emitter_shape_of(const Scene& scene, const Emitter& e) {
-    for (size_t i = 0; i < scene.shapes.size(); ++i) {
-        int k = scene.shapes[i]->emitter;
-        if (k >= 0 && scene.emitters[k].get() == &e) return int(i);
-    }
-    return -1;
-}
+// Photon storage (Jensen 2001, sec. 5.2), a visitor on the vertices of the
+// light walk (subpath.h), which brings the emitter pick, the emission
+// sample, the adjoint BSDFs, free flights through media, index-matched
+// boundaries and Russian roulette. The visitor decides what each vertex
+// leaves and where the path may end, from the vertices before it:
+//   surface photons (not spec.volume) at vertices with a non-specular lobe
+//   (photons on specular surfaces are useless), filtered by the spec: L S+
+//   D only (caustic_only), or only after a non-specular vertex
+//   (indirect_only), or all but the first vertex's (store_direct off);
+//   volume photons (spec.volume) at medium scattering events after at least
+//   one scattering vertex (L X+ V), with the power the walk carries there,
+//   which already holds the event's sigma_s / (density of scattering there)
+//   (free_flight_*), so the photons are distributed with density
+//   sigma_s(x) int L(x, w) dw per unit volume (the seed: d^2 Phi = sigma_s
+//   L dw dV, Jensen & Christensen 1998): what the camera pass's
+//   Phi / (4/3 pi r^3) estimate divides by volume.
+// A photon's depth is its vertex's index on the walk: segments from the
+// emitter without media, scattering vertices through them.
+class PhotonStore {
+public:
+    PhotonStore(const PhotonTraceSpec& spec, std::vector<Photon>& out, ThreadStats& stats)
+        : spec_(spec), out_(out), stats_(stats) {}
 
-Photon make_photon(const Vec3& p, const Vec3& wi, const Color& power, uint32_t flags) {
-    Photon ph;
-    ph.p = p;
-    ph.wi = wi;
-    ph.power = power;
-    ph.flags = flags;
-    return ph;
-}
-
-// Photon tracing through participating media (photon_trace.h): the walk of
-// subpath.cpp's random_walk for light subpaths, storing photons instead of
-// vertices. Surface photons follow the rules of trace_photon_path; volume
-// photons (spec.volume) are stored at medium scattering events, with the
-// power th.beta the walk carries there. That power already holds the
-// event's sigma_s / (density of scattering there) (free_flight_*), so the
-// stored photons are distributed with density sigma_s(x) int L(x, w) dw per
-// unit volume (the seed: d^2 Phi = sigma_s L dw dV, Jensen & Christensen 1998):
-// what the camera pass's Phi / (4/3 pi r^3) estimate divides by volume.
-void trace_media_path(const Scene& scene, const PhotonTraceSpec& spec, const Emitter& e, const EmissionSample& es,
-                      const Color& beta0, Sampler& sampler, std::vector<Photon>& out, ThreadStats& stats) {
-    Ray ray;
-    ray.o = es.p + es.n * es.eps;
-    ray.d = es.d;
-    MediumTracker mt = emitter_medium(scene, ray, es.n, emitter_shape_of(scene, e));
-    // Hero channel of spectral MIS, drawn once per light path (media_common.h).
-    SpectralThroughput th(std::min(int(sampler.next_1d() * 3.f), 2),
-                          e.is_infinite() ? beta0 * transmittance_from_infinity(scene, mt.medium) : beta0);
-    if (is_black(th.beta)) return;  // light from infinity that no unbounded medium lets through
-    const float b0 = max_component(beta0);
-    BsdfContext ctx{TransportMode::Importance};
-    int k = 0;                 // scattering vertices before the current one
-    bool all_specular = true;  // each of them scattered specularly
-    uint32_t medium_flags = 0; // kPhotonVolumePath / kPhotonSubsurfacePath once it scattered in a medium
-    // volpath's roulette (volpath.cpp says why): only once the throughput
-    // fell below its start, capped at 0.95 beyond kLongWalk events.
-    constexpr int kLongWalk = 1024;
-    auto roulette = [&](int depth, float rr_u) {
-        if (depth < spec.rr_depth) return true;
-        float q = b0 > 0.f ? max_component(th.beta) / b0 : 0.f;
-        if (depth >= kLongWalk) q = std::min(q, 0.95f);
-        if (q >= 1.f) return true;
-        if (!(rr_u < q)) return false;
-        th.beta /= q;
-        return true;
-    };
-    auto store = [&](const Vec3& p, const Vec3& wi, uint32_t flags) {
-        if (!is_finite(th.beta) || is_black(th.beta)) return;
-        out.push_back(make_photon(p, wi, th.beta, flags));
-        ++stats.photons;
-    };
-    for (int depth = 1, guard = 0; guard < (1 << 20); ++guard) {  // depth: scattering vertex about to be made
-        Interaction it;
-        ++stats.rays;
-        bool hit = scene.intersect(ray, it);
-        // 1. Free flight through the current medium.
-        if (mt.medium >= 0) {
-            const Medium& med = *scene.media[mt.medium];
-            float t = 0.f;
-            FlightEvent event = free_flight(med, ray, hit ? it.t : ray.tmax, sampler, th, t);
-            if (event == kAbsorbed) break;
-            if (event == kScattered) {
-                Vec3 p = ray.o + ray.d * t;
-                // 2. A volume photon at a multiple-scattering event (k > 0).
-                if (spec.volume && k > 0)
-                    store(p, -ray.d, kPhotonIndirect | (uint32_t(std::min(depth, 255)) << kPhotonDepthShift) |
-                                         (uint32_t(mt.medium + 1) << kPhotonMediumShift));
-                ++k;
-                all_specular = false;
-                medium_flags |= mt.enclosed ? kPhotonSubsurfacePath : kPhotonVolumePath;
-                if (spec.caustic_only) break;  // L S+ D only: a medium vertex ends a caustic path
-                if (spec.max_depth >= 0 && depth >= spec.max_depth) break;
-                PhaseSample ps = med.phase->sample(-ray.d, sampler.next_2d());
-                if (!(ps.pdf_w > 0.f)) break;
-                th.beta *= ps.weight;
-                ray = Ray{p, ps.wo, 0.f, kInf};
-                if (!roulette(depth++, sampler.next_1d())) break;
-                continue;
+    bool operator()(const std::vector<PathVertex>& path) {
+        const int n = int(path.size()) - 1;
+        if (n == 0) return true;  // y0: the emission sample leaves no photon
+        // 1. The vertex before this one is complete now (its lobe is known): count it.
+        if (n >= 2) {
+            const PathVertex& prev = path[n - 1];
+            if (prev.type == VType::Medium) {
+                ++k_;
+                all_specular_ = false;
+                medium_flags_ |= prev.enclosed ? kPhotonSubsurfacePath : kPhotonVolumePath;
+            } else if (!prev.null_surface()) {
+                ++k_;
+                all_specular_ = all_specular_ && prev.delta;
             }
         }
-        if (!hit) break;
-        const Bsdf& bsdf = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
-        // 3. An index-matched boundary: no vertex, only a change of medium.
-        if (bsdf.flags() == kNull) {
-            mt.cross(it, ray.d, true);
-            ray = it.spawn(ray.d);
-            continue;
+        // A caustic path ends once it scattered through a non-specular lobe.
+        if (spec_.caustic_only && !all_specular_) return false;
+        const PathVertex& v = path[n];
+        const uint32_t depth = uint32_t(std::min(n, 255)) << kPhotonDepthShift;
+        // 2. A volume photon at a multiple-scattering event (k > 0); a
+        //    medium vertex ends a caustic path.
+        if (v.type == VType::Medium) {
+            if (spec_.volume && k_ > 0)
+                store(v, kPhotonIndirect | depth | (uint32_t(v.medium + 1) << kPhotonMediumShift));
+            return !spec_.caustic_only;
         }
-        // 4. A surface photon where a non-specular lobe can scatter it
-        //    (as trace_photon_path; none in a volume-only pass).
-        if (!spec.volume && bsdf.has_smooth()) {
-            bool direct = k == 0, caustic = k > 0 && all_specular;
-            bool keep = spec.caustic_only ? caustic : spec.indirect_only ? !all_specular : (spec.store_direct || !direct);
+        // 3. A surface photon where a non-specular lobe can scatter it.
+        if (!spec_.volume && v.bsdf->has_smooth()) {
+            bool direct = k_ == 0, caustic = k_ > 0 && all_specular_;
+            bool keep = spec_.caustic_only    ? caustic
+                        : spec_.indirect_only ? !all_specular_
+                                              : (spec_.store_direct || !direct);
             if (keep)
-                store(it.p, it.wi, (direct ? kPhotonDirect : 0u) | (all_specular ? 0u : kPhotonIndirect) |
-                                       medium_flags | (uint32_t(std::min(depth, 255)) << kPhotonDepthShift));
+                store(v, (direct ? kPhotonDirect : 0u) | (all_specular_ ? 0u : kPhotonIndirect) | medium_flags_ |
+                             depth);
         }
-        if (spec.max_depth >= 0 && depth >= spec.max_depth) break;
-        // 5. Scatter by the adjoint BSDF; the medium changes when the sample crosses a boundary.
-        Vec3 wi = it.to_local(it.wi);
-        BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
-        if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
-        Vec3 wo = it.to_world(bs.wo);
-        th.beta *= bs.weight * shading_correction(it, it.wi, wo);
-        ++k;
-        all_specular = all_specular && bs.is_delta;
-        if (spec.caustic_only && !all_specular) break;
-        mt.cross(it, wo, false);
-        ray = it.spawn(wo);
-        if (!roulette(depth++, sampler.next_1d())) break;
+        // 4. A caustic path goes on only through a delta lobe (a BSDF with a
+        //    delta and a smooth lobe, plastic's coat, passes caustics on
+        //    through the delta one: step 1 at the next vertex decides).
+        return !spec_.caustic_only || (v.bsdf->flags() & kDelta);
     }
-}
+
+private:
+    void store(const PathVertex& v, uint32_t flags) {
+        if (!is_finite(v.beta) || is_black(v.beta)) return;
+        Photon ph;
+        ph.p = v.it.p;
+        ph.wi = v.it.wi;
+        ph.power = v.beta;
+        ph.flags = flags;
+        out_.push_back(ph);
+        ++stats_.photons;
+    }
+
+    const PhotonTraceSpec& spec_;
+    std::vector<Photon>& out_;
+    ThreadStats& stats_;
+    int k_ = 0;                  // scattering vertices before the current one (null boundaries excluded)
+    bool all_specular_ = true;   // each of them scattered specularly
+    uint32_t medium_flags_ = 0;  // kPhotonVolumePath / kPhotonSubsurfacePath once the path scattered in a medium
+};
 
 }  // namespace
 
 void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path,
                        uint64_t pass, std::vector<Photon>& out, ThreadStats& stats) {
     Sampler sampler(mix64(seed + 0x70686f746f6eULL + spec.stream), path, pass);
-    size_t n = scene.emitters.size();
-    // 1. Pick an emitter uniformly and sample a ray of light leaving it
-    //    (Jensen 2001, sec. 5.1: emission proportional to power; the
-    //    weight carries the flux, Le |cos| / (pdf_a pdf_w) / pick).
-    float u_pick = sampler.next_1d();
-    Vec2 u_pos = sampler.next_2d();
-    float u_extra = sampler.next_1d();
-    Vec2 u_dir = sampler.next_2d();
-    if (n == 0) return;
-    const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n)), n - 1)];
-    Vec3 center;
-    float radius;
-    scene.bounding_sphere(center, radius);
-    EmissionSample es = e.sample_emission(u_pos, u_extra, u_dir, center, radius);
-    if (!(es.pdf_a > 0.f) || !(es.pdf_w > 0.f) || is_black(es.weight)) return;
-    Color beta = es.weight * (1.f / emitter_pick_prob(scene));  // flux of the path
-    if (scene.features.has_media) {
-        trace_media_path(scene, spec, e, es, beta, sampler, out, stats);
-        return;
-    }
-    Color thr(1.f);                                              // throughput since the emitter
-    Ray ray;
-    ray.o = es.p + es.n * es.eps;
-    ray.d = es.d;
-    BsdfContext ctx{TransportMode::Importance};
-    int k = 0;                  // scattering vertices before the current one (null boundaries excluded)
-    bool all_specular = true;   // each of them scattered specularly
-    for (int depth = 1;; ++depth) {  // segments from the emitter to `it`
-        // 2. The next vertex.
-        Interaction it;
-        ++stats.rays;
-        if (!scene.intersect(ray, it)) break;
-        const Bsdf& bsdf = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
-        Vec3 wi = it.to_local(it.wi);
-
-        // 3. Store a photon where a non-specular lobe can scatter it
-        //    (Jensen 2001, sec. 5.2: photons on specular surfaces are useless).
-        if (bsdf.has_smooth()) {
-            bool direct = k == 0, caustic = k > 0 && all_specular;
-            bool keep = spec.caustic_only ? caustic
-                        : spec.indirect_only ? !all_specular
-                                             : (spec.store_direct || !direct);
-            if (keep) {
-                Photon ph;
-                ph.p = it.p;
-                ph.wi = it.wi;
-                ph.power = beta * thr;
-                ph.flags = (direct ? kPhotonDirect : 0u) | (all_specular ? 0u : kPhotonIndirect) |
-                           (uint32_t(std::min(depth, 255)) << kPhotonDepthShift);
-                if (is_finite(ph.power) && !is_black(ph.power)) {
-                    out.push_back(ph);
-                    ++stats.photons;
-                }
-            }
-            // A caustic path ends once it scatters through a non-specular
-            // lobe (below, after sampling), not at the first vertex that has
-            // one: a BSDF with a delta and a smooth lobe (plastic's coat)
-            // passes caustics on through the delta lobe.
-        }
-        if (spec.max_depth >= 0 && depth >= spec.max_depth) break;
-
-        // 4. Scatter by the adjoint BSDF (importance transport, with the
-        //    shading-normal correction of Veach 1997, eq. 5.16).
-        BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
-        if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
-        Vec3 wo = it.to_world(bs.wo);
-        thr *= bs.weight * shading_correction(it, it.wi, wo);
-        if (bsdf.flags() != kNull) {
-            ++k;
-            all_specular = all_specular && bs.is_delta;
-        }
-        if (spec.caustic_only && !all_specular) break;
-        ray = it.spawn(wo);
-
-        // 5. Russian roulette (Jensen 2001, sec. 5.1.3; Mitsuba's q = min(max(thr), 0.95)).
-        float rr_u = sampler.next_1d();
-        if (depth >= spec.rr_depth) {
-            float q = std::min(max_component(thr), 0.95f);
-            if (!(rr_u < q)) break;
-            thr /= q;
-        }
-    }
+    thread_local std::vector<PathVertex> light;
+    PhotonStore store(spec, out, stats);
+    VertexVisitor visit = [&store](const std::vector<PathVertex>& p) { return store(p); };
+    // A photon of depth d is vertex y_d: max_depth segments are max_depth + 1 vertices.
+    const int max_vertices = spec.max_depth < 0 ? INT_MAX : spec.max_depth + 1;
+    EmissionSample es;
+    light_subpath(scene, sampler, max_vertices, spec.rr_depth, light, es, stats, &visit, false);
 }
 
 PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t target,

@@ -1,7 +1,8 @@
 // Photon tracing, the first pass of photon mapping (Jensen 2001, ch. 5):
 // light paths leave the emitters with their flux, scatter by the adjoint
 // BSDFs with Russian roulette, and leave a photon (position, incoming
-// direction, power) at every vertex with a non-specular lobe.
+// direction, power) at every vertex with a non-specular lobe. The light
+// paths are those of light tracing and bdpt (subpath.h).
 //
 // Determinism: light path g draws on Sampler(mix64(seed + stream), g, pass)
 // alone, and the photons of a pass are concatenated in path order, so the
@@ -42,14 +43,17 @@ struct PhotonTraceSpec {
 };
 
 // Traces light path `path` of pass `pass` and appends its photons, their
-// power not yet divided by the number of paths traced. In a scene with
-// media the path takes free flights through them (the seed's photon
-// tracing in participating media: mean free path 1 / sigma_t, scatter with
-// probability sigma_s / sigma_t else absorb, the new direction drawn from
-// the phase function), crosses index-matched boundaries without a vertex,
-// and its power follows the hero-channel spectral MIS throughput of
-// media_common.h; `depth` then counts scattering vertices (surface or
-// medium, null boundaries excluded), as volpath's max_depth does.
+// power not yet divided by the number of paths traced: the light subpath
+// of ptracer and bdpt (subpath.h's light_subpath: the emitter pick, the
+// emission sample, the adjoint walk with Russian roulette), its photons
+// stored by a visitor on the walk's vertices (photon_trace.cpp). In a
+// scene with media the walk takes free flights through them (mean free
+// path 1 / sigma_t, scatter with probability sigma_s / sigma_t else
+// absorb, the new direction drawn from the phase function), crosses
+// index-matched boundaries without a vertex, and its power follows the
+// hero-channel spectral MIS throughput of media_common.h; `depth` then
+// counts scattering vertices (surface or medium, null boundaries
+// excluded), as volpath's max_depth does.
 void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path,
                        uint64_t pass, std::vector<Photon>& out, ThreadStats& stats);
 

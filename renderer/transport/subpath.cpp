@@ -1,4 +1,5 @@
-// The subpath machinery of subpath.h, shared by ptracer.cpp and bdpt.cpp.
+// The subpath machinery of subpath.h: the light walk of ptracer.cpp, bdpt.cpp
+// and photon_trace.cpp, and bdpt's camera walk.
 #include "transport/subpath.h"
 
 #include <algorithm>
@@ -102,74 +103,70 @@ Vec3 far_point(const Scene& scene, const Ray& ray) {
 // exactly as the connections compute them: the weights are a partition of
 // unity only if every strategy sees the same numbers (the sampled direction
 // leaves an offset origin, and for vertices 1e-2 apart in a corner that
-// moved densities by 1 %, measured by bdpt_mis_check).
+// moved densities by 1 %, measured by bdpt_mis_check). The walk's steps
+// follow pbrt-v4's RandomWalk (bdpt.cpp) with SmallVCM's light loop
+// (vertexcm.hxx): every vertex is handed to `visit` as it is made.
 void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode, int max_vertices,
-                 int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const WalkStop* stop,
-                 const MediumTracker* media) {
+                 int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const VertexVisitor* visit,
+                 const MediumTracker* media, bool densities) {
     BsdfContext ctx{mode};
-    Color thr(1.f);         // throughput since the start (Russian roulette)
+    Color thr(1.f);         // throughput since the start (Russian roulette without media)
     float eta_scale = 1.f;  // undoes radiance scaling by eta^2 (Russian roulette)
     // Through media: the hero channel of spectral MIS (media_common.h),
     // drawn once per walk, and the medium the walk is in.
     MediumTracker mt = media ? *media : MediumTracker{};
     SpectralThroughput th(media ? std::min(int(sampler.next_1d() * 3.f), 2) : 0, beta);
     const float beta0 = max_component(beta);
-    // Each new vertex gets pdf_fwd and its predecessor's predecessor
-    // pdf_rev (see above).
-    auto push_vertex = [&](PathVertex& v) {
-        const size_t n = path.size();  // index of v
+    // The vertex just placed at the end of `path`: its densities (above),
+    // then the visitor; false when the walk ends there (the visitor's
+    // choice, or max_vertices reached).
+    auto add_vertex = [&]() {
+        const size_t n = path.size() - 1;  // index of v
+        PathVertex& v = path[n];
         const PathVertex& prev = path[n - 1];
-        if (n == 1) {
+        if (densities && n == 1) {
             v.pdf_fwd = prev.type == VType::Camera ? camera_pdf_a(scene, prev, v) : pdf_to(scene, prev, nullptr, v);
-        } else if (prev.delta) {
+        } else if (densities && prev.delta) {
             v.pdf_fwd = 0.f;  // a delta: remap0 in the weights (pbrt-v4)
             path[n - 2].pdf_rev = 0.f;
-        } else {
+        } else if (densities) {
             v.pdf_fwd = pdf_to(scene, prev, &path[n - 2], v);
             path[n - 2].pdf_rev = pdf_to(scene, prev, &v, path[n - 2]);
         }
-        path.push_back(v);
+        if (visit && !(*visit)(path)) return false;
+        return int(path.size()) < max_vertices;
     };
-    // Russian roulette (Mitsuba: q = min(max(throughput) eta^2, 0.95)). In
-    // media, volpath's rule (volpath.cpp explains it): only once the
-    // throughput has fallen below its start, the 0.95 cap only beyond
-    // kLongWalk events, so that long walks in bright media carry no
-    // 1 / 0.95^n tail.
-    constexpr int kLongWalk = 1024;
+    // Russian roulette after the depth-th scattering vertex (common.h):
+    // Mitsuba's rule on the throughput since the start, volpath's in media.
     auto roulette = [&](int depth, float rr_u) {
-        if (depth < rr_depth) return true;
-        if (!media) {
-            float q = std::min(max_component(thr) * eta_scale, 0.95f);
-            if (!(rr_u < q)) return false;
-            th.beta /= q;
-            thr /= q;
-            return true;
-        }
-        float q = beta0 > 0.f ? max_component(th.beta) / beta0 * eta_scale : 0.f;
-        if (depth >= kLongWalk) q = std::min(q, 0.95f);
-        if (q >= 1.f) return true;
+        if (media)
+            return survives_roulette(RouletteRule::BelowStart, depth, rr_depth,
+                                     beta0 > 0.f ? max_component(th.beta) / beta0 * eta_scale : 0.f, rr_u, th.beta);
+        float q = roulette_survival(RouletteRule::Capped, depth, rr_depth, max_component(thr) * eta_scale);
         if (!(rr_u < q)) return false;
         th.beta /= q;
+        thr /= q;
         return true;
     };
     // depth: scattering vertices from the start to the new vertex (every
     // surface vertex without media; null boundaries excluded with them).
     for (int depth = 1, guard = 0; guard < (1 << 20); ++guard) {
         if (int(path.size()) >= max_vertices) break;
+        // 1. The next surface along the ray.
         Interaction it;
         ++stats.rays;
         bool hit = scene.intersect(ray, it);
 
-        // Free flight through the current medium (media_common.h); a
-        // scattering event is a Medium vertex, whose next direction the
-        // phase function samples (weight eval / pdf = 1 for ours).
+        // 2. Free flight through the current medium (media_common.h); a
+        //    scattering event is a Medium vertex, whose next direction the
+        //    phase function samples (weight eval / pdf = 1 for ours).
         if (media && mt.medium >= 0) {
             const Medium& med = *scene.media[mt.medium];
             float t = 0.f;
             FlightEvent event = free_flight(med, ray, hit ? it.t : ray.tmax, sampler, th, t);
             if (event == kAbsorbed) break;
             if (event == kScattered) {
-                PathVertex v;
+                PathVertex& v = path.emplace_back();
                 v.type = VType::Medium;
                 v.it.kind = VertexKind::Medium;
                 v.it.valid = true;
@@ -180,9 +177,7 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
                 v.phase = med.phase.get();
                 v.medium = mt.medium;
                 v.enclosed = mt.enclosed;
-                push_vertex(v);
-                if (int(path.size()) >= max_vertices) break;
-                if (stop && (*stop)(path)) break;
+                if (!add_vertex()) break;
                 PhaseSample ps = v.phase->sample(v.it.wi, sampler.next_2d());
                 if (!(ps.pdf_w > 0.f)) break;
                 th.beta *= ps.weight;
@@ -192,11 +187,11 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
             }
         }
 
+        // 3. Leaving the scene: a camera path ends on the environment, a
+        //    Light vertex at infinity for the s = 0 strategy (pbrt-v4).
         if (!hit) {
-            // A camera path leaving the scene ends on the environment: a
-            // Light vertex at infinity, for the s = 0 strategy (pbrt-v4).
             if (mode == TransportMode::Radiance && !scene.environment.empty()) {
-                PathVertex v;
+                PathVertex& v = path.emplace_back();
                 v.type = VType::Light;
                 v.infinite = true;
                 v.emitter = scene.environment[0];
@@ -204,33 +199,34 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
                 v.it.wi = -ray.d;
                 v.beta = th.beta;
                 v.medium = mt.medium;
-                push_vertex(v);
+                add_vertex();
             }
             break;
         }
         const Shape& shape = *scene.shapes[it.shape];
         const Bsdf* bsdf = scene.bsdfs[shape.bsdf].get();
-        // Through media, an index-matched boundary is no vertex: cross it.
+
+        // 4. Through media, an index-matched boundary is no vertex: cross it.
         if (media && bsdf->flags() == kNull) {
             mt.cross(it, ray.d, true);
             ray = it.spawn(ray.d);
             continue;
         }
-        PathVertex v;
+
+        // 5. A surface vertex.
+        PathVertex& v = path.emplace_back();
         v.it = it;
         v.beta = th.beta;
         v.bsdf = bsdf;
         v.emitter = shape.emitter >= 0 ? scene.emitters[shape.emitter].get() : nullptr;
         v.medium = mt.medium;
-        push_vertex(v);
-        if (int(path.size()) >= max_vertices) break;
-        if (stop && (*stop)(path)) break;
+        if (!add_vertex()) break;
 
-        // Sample the next direction (adjoint BSDF with the shading-normal
-        // correction in importance transport, common.h).
-        PathVertex& cur = path.back();
+        // 6. Sample the next direction (adjoint BSDF with the shading-normal
+        //    correction in importance transport, common.h); the medium
+        //    changes when the sample crosses a boundary.
         Vec3 wi = it.to_local(it.wi);
-        BsdfSample bs = cur.bsdf->sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+        BsdfSample bs = v.bsdf->sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
         if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
         Vec3 wo = it.to_world(bs.wo);
         Color f = bs.weight;
@@ -238,14 +234,17 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
         else eta_scale *= sqr(bs.eta);
         th.beta *= f;
         thr *= f;
-        cur.delta = bs.is_delta;
+        v.delta = bs.is_delta;
         if (media) mt.cross(it, wo, false);
         ray = it.spawn(wo);
+
+        // 7. Russian roulette.
         if (!roulette(depth++, sampler.next_1d())) break;
     }
 }
 
-// The shape an area emitter lies on (-1 for the others).
+// The shape an area emitter lies on (-1 for the others): where its light
+// starts decides the medium it starts in (emitter_medium).
 static int emitter_shape(const Scene& scene, const Emitter& e) {
     for (size_t i = 0; i < scene.shapes.size(); ++i) {
         int k = scene.shapes[i]->emitter;
@@ -255,53 +254,58 @@ static int emitter_shape(const Scene& scene, const Emitter& e) {
 }
 
 bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
-                   std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats, const WalkStop* stop) {
+                   std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats,
+                   const VertexVisitor* visit, bool densities) {
     light.clear();
-    size_t n_em = scene.emitters.size();
+    // 1. An emitter picked uniformly (as next event estimation) and a ray of
+    //    light leaving it, its weight the flux Le |cos| / (pdf_a pdf_w) / pick
+    //    (Jensen 2001, sec. 5.1); the same random numbers whatever happens.
     float u_pick = sampler.next_1d();
     Vec2 u_pos = sampler.next_2d();
     float u_extra = sampler.next_1d();
     Vec2 u_dir = sampler.next_2d();
-    if (n_em == 0) return false;
-    const Emitter& e = *scene.emitters[std::min(size_t(u_pick * float(n_em)), n_em - 1)];
+    const Emitter* e = pick_emitter(scene, u_pick);
+    if (!e) return false;
     Vec3 center;
     float radius;
     scene.bounding_sphere(center, radius);
-    es = e.sample_emission(u_pos, u_extra, u_dir, center, radius);
+    es = e->sample_emission(u_pos, u_extra, u_dir, center, radius);
     if (!(es.pdf_a > 0.f) || !(es.pdf_w > 0.f)) return false;
+    // 2. y0 and its density. At infinity that is the density of its
+    //    direction under light sampling (pbrt-v4's GenerateLightSubpath);
+    //    y1's comes from the origin disk through emitter_pdf_to.
     float pick = emitter_pick_prob(scene);
-    PathVertex y0;
+    PathVertex& y0 = light.emplace_back();
     y0.type = VType::Light;
-    y0.emitter = &e;
+    y0.emitter = e;
     y0.it.p = es.p;
     y0.it.n = es.n;
     y0.it.eps = es.eps;
     y0.pdf_fwd = pick * es.pdf_a;
-    y0.infinite = e.is_infinite();
-    // At infinity y0's own density is that of its direction under light
-    // sampling (pbrt-v4's GenerateLightSubpath); y1's comes from the origin
-    // disk through emitter_pdf_to.
-    if (y0.infinite) {  // seen from a point downstream of y0, the light lies along -es.d
+    y0.infinite = e->is_infinite();
+    if (y0.infinite && densities) {  // seen from a point downstream of y0, the light lies along -es.d
         PathVertex downstream;
         downstream.it.p = es.p + es.d;
         y0.pdf_fwd = light_origin_pdf(scene, y0, downstream);
     }
+    // 3. The medium the light starts in, and the transmittance from
+    //    infinity through it for an emitter at infinity.
     Ray ray;
     ray.o = es.p + es.n * es.eps;
     ray.d = es.d;
     MediumTracker mt;
     Color beta = es.weight / pick;
     if (scene.features.has_media) {
-        mt = emitter_medium(scene, ray, es.n, emitter_shape(scene, e));
+        mt = emitter_medium(scene, ray, es.n, emitter_shape(scene, *e));
         y0.medium = mt.medium;
         y0.enclosed = mt.enclosed;
         if (y0.infinite) beta *= transmittance_from_infinity(scene, mt.medium);
     }
-    light.push_back(y0);
-    if (stop && (*stop)(light)) return true;
+    if (visit && !(*visit)(light)) return true;
     if (is_black(beta)) return true;  // y0 alone: light from infinity that no unbounded medium lets through
+    // 4. The adjoint walk.
     random_walk(scene, sampler, ray, beta, TransportMode::Importance, max_vertices, rr_depth, light, stats,
-                stop, scene.features.has_media ? &mt : nullptr);
+                visit, scene.features.has_media ? &mt : nullptr, densities);
     return true;
 }
 

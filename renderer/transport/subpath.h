@@ -1,8 +1,9 @@
-// The subpath machinery shared by the bidirectional estimators (`ptracer`,
-// `bdpt`; SmallVCM's shared vertex and walk of vertexcm.hxx, pbrt-v4's
-// Vertex and RandomWalk in bdpt.cpp): one vertex record, one random walk
-// for camera and light subpaths (adjoint BSDFs with the shading-normal
-// correction in importance transport), the light subpath's start, the
+// The subpath machinery shared by the light-tracing estimators (`ptracer`,
+// `bdpt`, photon tracing; SmallVCM's shared vertex and walk of
+// vertexcm.hxx, pbrt-v4's Vertex and RandomWalk in bdpt.cpp): one vertex
+// record, one random walk for camera and light subpaths (adjoint BSDFs
+// with the shading-normal correction in importance transport) whose
+// vertices go to a visitor as they are made, the light subpath's start, the
 // area densities of bidirectional MIS, the t = 1 connection to the sensor
 // and the effect class of a strategy's vertex string.
 #pragma once
@@ -14,8 +15,8 @@
 
 namespace rm {
 
-// Medium: a scattering event inside a participating medium (ptracer's light
-// subpaths, both of bdpt's subpaths).
+// Medium: a scattering event inside a participating medium (light
+// subpaths, and bdpt's camera subpaths).
 enum class VType : uint8_t { Camera, Light, Surface, Medium };
 
 // One vertex of either subpath. pdf_fwd is the area density with which the
@@ -82,9 +83,14 @@ Vec3 far_point(const Scene& scene, const Ray& ray);
 // is 0).
 float nee_over_emission(const Scene& scene, const PathVertex& y0, const PathVertex& adj);
 
-// Asked after each new vertex, before its next direction is sampled: true
-// stops the walk there (an estimator that can use no later vertex).
-using WalkStop = std::function<bool(const std::vector<PathVertex>&)>;
+// The walk hands each new vertex (path.back()) to a visitor as soon as it
+// is made, before the vertex's next direction is sampled (so its `delta`
+// is not known yet; the vertices before it are complete): what an
+// estimator does with the vertices of its walk as they come (photon
+// storage into the maps, photon_trace.cpp; a light tracer's check that a
+// requested class can still follow, ptracer.cpp). Returns false to end
+// the walk at that vertex.
+using VertexVisitor = std::function<bool(const std::vector<PathVertex>&)>;
 
 // Extends `path` (its start vertex, the camera or the light, already in it)
 // from `ray` with throughput `beta`, up to max_vertices vertices in all.
@@ -93,20 +99,27 @@ using WalkStop = std::function<bool(const std::vector<PathVertex>&)>;
 // flights, medium vertices (VType::Medium) and phase-function directions,
 // with the spectral MIS throughput of media_common.h, and crosses
 // index-matched boundaries without making them vertices (they do not count
-// towards max_vertices, as in volpath).
+// towards max_vertices, as in volpath). Russian roulette from rr_depth
+// scattering vertices on (common.h: Mitsuba's rule without media,
+// volpath's through them). `densities`: whether the vertices get their
+// pdf_fwd / pdf_rev (the MIS weights of bdpt and vertex merging read them;
+// light tracing and photon mapping read none and save their cost, a tenth
+// to a fifth of photon tracing's time); no random numbers depend on it.
 void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode, int max_vertices,
-                 int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const WalkStop* stop = nullptr,
-                 const MediumTracker* media = nullptr);
+                 int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, const VertexVisitor* visit = nullptr,
+                 const MediumTracker* media = nullptr, bool densities = true);
 
-// A light subpath y0 y1 ..: an emitter picked uniformly (as next event
-// estimation), a ray of light leaving it (`es`), then the walk. Always
-// draws the same random numbers for its start. Returns false (and leaves
-// `light` empty) when the scene has no emitter or the sample failed.
-// In a scene with media the walk goes through them (random_walk's `media`),
-// starting in the emitter's medium (emitter_medium).
+// The light subpath y0 y1 .. of every light-tracing estimator (ptracer,
+// bdpt, photon tracing): an emitter picked uniformly (as next event
+// estimation), a ray of light leaving it (`es`), then the walk, each
+// vertex (y0 included) handed to `visit`. Always draws the same random
+// numbers for its start. Returns false (and leaves `light` empty) when the
+// scene has no emitter or the sample failed. In a scene with media the
+// walk goes through them (random_walk's `media`), starting in the
+// emitter's medium (emitter_medium). `densities` as in random_walk.
 bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
                    std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats,
-                   const WalkStop* stop = nullptr);
+                   const VertexVisitor* visit = nullptr, bool densities = true);
 
 // The sensor end of a connection from `ref`: Sensor::sample_direction, with
 // a point drawn on an area sensor (random numbers only for those, so a
