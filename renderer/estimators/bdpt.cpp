@@ -39,8 +39,13 @@
 // light subpaths start on the disk outside the scene, y1 with the disk's
 // planar density times |cos|, y0 with its direction's light-sampling
 // density (subpath.cpp). An irradiancemeter's camera vertex is a point of
-// its shape (sensor.cpp). Not supported (refused by check_scene): sensors
-// without importance (the radiance meter).
+// its shape (sensor.cpp). A sensor without importance (the radiance meter:
+// a delta position and a delta direction) can be reached by no light
+// subpath, so t = 1 cannot make any path there: z0 is marked a delta
+// vertex, which leaves t = 1 out of every weight's denominator (Veach 1997,
+// sec. 10.2.1: a strategy whose connection touches a delta vertex has
+// density 0), and the other strategies, z1 found by the meter's ray, are
+// weighted among themselves.
 //
 // Participating media (issue 6; Veach 1997 ch. 10 over the volume path
 // measure of Pauly et al. 2000; pbrt-v3 sec. 16.3): both subpaths walk
@@ -119,11 +124,6 @@ public:
     }
 
     void check_scene(const Scene& scene) const override {
-        if (!scene.sensor->has_importance())
-            throw std::invalid_argument("integrator 'bdpt': sensor '" + scene.sensor_desc.type +
-                                        "' cannot be reached by light subpaths (a radiance meter measures at one "
-                                        "point along one direction); use integrator 'path', or a camera or an "
-                                        "irradiancemeter");
         const SensorDesc& sd = scene.sensor_desc;
         filter_ = std::make_unique<FilterSampler>(sd.rfilter, sd.filter_radius, sd.filter_stddev);
     }
@@ -155,6 +155,7 @@ public:
         z0.it.n = sr.n;
         z0.beta = sr.weight;
         z0.pdf_fwd = 1.f;
+        z0.delta = !sensor.has_importance();  // a radiance meter: no t = 1 (the file's head)
         int max_cam = max_depth_ < 0 ? INT_MAX : max_depth_ + 1;  // z0 .. z_max_depth
         if (!scene.features.has_media) {
             cam.push_back(z0);
@@ -194,7 +195,7 @@ public:
         //    as in pbrt-v4 (its weight is then 1).
         // s = 1 draws its own emitter sample, so it exists even without a light subpath.
         const int nc = int(cam.size()), nl = std::max(int(light.size()), n_em > 0 ? 1 : 0);
-        for (int t = 1; t <= nc; ++t)
+        for (int t = cam[0].delta ? 2 : 1; t <= nc; ++t)
             for (int s = 0; s <= nl; ++s) {
                 if (s > int(light.size()) && s != 1) continue;
                 if (s > 0 && cam[t - 1].type == VType::Light) continue;  // an escaped camera path: s = 0 only
