@@ -6,11 +6,16 @@ test_canonical_mitsuba.py average 4 x 4 pixels and so dilute a bias
 confined to a few pixels by 16; these do not.
 
 Significance: each comparison at ALPHA_EACH = 2.5e-4, and at most
-N_COMPARISONS = 16 comparisons in the file that can fail by chance, so the
-file's false-alarm rate under fresh noise is at most 16 x 2.5e-4 = 0.4 %
-(Bonferroni; the power checks are not counted: they must reject). Seeds:
-fixed, offset by the environment variable RADIOMETER_TEST_SEED_OFFSET (0
-unless set), which re-rolls every render's noise.
+N_COMPARISONS = 17 comparisons in the file that can fail by chance (16
+estimator x scene comparisons, and the unfloored test of the bdpt finding
+rejecting a pixel away from the light), so the file's false-alarm rate
+under fresh noise is at most 17 x 2.5e-4 = 0.43 % (Bonferroni; the power
+checks are not counted: they must reject). That is the nominal rate of
+t-tests on seed means; where those are far from normal (rare large
+samples) the floors below carry it. Measured: with the seeds re-rolled
+(RADIOMETER_TEST_SEED_OFFSET = 0, 1, 2, 3: the environment variable offsets
+every render's seed) none of the 4 x 16 comparisons failed. About 110 s on
+2 shared cores.
 
 Floors on the seeds' variance (pixels.py explains both): the reference's
 per-sample variance scaled to our budget (rare paths), for every estimator,
@@ -18,9 +23,11 @@ and for estimators that importance-sample the pixel filter (all but
 ptracer) the position-sampling variance of the scene's filter (the Cornell
 box's gaussian; 0 for the box filter of the other scenes).
 
-Power: in each comparison the reference scaled by 1.1 in 4 pixels must be
-rejected, the 2 x 2 square at a 4 x 4 block corner (so each block holds one
-of them) where the reference is least noisy (quiet_square); and
+Power: in each comparison the reference scaled by 1.1 (or the larger factor
+the case table states, where the budget cannot resolve 10 %) in 4 pixels
+must be rejected: the 2 x 2 square at a 4 x 4 block corner (so each block
+holds one of them) where the comparison's relative standard error is
+smallest (quiet_square, chosen from the variances, not the difference);
 test_per_pixel_test_sees_what_blocks_miss shows the block test missing
 that bias on the same renders.
 
@@ -34,7 +41,7 @@ import numpy as np
 import pytest
 
 import radiometer as rm
-from radiometer.analysis.blocks import blocked_z_test, reference_variance_floor, region_mask
+from radiometer.analysis.blocks import block_mean, block_var_independent, reference_variance_floor, region_mask
 from radiometer.analysis.pixels import position_sampling_floor, seed_t_test, sidak_level, two_sample_t_test
 
 from test_canonical_mitsuba import PTRACER_EXCLUDE
@@ -42,7 +49,7 @@ from test_canonical_mitsuba import PTRACER_EXCLUDE
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
 RES = 64
 ALPHA_EACH = 2.5e-4
-N_COMPARISONS = 16
+N_COMPARISONS = 17
 SEEDS = 32
 SEED_OFFSET = int(os.environ.get("RADIOMETER_TEST_SEED_OFFSET", "0"))
 POWER = 1.1
@@ -226,8 +233,6 @@ def test_per_pixel_test_sees_what_blocks_miss():
     2.8 (measured), against a threshold above 4.3. (The shift is the bias over the
     block's standard error; the detection probability follows from it
     under normal block means, independent of the renders' noise.)"""
-    from radiometer.analysis.blocks import block_mean, block_var_independent
-
     name, spp = "cornell_box", UNBIASED[("path", "cornell_box")][0]
     r, (y, x), runs, biased = _compare("path", name, spp, power=POWER)
     assert not r.passed, f"the per-pixel test missed a 10 % bias at ({y}, {x}):\n{r.summary()}"
@@ -269,3 +274,10 @@ def test_bdpt_dark_light_border_is_filter_position_sampling():
     rejected = np.argwhere(plain.p < plain.level)
     assert all(near_light[y, x] for y, x, _ in rejected), rejected.tolist()
     assert plain.worst_ratio < 0.9, plain.summary()
+
+
+def test_false_alarm_budget_counts_every_comparison():
+    """The module docstring's bound: every comparison that can fail by
+    chance is counted (the tables, direct, the bdpt finding)."""
+    assert len(UNBIASED) + len(BIASED) + 2 == N_COMPARISONS
+    assert N_COMPARISONS * ALPHA_EACH < 0.005
