@@ -153,7 +153,7 @@ public:
 // Throws std::invalid_argument for an unknown type or a bad parameter.
 std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& desc, const EffectMask& mask);
 
-// Test hook of bdpt.cpp: for the strategies (s, t) of n random sample
+// Test hook of bdpt (estimators/bdpt_mis_check.cpp): for the strategies (s, t) of n random sample
 // pairs, the MIS weight as bdpt computes it and as a brute-force product of
 // every strategy's path density gives it, and the sum of bdpt's weights
 // over every strategy of the same path (`sums`); strategy = 1000 s + t,
