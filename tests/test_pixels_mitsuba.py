@@ -14,8 +14,8 @@ checks are not counted: they must reject). That is the nominal rate of
 t-tests on seed means; where those are far from normal (rare large
 samples) the floors below carry it. Measured: with the seeds re-rolled
 (RADIOMETER_TEST_SEED_OFFSET = 0, 1, 2, 3: the environment variable offsets
-every render's seed) none of the 4 x 16 comparisons failed. About 110 s on
-2 shared cores.
+every render's seed) none of the 4 x 16 comparisons failed. 95 to 135 s
+on 2 shared cores (about 105 s of CPU).
 
 Floors on the seeds' variance (pixels.py explains both): the reference's
 per-sample variance scaled to our budget (rare paths), for every estimator,
