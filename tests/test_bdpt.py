@@ -262,6 +262,59 @@ def test_mis_weights_match_brute_force(which, mis):
     np.testing.assert_allclose(sums, 1.0, rtol=0, atol=1e-4, err_msg=f"{which}: weights of one path")
 
 
+# ------------------------------------------------------------------ a radiance meter
+
+def _radiancemeter_scene():
+    """A radiance meter looking at the floor under a small area light 0.3
+    above it, with a wall and a plastic sphere. The light is close enough
+    that the light subpath's density of the floor point, the t = 1
+    strategy's, is comparable to the others': were t = 1 counted in the
+    weights' denominators (it cannot make any path here: the meter is a
+    delta position and direction), every other strategy's weight would
+    lose its share (measured: bdpt / path = 0.22)."""
+    rect = lambda m, rho: {"type": "rectangle", "to_world": m,  # noqa: E731
+                           "bsdf": {"type": "diffuse", "reflectance": _rgb(rho)}}
+    return rm.load_dict({
+        "type": "scene",
+        "floor": rect(np.diag([2.0, 2.0, 1.0, 1.0]), [0.7, 0.6, 0.5]),
+        "wall": rect(np.array([[2.0, 0, 0, 0], [0, 0, 1.0, 1.0], [0, -2.0, 0, 2.0], [0, 0, 0, 1.0]]), 0.5),
+        "plastic": {"type": "sphere", "center": [-0.4, 0.3, 0.2], "radius": 0.2, "bsdf": {"type": "plastic"}},
+        "light": {"type": "rectangle", "flip_normals": True,
+                  "to_world": np.array([[0.2, 0, 0, 0], [0, 0.2, 0, 0], [0, 0, -1.0, 0.3], [0, 0, 0, 1.0]]),
+                  "emitter": {"type": "area", "radiance": _rgb(5.0)}},
+        "sensor": {"type": "radiancemeter", "origin": [1.2, -0.2, 0.2], "direction": [-1.2, 0.25, -0.2],
+                   "film": {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"}}}})
+
+
+def test_radiancemeter_matches_path():
+    """bdpt with a radiance meter, every strategy but t = 1, against `path`
+    (2^15 and 2^16 samples, about 0.15 % standard error each): z-test of the
+    one pixel, each channel at ALPHA / 3; power: `path` scaled by 1.01 must
+    be rejected (z about 4)."""
+    from radiometer.analysis.stats import z_test
+
+    scene = _radiancemeter_scene()
+    a = rm.render(scene, integrator={"type": "path", "max_depth": 4}, spp=1 << 16, seed=1)
+    b = rm.render(scene, integrator={"type": "bdpt", "max_depth": 4}, spp=1 << 15, seed=2)
+    assert_clean(b, "radiancemeter")
+    assert b.image.shape == (1, 1, 3) and b.image.min() > 0
+    r = z_test(b.image, b.variance, a.image, a.variance, alpha=ALPHA)
+    assert r.passed, f"bdpt / path = {b.image.ravel() / a.image.ravel()}\n{r.summary()}"
+    r = z_test(b.image, b.variance, a.image * 1.01, a.variance * 1.01 ** 2, alpha=ALPHA)
+    assert not r.passed, f"a 1 % error went undetected:\n{r.summary()}"
+
+
+def test_radiancemeter_mis_weights_sum_to_one():
+    """The brute-force MIS check with a radiance meter: the linear-time
+    weights equal the full-path ones, and the weights of every strategy
+    that can make a sampled path (t >= 2) sum to 1."""
+    fast, brute, sums, strategy = _mis_check(_radiancemeter_scene(), max_depth=4)
+    assert len(fast) > 1000 and len(np.unique(strategy)) >= 8
+    assert min(np.asarray(strategy) % 1000) >= 2
+    np.testing.assert_allclose(fast, brute, rtol=2e-4, atol=1e-6)
+    np.testing.assert_allclose(sums, 1.0, rtol=0, atol=1e-4)
+
+
 # ------------------------------------------------------------------ determinism, errors, stress
 
 def test_same_seed_same_bytes_whatever_threads():

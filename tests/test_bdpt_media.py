@@ -39,7 +39,7 @@ from radiometer.reference_scenes import registry
 from refcompare import (_rgb, assert_agrees, assert_clean, assert_same_bytes_whatever_threads,
                         assert_strategies_estimate_their_depth, blocked_z_test, reference_variance_floor)
 from test_bdpt import small_room
-from test_media import hot_voxel_grid, small_light_slab
+from test_media import check_single_scatter_point_light, hot_voxel_grid, small_light_slab
 
 ALPHA = 0.01
 
@@ -303,3 +303,12 @@ def test_strategy_images_sum_to_the_image_in_fog():
     assert np.allclose(total, r.image, rtol=1e-5, atol=1e-7), np.abs(total - r.image).max()
     # connections at medium vertices fill the inner strategies
     assert all(r.strategies[(s, t)].mean() > 0 for s, t in expected if (s, t) != (1, 1) and s + t - 1 >= 2)
+
+
+@pytest.mark.parametrize("g", [None, 0.6], ids=["isotropic", "hg0.6"])
+def test_radiancemeter_in_fog_matches_single_scattering(g):
+    """A radiance meter in fog lit by a point light (test_media.py's closed
+    form, max_depth 2): bdpt with a radiance meter, where only next event
+    estimation from the meter ray's medium vertex (s = 1, t = 2) can make
+    a path. z-test against the integral; a 1 % error must be rejected."""
+    check_single_scatter_point_light(g, "bdpt", 1 << 19)

@@ -188,9 +188,8 @@ public:
 // unknown estimator or a bad parameter.
 std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& desc, const EffectMask& mask);
 
-// Test hook of bdpt.cpp (`bdpt`: an integrator make_integrator made for
-// estimator bdpt, else std::invalid_argument): for the strategies (s, t) of
-// n random sample pairs, the MIS weight as bdpt computes it and as a brute-force product of
+// Test hook of bdpt (estimators/bdpt_mis_check.cpp): for the strategies (s, t) of n random sample
+// pairs, the MIS weight as bdpt computes it and as a brute-force product of
 // every strategy's path density gives it, and the sum of bdpt's weights
 // over every strategy of the same path (`sums`); strategy = 1000 s + t,
 // plus 1000000 when the path has a medium vertex.
