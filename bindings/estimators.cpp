@@ -14,23 +14,28 @@ ParamValue to_param_value(const py::handle& v, const std::string& estimator, con
         try {
             return int64_t(v.cast<long long>());
         } catch (const py::cast_error&) {
-            throw ParamError(estimator, what, "integrator '" + estimator + "': parameter '" + what +
-                                                  "' must be a 32-bit integer, got " + py::repr(v).cast<std::string>());
+            throw ParamError(estimator, what,
+                             "integrator '" + estimator + "': parameter '" + what + "' must be a 32-bit integer, got " +
+                                 py::repr(v).cast<std::string>());
         }
     }
     if (PyFloat_Check(v.ptr()) || py::isinstance(v, np.attr("floating"))) return v.cast<double>();
     if (PyUnicode_Check(v.ptr())) return v.cast<std::string>();
-    throw ParamError(estimator, what, "integrator '" + estimator + "': parameter '" + what +
-                                          "' must be an integer, float, boolean or string, got " +
-                                          py::repr(v).cast<std::string>());
+    throw ParamError(estimator, what,
+                     "integrator '" + estimator + "': parameter '" + what +
+                         "' must be an integer, float, boolean or string, got " + py::repr(v).cast<std::string>());
 }
 
 py::object from_param_value(const ParamValue& v) {
     switch (param_type(v)) {
-        case ParamType::Bool: return py::bool_(std::get<bool>(v));
-        case ParamType::Int: return py::int_(std::get<int64_t>(v));
-        case ParamType::Float: return py::float_(std::get<double>(v));
-        case ParamType::String: return py::str(std::get<std::string>(v));
+        case ParamType::Bool:
+            return py::bool_(std::get<bool>(v));
+        case ParamType::Int:
+            return py::int_(std::get<int64_t>(v));
+        case ParamType::Float:
+            return py::float_(std::get<double>(v));
+        case ParamType::String:
+            return py::str(std::get<std::string>(v));
     }
     return py::none();
 }
@@ -39,8 +44,9 @@ ParamSet to_param_set(const py::dict& d, const std::string& estimator) {
     ParamSet s;
     for (auto [k, v] : d) {
         if (!PyUnicode_Check(k.ptr()))
-            throw ParamError(estimator, "", "integrator '" + estimator + "': parameter names must be strings, got " +
-                                                py::repr(k).cast<std::string>());
+            throw ParamError(estimator, "",
+                             "integrator '" + estimator + "': parameter names must be strings, got " +
+                                 py::repr(k).cast<std::string>());
         std::string name = k.cast<std::string>();
         s.set(name, to_param_value(v, estimator, name));
     }
@@ -57,18 +63,24 @@ namespace {
 
 const char* driver_name(Driver d) {
     switch (d) {
-        case Driver::Camera: return "camera";
-        case Driver::Light: return "light";
-        case Driver::OwnPasses: return "own";
+        case Driver::Camera:
+            return "camera";
+        case Driver::Light:
+            return "light";
+        case Driver::OwnPasses:
+            return "own";
     }
     return "?";
 }
 
 const char* bias_name(Bias b) {
     switch (b) {
-        case Bias::Unbiased: return "unbiased";
-        case Bias::Consistent: return "consistent";
-        case Bias::Biased: return "biased";
+        case Bias::Unbiased:
+            return "unbiased";
+        case Bias::Consistent:
+            return "consistent";
+        case Bias::Biased:
+            return "biased";
     }
     return "?";
 }
@@ -134,7 +146,8 @@ void bind_estimators(py::module_& m) {
                 py::object cls = py::module_::import("radiometer.scene_desc").attr("SceneError");
                 py::object exc = cls(e.what());
                 exc.attr("estimator") = e.estimator();
-                exc.attr("parameter") = e.parameter().empty() ? py::object(py::none()) : py::object(py::str(e.parameter()));
+                exc.attr("parameter") =
+                    e.parameter().empty() ? py::object(py::none()) : py::object(py::str(e.parameter()));
                 PyErr_SetObject(cls.ptr(), exc.ptr());
             } catch (const py::error_already_set&) {
                 PyErr_SetString(PyExc_ValueError, e.what());

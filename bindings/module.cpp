@@ -10,11 +10,11 @@
 #include "bindings.h"
 #include "convert.h"
 #include "film/film.h"
-#include "render/render.h"
 #include "photon/photon_map.h"
-#include "transport/photon_trace.h"
+#include "render/render.h"
 #include "scene/phase.h"
 #include "scene/scene.h"
+#include "transport/photon_trace.h"
 
 namespace py = pybind11;
 using namespace rm;
@@ -78,16 +78,18 @@ PYBIND11_MODULE(_core, m) {
         .def_property("radiance", color_get(&EmitterDesc::radiance), color_set(&EmitterDesc::radiance))
         .def_property("intensity", color_get(&EmitterDesc::intensity), color_set(&EmitterDesc::intensity))
         .def_property("irradiance", color_get(&EmitterDesc::irradiance), color_set(&EmitterDesc::irradiance))
-        .def_property("to_world", [](const EmitterDesc& d) { return d.to_world; },
-                      [](EmitterDesc& d, py::object v) { d.to_world = to_matrix(v); })
+        .def_property(
+            "to_world", [](const EmitterDesc& d) { return d.to_world; },
+            [](EmitterDesc& d, py::object v) { d.to_world = to_matrix(v); })
         .def_readwrite("cutoff_angle", &EmitterDesc::cutoff_angle)
         .def_readwrite("beam_width", &EmitterDesc::beam_width);
 
     py::class_<SensorDesc>(m, "SensorDesc")
         .def(py::init<>())
         .def_readwrite("type", &SensorDesc::type)
-        .def_property("to_world", [](const SensorDesc& d) { return d.to_world; },
-                      [](SensorDesc& d, py::object v) { d.to_world = to_matrix(v); })
+        .def_property(
+            "to_world", [](const SensorDesc& d) { return d.to_world; },
+            [](SensorDesc& d, py::object v) { d.to_world = to_matrix(v); })
         .def_readwrite("fov_x", &SensorDesc::fov_x)
         .def_readwrite("near_clip", &SensorDesc::near_clip)
         .def_readwrite("far_clip", &SensorDesc::far_clip)
@@ -111,10 +113,12 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("nz", &GridDesc::nz)
         .def_readwrite("channels", &GridDesc::channels)
         .def_readwrite("accel", &GridDesc::accel)
-        .def_property("data", [](const GridDesc& d) { return d.data; },
-                      [](GridDesc& d, py::object v) { d.data = flat<float>(v, 1, "grid data"); })
-        .def_property("to_world", [](const GridDesc& d) { return d.to_world; },
-                      [](GridDesc& d, py::object v) { d.to_world = to_matrix(v); });
+        .def_property(
+            "data", [](const GridDesc& d) { return d.data; },
+            [](GridDesc& d, py::object v) { d.data = flat<float>(v, 1, "grid data"); })
+        .def_property(
+            "to_world", [](const GridDesc& d) { return d.to_world; },
+            [](GridDesc& d, py::object v) { d.to_world = to_matrix(v); });
 
     py::class_<MediumDesc>(m, "MediumDesc")
         .def(py::init<>())
@@ -141,33 +145,38 @@ PYBIND11_MODULE(_core, m) {
     // total, and the radial sampler with its density.
     py::class_<Dipole>(m, "Dipole")
         .def(py::init<const DipoleDesc&>())
-        .def("rd",
-             [](const Dipole& d, DoubleArray r) {
-                 std::vector<float> out(3 * size_t(r.size()));
-                 for (py::ssize_t i = 0; i < r.size(); ++i)
-                     for (int c = 0; c < 3; ++c) out[3 * i + c] = float(d.rd(c, r.data()[i]));
-                 return to_numpy(std::move(out), {py::ssize_t(r.size()), 3});
-             },
-             py::arg("r"), "J01 eq. 4, per unit area, (N, 3)")
+        .def(
+            "rd",
+            [](const Dipole& d, DoubleArray r) {
+                std::vector<float> out(3 * size_t(r.size()));
+                for (py::ssize_t i = 0; i < r.size(); ++i)
+                    for (int c = 0; c < 3; ++c) out[3 * i + c] = float(d.rd(c, r.data()[i]));
+                return to_numpy(std::move(out), {py::ssize_t(r.size()), 3});
+            },
+            py::arg("r"), "J01 eq. 4, per unit area, (N, 3)")
         .def_property_readonly("total_rd", [](const Dipole& d) { return color_tuple(d.total_rd()); })
-        .def("sample_r",
-             [](const Dipole& d, int ch, DoubleArray u) {
-                 return map_channel(ch, u, [&](int c, double x) { return d.sample_r(c, x); });
-             },
-             py::arg("channel"), py::arg("u"))
-        .def("pdf_a",
-             [](const Dipole& d, int ch, DoubleArray r) {
-                 return map_channel(ch, r, [&](int c, double x) { return d.pdf_a(c, x); });
-             },
-             py::arg("channel"), py::arg("r"), "density per unit area of a point at distance r")
-        .def("r_max",
-             [](const Dipole& d, int ch) {
-                 if (ch < 0 || ch > 2) throw py::value_error("channel must be 0, 1 or 2");
-                 return d.r_max(ch);
-             },
-             py::arg("channel"))
-        .def("exit_lobe", [](const Dipole& d) -> const Bsdf& { return d.exit_lobe(); },
-             py::return_value_policy::reference_internal, "cos(wo) Sw(wo), the lobe paths leave an exit point by")
+        .def(
+            "sample_r",
+            [](const Dipole& d, int ch, DoubleArray u) {
+                return map_channel(ch, u, [&](int c, double x) { return d.sample_r(c, x); });
+            },
+            py::arg("channel"), py::arg("u"))
+        .def(
+            "pdf_a",
+            [](const Dipole& d, int ch, DoubleArray r) {
+                return map_channel(ch, r, [&](int c, double x) { return d.pdf_a(c, x); });
+            },
+            py::arg("channel"), py::arg("r"), "density per unit area of a point at distance r")
+        .def(
+            "r_max",
+            [](const Dipole& d, int ch) {
+                if (ch < 0 || ch > 2) throw py::value_error("channel must be 0, 1 or 2");
+                return d.r_max(ch);
+            },
+            py::arg("channel"))
+        .def(
+            "exit_lobe", [](const Dipole& d) -> const Bsdf& { return d.exit_lobe(); },
+            py::return_value_policy::reference_internal, "cos(wo) Sw(wo), the lobe paths leave an exit point by")
         .def_property_readonly("eta", &Dipole::eta)
         .def_property_readonly("sw_norm", &Dipole::sw_norm)
         .def_property_readonly("A", [](const Dipole& d) { return d.A; })
@@ -180,28 +189,30 @@ PYBIND11_MODULE(_core, m) {
     bind_estimators(m);
 
     py::class_<Scene> scene_class(m, "Scene");
-    scene_class
-        .def(py::init<>())
+    scene_class.def(py::init<>())
         .def("add_bsdf", &Scene::add_bsdf)
-        .def("add_mesh",
-             [](Scene& s, const std::string& id, py::object pos, py::object idx, py::object normals, py::object uvs,
-                int bsdf, bool flip) {
-                 return s.add_mesh(id, flat<float>(pos, 3, "positions"), flat<uint32_t>(idx, 3, "indices"),
-                                   flat<float>(normals, 3, "normals"), flat<float>(uvs, 2, "uvs"), bsdf, flip);
-             },
-             py::arg("id"), py::arg("positions"), py::arg("indices"), py::arg("normals") = py::none(),
-             py::arg("uvs") = py::none(), py::arg("bsdf"), py::arg("flip_normals") = false)
-        .def("add_sphere",
-             [](Scene& s, const std::string& id, py::object c, float r, int bsdf, bool flip) {
-                 Color cc = to_color(c);
-                 return s.add_sphere(id, cc, r, bsdf, flip);
-             },
-             py::arg("id"), py::arg("center"), py::arg("radius"), py::arg("bsdf"), py::arg("flip_normals") = false)
-        .def("add_disk",
-             [](Scene& s, const std::string& id, py::object m4, int bsdf, bool flip) {
-                 return s.add_disk(id, to_matrix(m4), bsdf, flip);
-             },
-             py::arg("id"), py::arg("to_world"), py::arg("bsdf"), py::arg("flip_normals") = false)
+        .def(
+            "add_mesh",
+            [](Scene& s, const std::string& id, py::object pos, py::object idx, py::object normals, py::object uvs,
+               int bsdf, bool flip) {
+                return s.add_mesh(id, flat<float>(pos, 3, "positions"), flat<uint32_t>(idx, 3, "indices"),
+                                  flat<float>(normals, 3, "normals"), flat<float>(uvs, 2, "uvs"), bsdf, flip);
+            },
+            py::arg("id"), py::arg("positions"), py::arg("indices"), py::arg("normals") = py::none(),
+            py::arg("uvs") = py::none(), py::arg("bsdf"), py::arg("flip_normals") = false)
+        .def(
+            "add_sphere",
+            [](Scene& s, const std::string& id, py::object c, float r, int bsdf, bool flip) {
+                Color cc = to_color(c);
+                return s.add_sphere(id, cc, r, bsdf, flip);
+            },
+            py::arg("id"), py::arg("center"), py::arg("radius"), py::arg("bsdf"), py::arg("flip_normals") = false)
+        .def(
+            "add_disk",
+            [](Scene& s, const std::string& id, py::object m4, int bsdf, bool flip) {
+                return s.add_disk(id, to_matrix(m4), bsdf, flip);
+            },
+            py::arg("id"), py::arg("to_world"), py::arg("bsdf"), py::arg("flip_normals") = false)
         .def("add_medium", &Scene::add_medium)
         .def("set_shape_media", &Scene::set_shape_media, py::arg("shape"), py::arg("interior"), py::arg("exterior"))
         .def("add_dipole", &Scene::add_dipole, py::arg("shape"), py::arg("desc"))
@@ -209,69 +220,70 @@ PYBIND11_MODULE(_core, m) {
         .def("add_area_emitter", &Scene::add_area_emitter)
         .def("add_emitter", &Scene::add_emitter)
         .def("set_sensor", &Scene::set_sensor)
-        .def("commit", [](Scene& s) {
-            py::gil_scoped_release nogil;
-            s.commit();
-        })
+        .def("commit",
+             [](Scene& s) {
+                 py::gil_scoped_release nogil;
+                 s.commit();
+             })
         .def_property_readonly("shape_count", [](const Scene& s) { return s.shapes.size(); })
         .def_property_readonly("emitter_count", [](const Scene& s) { return s.emitters.size(); })
         .def_property_readonly("width", [](const Scene& s) { return s.sensor ? s.sensor->width : 0; })
         .def_property_readonly("height", [](const Scene& s) { return s.sensor ? s.sensor->height : 0; })
-        .def_property_readonly("bbox", [](const Scene& s) {
-            return py::make_tuple(color_tuple(s.bbox_lo), color_tuple(s.bbox_hi));
-        })
-        .def_property_readonly("features", [](const Scene& s) {
-            py::dict d;
-            d["has_delta_bsdf"] = s.features.has_delta_bsdf;
-            d["has_smooth_bsdf"] = s.features.has_smooth_bsdf;
-            d["has_area_emitters"] = s.features.has_area_emitters;
-            d["has_delta_emitters"] = s.features.has_delta_emitters;
-            d["has_environment"] = s.features.has_environment;
-            d["has_media"] = s.features.has_media;
-            d["has_dipole"] = s.features.has_dipole;
-            return d;
-        })
+        .def_property_readonly(
+            "bbox", [](const Scene& s) { return py::make_tuple(color_tuple(s.bbox_lo), color_tuple(s.bbox_hi)); })
+        .def_property_readonly("features",
+                               [](const Scene& s) {
+                                   py::dict d;
+                                   d["has_delta_bsdf"] = s.features.has_delta_bsdf;
+                                   d["has_smooth_bsdf"] = s.features.has_smooth_bsdf;
+                                   d["has_area_emitters"] = s.features.has_area_emitters;
+                                   d["has_delta_emitters"] = s.features.has_delta_emitters;
+                                   d["has_environment"] = s.features.has_environment;
+                                   d["has_media"] = s.features.has_media;
+                                   d["has_dipole"] = s.features.has_dipole;
+                                   return d;
+                               })
         // Photons of `paths` light paths (photon_trace.h), for pictures of
         // where light goes (the benchmark report's 3D views) and for tests:
         // positions (N, 3), incoming directions (N, 3), power (N, 3, already
         // divided by the paths traced) and the path depth of each.
-        .def("trace_photons",
-             [](const Scene& s, uint64_t paths, bool caustic_only, uint64_t seed, int max_depth, int threads) {
-                 if (paths < 1 || paths > (uint64_t(1) << 26))
-                     throw py::value_error("trace_photons: paths must be in 1..2^26");
-                 PhotonTraceSpec spec;
-                 spec.caustic_only = caustic_only;
-                 spec.max_depth = max_depth;
-                 int th = threads > 0 ? threads : int(std::max(1u, std::thread::hardware_concurrency()));
-                 ThreadStats stats;
-                 PhotonPass pass;
-                 {
-                     py::gil_scoped_release release;
-                     pass = trace_photon_paths(s, spec, seed, 0, paths, th, [] { return true; }, stats);
-                 }
-                 const size_t n = pass.photons.size();
-                 std::vector<float> p(3 * n), w(3 * n), pw(3 * n), depth(n);
-                 for (size_t i = 0; i < n; ++i) {
-                     const Photon& ph = pass.photons[i];
-                     for (int c = 0; c < 3; ++c) {
-                         p[3 * i + c] = ph.p[c];
-                         w[3 * i + c] = ph.wi[c];
-                         pw[3 * i + c] = ph.power[c];
-                     }
-                     depth[i] = float(photon_depth(ph));
-                 }
-                 py::ssize_t N = py::ssize_t(n);
-                 py::dict out;
-                 out["p"] = to_numpy(std::move(p), {N, 3});
-                 out["wi"] = to_numpy(std::move(w), {N, 3});
-                 out["power"] = to_numpy(std::move(pw), {N, 3});
-                 out["depth"] = to_numpy(std::move(depth), {N});
-                 out["paths"] = pass.paths;
-                 return out;
-             },
-             py::arg("paths"), py::arg("caustic_only") = false, py::arg("seed") = 0, py::arg("max_depth") = -1,
-             py::arg("threads") = 0);
-
+        .def(
+            "trace_photons",
+            [](const Scene& s, uint64_t paths, bool caustic_only, uint64_t seed, int max_depth, int threads) {
+                if (paths < 1 || paths > (uint64_t(1) << 26))
+                    throw py::value_error("trace_photons: paths must be in 1..2^26");
+                PhotonTraceSpec spec;
+                spec.caustic_only = caustic_only;
+                spec.max_depth = max_depth;
+                int th = threads > 0 ? threads : int(std::max(1u, std::thread::hardware_concurrency()));
+                ThreadStats stats;
+                PhotonPass pass;
+                {
+                    py::gil_scoped_release release;
+                    pass = trace_photon_paths(s, spec, seed, 0, paths, th, [] { return true; }, stats);
+                }
+                const size_t n = pass.photons.size();
+                std::vector<float> p(3 * n), w(3 * n), pw(3 * n), depth(n);
+                for (size_t i = 0; i < n; ++i) {
+                    const Photon& ph = pass.photons[i];
+                    for (int c = 0; c < 3; ++c) {
+                        p[3 * i + c] = ph.p[c];
+                        w[3 * i + c] = ph.wi[c];
+                        pw[3 * i + c] = ph.power[c];
+                    }
+                    depth[i] = float(photon_depth(ph));
+                }
+                py::ssize_t N = py::ssize_t(n);
+                py::dict out;
+                out["p"] = to_numpy(std::move(p), {N, 3});
+                out["wi"] = to_numpy(std::move(w), {N, 3});
+                out["power"] = to_numpy(std::move(pw), {N, 3});
+                out["depth"] = to_numpy(std::move(depth), {N});
+                out["paths"] = pass.paths;
+                return out;
+            },
+            py::arg("paths"), py::arg("caustic_only") = false, py::arg("seed") = 0, py::arg("max_depth") = -1,
+            py::arg("threads") = 0);
 
     bind_test_hooks(m, scene_class);
 
@@ -279,106 +291,120 @@ PYBIND11_MODULE(_core, m) {
     py::class_<Bsdf>(m, "Bsdf")
         .def(py::init([](const BsdfDesc& d) { return make_bsdf(d); }))
         .def_property_readonly("flags", &Bsdf::flags)
-        .def("eval",
-             [](const Bsdf& b, py::object wi, py::object wo, bool adjoint) {
-                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
-                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
-                 size_t n = a.size() / 3;
-                 std::vector<float> out(3 * n);
-                 BsdfContext ctx;
-                 ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
-                 {
-                     py::gil_scoped_release nogil;
-                     for (size_t i = 0; i < n; ++i) {
-                         Color f = b.eval(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
-                                          Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
-                         out[3 * i] = f.x; out[3 * i + 1] = f.y; out[3 * i + 2] = f.z;
-                     }
-                 }
-                 return to_numpy(std::move(out), {py::ssize_t(n), 3});
-             },
-             py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false,
-             "f(wi, wo) |cos theta_o| for (N, 3) local directions")
-        .def("pdf",
-             [](const Bsdf& b, py::object wi, py::object wo, bool adjoint) {
-                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
-                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
-                 size_t n = a.size() / 3;
-                 std::vector<float> out(n);
-                 BsdfContext ctx;
-                 ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
-                 for (size_t i = 0; i < n; ++i)
-                     out[i] = b.pdf_w(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
-                                      Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
-                 return to_numpy(std::move(out), {py::ssize_t(n)});
-             },
-             py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, "solid-angle pdf of sampling wo given wi")
-        .def("sample",
-             [](const Bsdf& b, py::object wi, py::object u1, py::object u2, bool adjoint) {
-                 auto a = flat<float>(wi, 3, "wi");
-                 auto uu1 = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(u1);
-                 auto uu2 = flat<float>(u2, 2, "u2");
-                 size_t n = a.size() / 3;
-                 if (!uu1 || size_t(uu1.size()) != n || uu2.size() != 2 * n)
-                     throw py::value_error("u1 must be (N,) and u2 (N, 2) for N directions wi");
-                 std::vector<float> wo(3 * n), weight(3 * n), pdf(n), eta(n), delta(n), flags(n);
-                 BsdfContext ctx;
-                 ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
-                 const float* pu1 = uu1.data();
-                 for (size_t i = 0; i < n; ++i) {
-                     BsdfSample bs = b.sample(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), pu1[i],
-                                              Vec2(uu2[2 * i], uu2[2 * i + 1]));
-                     for (int k = 0; k < 3; ++k) { wo[3 * i + k] = bs.wo[k]; weight[3 * i + k] = bs.weight[k]; }
-                     pdf[i] = bs.pdf_w; eta[i] = bs.eta; delta[i] = bs.is_delta ? 1.f : 0.f;
-                     flags[i] = float(bs.sampled_flags);
-                 }
-                 py::dict r;
-                 py::ssize_t N = py::ssize_t(n);
-                 r["wo"] = to_numpy(std::move(wo), {N, 3});
-                 r["weight"] = to_numpy(std::move(weight), {N, 3});
-                 r["pdf"] = to_numpy(std::move(pdf), {N});
-                 r["eta"] = to_numpy(std::move(eta), {N});
-                 r["is_delta"] = to_numpy(std::move(delta), {N});
-                 r["sampled_flags"] = to_numpy(std::move(flags), {N});
-                 return r;
-             },
-             py::arg("wi"), py::arg("u1"), py::arg("u2"), py::arg("adjoint") = false);
+        .def(
+            "eval",
+            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint) {
+                auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
+                if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
+                size_t n = a.size() / 3;
+                std::vector<float> out(3 * n);
+                BsdfContext ctx;
+                ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                {
+                    py::gil_scoped_release nogil;
+                    for (size_t i = 0; i < n; ++i) {
+                        Color f = b.eval(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
+                                         Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
+                        out[3 * i] = f.x;
+                        out[3 * i + 1] = f.y;
+                        out[3 * i + 2] = f.z;
+                    }
+                }
+                return to_numpy(std::move(out), {py::ssize_t(n), 3});
+            },
+            py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false,
+            "f(wi, wo) |cos theta_o| for (N, 3) local directions")
+        .def(
+            "pdf",
+            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint) {
+                auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
+                if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
+                size_t n = a.size() / 3;
+                std::vector<float> out(n);
+                BsdfContext ctx;
+                ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                for (size_t i = 0; i < n; ++i)
+                    out[i] = b.pdf_w(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
+                                     Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
+                return to_numpy(std::move(out), {py::ssize_t(n)});
+            },
+            py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, "solid-angle pdf of sampling wo given wi")
+        .def(
+            "sample",
+            [](const Bsdf& b, py::object wi, py::object u1, py::object u2, bool adjoint) {
+                auto a = flat<float>(wi, 3, "wi");
+                auto uu1 = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(u1);
+                auto uu2 = flat<float>(u2, 2, "u2");
+                size_t n = a.size() / 3;
+                if (!uu1 || size_t(uu1.size()) != n || uu2.size() != 2 * n)
+                    throw py::value_error("u1 must be (N,) and u2 (N, 2) for N directions wi");
+                std::vector<float> wo(3 * n), weight(3 * n), pdf(n), eta(n), delta(n), flags(n);
+                BsdfContext ctx;
+                ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                const float* pu1 = uu1.data();
+                for (size_t i = 0; i < n; ++i) {
+                    BsdfSample bs = b.sample(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), pu1[i],
+                                             Vec2(uu2[2 * i], uu2[2 * i + 1]));
+                    for (int k = 0; k < 3; ++k) {
+                        wo[3 * i + k] = bs.wo[k];
+                        weight[3 * i + k] = bs.weight[k];
+                    }
+                    pdf[i] = bs.pdf_w;
+                    eta[i] = bs.eta;
+                    delta[i] = bs.is_delta ? 1.f : 0.f;
+                    flags[i] = float(bs.sampled_flags);
+                }
+                py::dict r;
+                py::ssize_t N = py::ssize_t(n);
+                r["wo"] = to_numpy(std::move(wo), {N, 3});
+                r["weight"] = to_numpy(std::move(weight), {N, 3});
+                r["pdf"] = to_numpy(std::move(pdf), {N});
+                r["eta"] = to_numpy(std::move(eta), {N});
+                r["is_delta"] = to_numpy(std::move(delta), {N});
+                r["sampled_flags"] = to_numpy(std::move(flags), {N});
+                return r;
+            },
+            py::arg("wi"), py::arg("u1"), py::arg("u2"), py::arg("adjoint") = false);
 
     py::class_<PhaseFunction>(m, "Phase")
         .def(py::init([](const std::string& type, float g) { return make_phase(type, g); }), py::arg("type"),
              py::arg("g") = 0.f)
-        .def("eval",
-             [](const PhaseFunction& ph, py::object wi, py::object wo) {
-                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
-                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
-                 size_t n = a.size() / 3;
-                 std::vector<float> out(n);
-                 for (size_t i = 0; i < n; ++i)
-                     out[i] = ph.eval(Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
-                 return to_numpy(std::move(out), {py::ssize_t(n)});
-             },
-             py::arg("wi"), py::arg("wo"), "phase function value (== its sampling pdf), per steradian")
-        .def("sample",
-             [](const PhaseFunction& ph, py::object wi, py::object u) {
-                 auto a = flat<float>(wi, 3, "wi");
-                 auto uu = flat<float>(u, 2, "u");
-                 size_t n = a.size() / 3;
-                 if (uu.size() != 2 * n) throw py::value_error("u must be (N, 2) for N directions wi");
-                 std::vector<float> wo(3 * n), w(n), pdf(n);
-                 for (size_t i = 0; i < n; ++i) {
-                     PhaseSample ps = ph.sample(Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), Vec2(uu[2 * i], uu[2 * i + 1]));
-                     for (int k = 0; k < 3; ++k) wo[3 * i + k] = ps.wo[k];
-                     w[i] = ps.weight;
-                     pdf[i] = ps.pdf_w;
-                 }
-                 py::dict r;
-                 py::ssize_t N = py::ssize_t(n);
-                 r["wo"] = to_numpy(std::move(wo), {N, 3});
-                 r["weight"] = to_numpy(std::move(w), {N});
-                 r["pdf"] = to_numpy(std::move(pdf), {N});
-                 return r;
-             },
-             py::arg("wi"), py::arg("u"));
+        .def(
+            "eval",
+            [](const PhaseFunction& ph, py::object wi, py::object wo) {
+                auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
+                if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
+                size_t n = a.size() / 3;
+                std::vector<float> out(n);
+                for (size_t i = 0; i < n; ++i)
+                    out[i] =
+                        ph.eval(Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
+                return to_numpy(std::move(out), {py::ssize_t(n)});
+            },
+            py::arg("wi"), py::arg("wo"), "phase function value (== its sampling pdf), per steradian")
+        .def(
+            "sample",
+            [](const PhaseFunction& ph, py::object wi, py::object u) {
+                auto a = flat<float>(wi, 3, "wi");
+                auto uu = flat<float>(u, 2, "u");
+                size_t n = a.size() / 3;
+                if (uu.size() != 2 * n) throw py::value_error("u must be (N, 2) for N directions wi");
+                std::vector<float> wo(3 * n), w(n), pdf(n);
+                for (size_t i = 0; i < n; ++i) {
+                    PhaseSample ps =
+                        ph.sample(Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), Vec2(uu[2 * i], uu[2 * i + 1]));
+                    for (int k = 0; k < 3; ++k) wo[3 * i + k] = ps.wo[k];
+                    w[i] = ps.weight;
+                    pdf[i] = ps.pdf_w;
+                }
+                py::dict r;
+                py::ssize_t N = py::ssize_t(n);
+                r["wo"] = to_numpy(std::move(wo), {N, 3});
+                r["weight"] = to_numpy(std::move(w), {N});
+                r["pdf"] = to_numpy(std::move(pdf), {N});
+                return r;
+            },
+            py::arg("wi"), py::arg("u"));
 
     m.def(
         "filter_sample",

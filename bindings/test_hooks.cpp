@@ -57,104 +57,115 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
         .def("medium_has_majorant_grid", [](const Scene& s, int m) { return medium_at(s, m).has_majorant_grid(); })
         // `n` ratio-tracking estimates of the transmittance of o + d t, t in
         // [0, t1) (Medium::segment_transmittance), seeded: an n x 3 array.
-        .def("medium_transmittance_samples",
-             [](const Scene& s, int m, py::object o, py::object d, float t1, int n, uint64_t seed) {
-                 const Medium& med = medium_at(s, m);
-                 Color oc = to_color(o), dc = to_color(d);
-                 Vec3 ov(oc.x, oc.y, oc.z), dv = normalize(Vec3(dc.x, dc.y, dc.z));
-                 py::array_t<float> out({py::ssize_t(n), py::ssize_t(3)});
-                 auto w = out.mutable_unchecked<2>();
-                 for (int i = 0; i < n; ++i) {
-                     Sampler sampler(seed, 0, uint64_t(i));
-                     Color tr = med.segment_transmittance(ov, dv, t1, sampler);
-                     for (int c = 0; c < 3; ++c) w(i, c) = tr[c];
-                 }
-                 return out;
-             },
-             py::arg("medium"), py::arg("o"), py::arg("d"), py::arg("t1"), py::arg("n"), py::arg("seed") = 0)
-        .def("sample_emitter_direction",
-             [](const Scene& s, py::object ref, py::object u) {
-                 // Next event estimation's light sample (sample_light, as estimate_direct
-                 // takes it): u columns = (pick, u.x, u.y, u_extra); pdf includes the pick.
-                 if (!s.committed()) throw py::value_error("scene is not committed");
-                 auto r = flat<float>(ref, 3, "ref");
-                 auto uu = flat<float>(u, 4, "u");
-                 size_t n = r.size() / 3;
-                 if (uu.size() != 4 * n) throw py::value_error("u must be (N, 4) for N reference points");
-                 std::vector<float> d(3 * n), pdf(n), rad(3 * n), delta(n);
-                 const float pick = emitter_pick_prob(s);
-                 for (size_t i = 0; i < n; ++i) {
-                     if (s.emitters.empty()) continue;
-                     DirectSample ds;
-                     sample_light(s, Vec3(r[3 * i], r[3 * i + 1], r[3 * i + 2]), uu[4 * i],
-                                  Vec2(uu[4 * i + 1], uu[4 * i + 2]), uu[4 * i + 3], ds);
-                     for (int k = 0; k < 3; ++k) { d[3 * i + k] = ds.d[k]; rad[3 * i + k] = ds.radiance[k]; }
-                     pdf[i] = ds.pdf_w * pick;
-                     delta[i] = ds.is_delta ? 1.f : 0.f;
-                 }
-                 py::dict out;
-                 py::ssize_t N = py::ssize_t(n);
-                 out["d"] = to_numpy(std::move(d), {N, 3});
-                 out["pdf"] = to_numpy(std::move(pdf), {N});
-                 out["radiance"] = to_numpy(std::move(rad), {N, 3});
-                 out["is_delta"] = to_numpy(std::move(delta), {N});
-                 return out;
-             },
-             py::arg("ref"), py::arg("u"))
-        .def("sample_sensor_rays",
-             [](const Scene& s, py::object film, py::object u) {
-                 // Rays the sensor generates for film positions (N, 2) (pixels,
-                 // continuous) and extra samples u (N, 5) = (u1, u2.xy, u3.xy).
-                 if (!s.sensor) throw py::value_error("scene has no sensor");
-                 auto f = flat<float>(film, 2, "film");
-                 auto uu = flat<float>(u, 5, "u");
-                 size_t n = f.size() / 2;
-                 if (uu.size() != 5 * n) throw py::value_error("u must be (N, 5) for N film positions");
-                 std::vector<float> o(3 * n), d(3 * n), w(3 * n);
-                 for (size_t i = 0; i < n; ++i) {
-                     SensorRay sr = s.sensor->sample_ray(Vec2(f[2 * i], f[2 * i + 1]), uu[5 * i],
-                                                         Vec2(uu[5 * i + 1], uu[5 * i + 2]),
-                                                         Vec2(uu[5 * i + 3], uu[5 * i + 4]));
-                     for (int k = 0; k < 3; ++k) { o[3 * i + k] = sr.ray.o[k]; d[3 * i + k] = sr.ray.d[k]; w[3 * i + k] = sr.weight[k]; }
-                 }
-                 py::dict r;
-                 py::ssize_t N = py::ssize_t(n);
-                 r["o"] = to_numpy(std::move(o), {N, 3});
-                 r["d"] = to_numpy(std::move(d), {N, 3});
-                 r["weight"] = to_numpy(std::move(w), {N, 3});
-                 return r;
-             },
-             py::arg("film"), py::arg("u"))
-        .def("pdf_emitter_direction",
-             [](const Scene& s, py::object ref, py::object dirs) {
-                 // The light-sampling density that MIS assigns to a ray leaving ref
-                 // along d (light_pdf_w, as mis_emission_hit takes it).
-                 if (!s.committed()) throw py::value_error("scene is not committed");
-                 auto r = flat<float>(ref, 3, "ref");
-                 auto dd = flat<float>(dirs, 3, "d");
-                 size_t n = dd.size() / 3;
-                 bool one_ref = r.size() == 3;
-                 if (!one_ref && r.size() != dd.size()) throw py::value_error("ref must be (1, 3) or match d");
-                 std::vector<float> out(n, 0.f);
-                 {
-                     py::gil_scoped_release nogil;
-                     for (size_t i = 0; i < n; ++i) {
-                         size_t j = one_ref ? 0 : i;
-                         Ray ray;
-                         ray.o = Vec3(r[3 * j], r[3 * j + 1], r[3 * j + 2]);
-                         ray.d = normalize(Vec3(dd[3 * i], dd[3 * i + 1], dd[3 * i + 2]));
-                         Interaction it;
-                         if (s.intersect(ray, it)) {
-                             int e = s.shapes[it.shape]->emitter;
-                             if (e >= 0) out[i] = light_pdf_w(s, *s.emitters[e], ray.o, &it);
-                         } else {
-                             for (const Emitter* env : s.environment) out[i] += light_pdf_w(s, *env, ray.o, nullptr);
-                         }
-                     }
-                 }
-                 return to_numpy(std::move(out), {py::ssize_t(n)});
-             },
-             py::arg("ref"), py::arg("d"));
+        .def(
+            "medium_transmittance_samples",
+            [](const Scene& s, int m, py::object o, py::object d, float t1, int n, uint64_t seed) {
+                const Medium& med = medium_at(s, m);
+                Color oc = to_color(o), dc = to_color(d);
+                Vec3 ov(oc.x, oc.y, oc.z), dv = normalize(Vec3(dc.x, dc.y, dc.z));
+                py::array_t<float> out({py::ssize_t(n), py::ssize_t(3)});
+                auto w = out.mutable_unchecked<2>();
+                for (int i = 0; i < n; ++i) {
+                    Sampler sampler(seed, 0, uint64_t(i));
+                    Color tr = med.segment_transmittance(ov, dv, t1, sampler);
+                    for (int c = 0; c < 3; ++c) w(i, c) = tr[c];
+                }
+                return out;
+            },
+            py::arg("medium"), py::arg("o"), py::arg("d"), py::arg("t1"), py::arg("n"), py::arg("seed") = 0)
+        .def(
+            "sample_emitter_direction",
+            [](const Scene& s, py::object ref, py::object u) {
+                // Next event estimation's light sample (sample_light, as estimate_direct
+                // takes it): u columns = (pick, u.x, u.y, u_extra); pdf includes the pick.
+                if (!s.committed()) throw py::value_error("scene is not committed");
+                auto r = flat<float>(ref, 3, "ref");
+                auto uu = flat<float>(u, 4, "u");
+                size_t n = r.size() / 3;
+                if (uu.size() != 4 * n) throw py::value_error("u must be (N, 4) for N reference points");
+                std::vector<float> d(3 * n), pdf(n), rad(3 * n), delta(n);
+                const float pick = emitter_pick_prob(s);
+                for (size_t i = 0; i < n; ++i) {
+                    if (s.emitters.empty()) continue;
+                    DirectSample ds;
+                    sample_light(s, Vec3(r[3 * i], r[3 * i + 1], r[3 * i + 2]), uu[4 * i],
+                                 Vec2(uu[4 * i + 1], uu[4 * i + 2]), uu[4 * i + 3], ds);
+                    for (int k = 0; k < 3; ++k) {
+                        d[3 * i + k] = ds.d[k];
+                        rad[3 * i + k] = ds.radiance[k];
+                    }
+                    pdf[i] = ds.pdf_w * pick;
+                    delta[i] = ds.is_delta ? 1.f : 0.f;
+                }
+                py::dict out;
+                py::ssize_t N = py::ssize_t(n);
+                out["d"] = to_numpy(std::move(d), {N, 3});
+                out["pdf"] = to_numpy(std::move(pdf), {N});
+                out["radiance"] = to_numpy(std::move(rad), {N, 3});
+                out["is_delta"] = to_numpy(std::move(delta), {N});
+                return out;
+            },
+            py::arg("ref"), py::arg("u"))
+        .def(
+            "sample_sensor_rays",
+            [](const Scene& s, py::object film, py::object u) {
+                // Rays the sensor generates for film positions (N, 2) (pixels,
+                // continuous) and extra samples u (N, 5) = (u1, u2.xy, u3.xy).
+                if (!s.sensor) throw py::value_error("scene has no sensor");
+                auto f = flat<float>(film, 2, "film");
+                auto uu = flat<float>(u, 5, "u");
+                size_t n = f.size() / 2;
+                if (uu.size() != 5 * n) throw py::value_error("u must be (N, 5) for N film positions");
+                std::vector<float> o(3 * n), d(3 * n), w(3 * n);
+                for (size_t i = 0; i < n; ++i) {
+                    SensorRay sr =
+                        s.sensor->sample_ray(Vec2(f[2 * i], f[2 * i + 1]), uu[5 * i],
+                                             Vec2(uu[5 * i + 1], uu[5 * i + 2]), Vec2(uu[5 * i + 3], uu[5 * i + 4]));
+                    for (int k = 0; k < 3; ++k) {
+                        o[3 * i + k] = sr.ray.o[k];
+                        d[3 * i + k] = sr.ray.d[k];
+                        w[3 * i + k] = sr.weight[k];
+                    }
+                }
+                py::dict r;
+                py::ssize_t N = py::ssize_t(n);
+                r["o"] = to_numpy(std::move(o), {N, 3});
+                r["d"] = to_numpy(std::move(d), {N, 3});
+                r["weight"] = to_numpy(std::move(w), {N, 3});
+                return r;
+            },
+            py::arg("film"), py::arg("u"))
+        .def(
+            "pdf_emitter_direction",
+            [](const Scene& s, py::object ref, py::object dirs) {
+                // The light-sampling density that MIS assigns to a ray leaving ref
+                // along d (light_pdf_w, as mis_emission_hit takes it).
+                if (!s.committed()) throw py::value_error("scene is not committed");
+                auto r = flat<float>(ref, 3, "ref");
+                auto dd = flat<float>(dirs, 3, "d");
+                size_t n = dd.size() / 3;
+                bool one_ref = r.size() == 3;
+                if (!one_ref && r.size() != dd.size()) throw py::value_error("ref must be (1, 3) or match d");
+                std::vector<float> out(n, 0.f);
+                {
+                    py::gil_scoped_release nogil;
+                    for (size_t i = 0; i < n; ++i) {
+                        size_t j = one_ref ? 0 : i;
+                        Ray ray;
+                        ray.o = Vec3(r[3 * j], r[3 * j + 1], r[3 * j + 2]);
+                        ray.d = normalize(Vec3(dd[3 * i], dd[3 * i + 1], dd[3 * i + 2]));
+                        Interaction it;
+                        if (s.intersect(ray, it)) {
+                            int e = s.shapes[it.shape]->emitter;
+                            if (e >= 0) out[i] = light_pdf_w(s, *s.emitters[e], ray.o, &it);
+                        } else {
+                            for (const Emitter* env : s.environment) out[i] += light_pdf_w(s, *env, ray.o, nullptr);
+                        }
+                    }
+                }
+                return to_numpy(std::move(out), {py::ssize_t(n)});
+            },
+            py::arg("ref"), py::arg("d"));
 
     m.def(
         "bdpt_mis_check",
@@ -167,10 +178,9 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 py::gil_scoped_release nogil;
                 bdpt_mis_check(scene, *bdpt, seed, n, fast, brute, sums, strategy);
             }
-            return py::make_tuple(py::array_t<float>(fast.size(), fast.data()),
-                                  py::array_t<float>(brute.size(), brute.data()),
-                                  py::array_t<float>(sums.size(), sums.data()),
-                                  py::array_t<int>(strategy.size(), strategy.data()));
+            return py::make_tuple(
+                py::array_t<float>(fast.size(), fast.data()), py::array_t<float>(brute.size(), brute.data()),
+                py::array_t<float>(sums.size(), sums.data()), py::array_t<int>(strategy.size(), strategy.data()));
         },
         py::arg("scene"), py::arg("integrator"), py::arg("seed"), py::arg("n"),
         "test hook: bdpt's MIS weights (linear-time), brute-force ones and the linear-time weights' sum over "
@@ -191,10 +201,18 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 const ParamSpec* s = info->param(r);
                 if (!s) throw py::value_error("param_reader_check: '" + type + "' declares no '" + r + "'");
                 switch (s->type) {
-                    case ParamType::Bool: reader.get_bool(s->name); break;
-                    case ParamType::Int: reader.get_int(s->name); break;
-                    case ParamType::Float: reader.get_float(s->name); break;
-                    case ParamType::String: reader.get_string(s->name); break;
+                    case ParamType::Bool:
+                        reader.get_bool(s->name);
+                        break;
+                    case ParamType::Int:
+                        reader.get_int(s->name);
+                        break;
+                    case ParamType::Float:
+                        reader.get_float(s->name);
+                        break;
+                    case ParamType::String:
+                        reader.get_string(s->name);
+                        break;
                 }
             }
             reader.report_unused();

@@ -42,12 +42,15 @@ static Vec3 apply_point(const double M[4][4], const Vec3& p) {
     double y = M[1][0] * p.x + M[1][1] * p.y + M[1][2] * p.z + M[1][3];
     double z = M[2][0] * p.x + M[2][1] * p.y + M[2][2] * p.z + M[2][3];
     double w = M[3][0] * p.x + M[3][1] * p.y + M[3][2] * p.z + M[3][3];
-    if (w != 1.0) { x /= w; y /= w; z /= w; }
+    if (w != 1.0) {
+        x /= w;
+        y /= w;
+        z /= w;
+    }
     return {float(x), float(y), float(z)};
 }
 static Vec3 apply_vector(const double M[4][4], const Vec3& v) {
-    return {float(M[0][0] * v.x + M[0][1] * v.y + M[0][2] * v.z),
-            float(M[1][0] * v.x + M[1][1] * v.y + M[1][2] * v.z),
+    return {float(M[0][0] * v.x + M[0][1] * v.y + M[0][2] * v.z), float(M[1][0] * v.x + M[1][1] * v.y + M[1][2] * v.z),
             float(M[2][0] * v.x + M[2][1] * v.y + M[2][2] * v.z)};
 }
 

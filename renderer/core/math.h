@@ -27,13 +27,42 @@ struct Vec3 {
     Vec3 operator*(const Vec3& o) const { return {x * o.x, y * o.y, z * o.z}; }
     Vec3 operator/(const Vec3& o) const { return {x / o.x, y / o.y, z / o.z}; }
     Vec3 operator*(float s) const { return {x * s, y * s, z * s}; }
-    Vec3 operator/(float s) const { float r = 1.f / s; return {x * r, y * r, z * r}; }
+    Vec3 operator/(float s) const {
+        float r = 1.f / s;
+        return {x * r, y * r, z * r};
+    }
     Vec3 operator-() const { return {-x, -y, -z}; }
-    Vec3& operator+=(const Vec3& o) { x += o.x; y += o.y; z += o.z; return *this; }
-    Vec3& operator-=(const Vec3& o) { x -= o.x; y -= o.y; z -= o.z; return *this; }
-    Vec3& operator*=(const Vec3& o) { x *= o.x; y *= o.y; z *= o.z; return *this; }
-    Vec3& operator*=(float s) { x *= s; y *= s; z *= s; return *this; }
-    Vec3& operator/=(float s) { float r = 1.f / s; x *= r; y *= r; z *= r; return *this; }
+    Vec3& operator+=(const Vec3& o) {
+        x += o.x;
+        y += o.y;
+        z += o.z;
+        return *this;
+    }
+    Vec3& operator-=(const Vec3& o) {
+        x -= o.x;
+        y -= o.y;
+        z -= o.z;
+        return *this;
+    }
+    Vec3& operator*=(const Vec3& o) {
+        x *= o.x;
+        y *= o.y;
+        z *= o.z;
+        return *this;
+    }
+    Vec3& operator*=(float s) {
+        x *= s;
+        y *= s;
+        z *= s;
+        return *this;
+    }
+    Vec3& operator/=(float s) {
+        float r = 1.f / s;
+        x *= r;
+        y *= r;
+        z *= r;
+        return *this;
+    }
 };
 inline Vec3 operator*(float s, const Vec3& v) { return v * s; }
 inline float dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }

@@ -8,20 +8,28 @@ namespace rm {
 
 const char* param_type_phrase(ParamType t) {
     switch (t) {
-        case ParamType::Bool: return "a boolean";
-        case ParamType::Int: return "an integer";
-        case ParamType::Float: return "a number";
-        case ParamType::String: return "a string";
+        case ParamType::Bool:
+            return "a boolean";
+        case ParamType::Int:
+            return "an integer";
+        case ParamType::Float:
+            return "a number";
+        case ParamType::String:
+            return "a string";
     }
     return "?";
 }
 
 const char* param_type_name(ParamType t) {
     switch (t) {
-        case ParamType::Bool: return "bool";
-        case ParamType::Int: return "int";
-        case ParamType::Float: return "float";
-        case ParamType::String: return "string";
+        case ParamType::Bool:
+            return "bool";
+        case ParamType::Int:
+            return "int";
+        case ParamType::Float:
+            return "float";
+        case ParamType::String:
+            return "string";
     }
     return "?";
 }
@@ -47,10 +55,14 @@ std::string format_double(double v) {
 
 std::string format_param_value(const ParamValue& v) {
     switch (param_type(v)) {
-        case ParamType::Bool: return std::get<bool>(v) ? "true" : "false";
-        case ParamType::Int: return std::to_string(std::get<int64_t>(v));
-        case ParamType::Float: return format_double(std::get<double>(v));
-        case ParamType::String: return "'" + std::get<std::string>(v) + "'";
+        case ParamType::Bool:
+            return std::get<bool>(v) ? "true" : "false";
+        case ParamType::Int:
+            return std::to_string(std::get<int64_t>(v));
+        case ParamType::Float:
+            return format_double(std::get<double>(v));
+        case ParamType::String:
+            return "'" + std::get<std::string>(v) + "'";
     }
     return "?";
 }

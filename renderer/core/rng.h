@@ -47,7 +47,11 @@ public:
     Sampler(uint64_t seed, uint64_t pixel, uint64_t sample_index)
         : rng_(mix64(seed ^ mix64(sample_index + 0x632be59bd9b4e019ULL)), mix64(pixel + (seed << 1))) {}
     float next_1d() { return rng_.next_float(); }
-    Vec2 next_2d() { float a = rng_.next_float(); float b = rng_.next_float(); return {a, b}; }
+    Vec2 next_2d() {
+        float a = rng_.next_float();
+        float b = rng_.next_float();
+        return {a, b};
+    }
 
 private:
     Pcg32 rng_;

@@ -104,8 +104,9 @@ std::unique_ptr<Integrator> make_bdpt(ParamReader& p);
 [[maybe_unused]] const bool kRegistered = register_estimator([] {
     EstimatorInfo e;
     e.name = "bdpt";
-    e.doc = "bidirectional path tracing: every strategy (s, t) combined by multiple importance sampling "
-            "(Veach 1997, ch. 10)";
+    e.doc =
+        "bidirectional path tracing: every strategy (s, t) combined by multiple importance sampling "
+        "(Veach 1997, ch. 10)";
     e.params = {
         max_depth_param().described("longest path in segments (s + t - 1)"),
         rr_depth_param().described("subpath depth (segments) from which Russian roulette may stop a subpath"),
@@ -134,8 +135,11 @@ class BdptIntegrator final : public Integrator {
 
 public:
     explicit BdptIntegrator(ParamReader& p)
-        : max_depth_(p.get_int("max_depth")), rr_depth_(p.get_int("rr_depth")), hide_(p.get_bool("hide_emitters")),
-          beta_(p.get_float("beta")), strategy_depth_(p.get_int("strategy_images")),
+        : max_depth_(p.get_int("max_depth")),
+          rr_depth_(p.get_int("rr_depth")),
+          hide_(p.get_bool("hide_emitters")),
+          beta_(p.get_float("beta")),
+          strategy_depth_(p.get_int("strategy_images")),
           mis_(mis_from_name(p.get_string("mis"))) {}
 
     int strategy_depth() const override { return strategy_depth_; }
@@ -168,7 +172,7 @@ public:
         z0.it.n = sr.n;
         z0.beta = sr.weight;
         z0.pdf_fwd = 1.f;
-        z0.delta = !sensor.has_importance();  // a radiance meter: no t = 1 (the file's head)
+        z0.delta = !sensor.has_importance();                      // a radiance meter: no t = 1 (the file's head)
         int max_cam = max_depth_ < 0 ? INT_MAX : max_depth_ + 1;  // z0 .. z_max_depth
         if (!scene.features.has_media) {
             cam.push_back(z0);
@@ -234,9 +238,12 @@ public:
 private:
     float heuristic(float r) const {
         switch (mis_) {
-            case Mis::Balance: return r;
-            case Mis::Uniform: return 1.f;
-            default: return beta_ == 2.f ? r * r : std::pow(r, beta_);
+            case Mis::Balance:
+                return r;
+            case Mis::Uniform:
+                return 1.f;
+            default:
+                return beta_ == 2.f ? r * r : std::pow(r, beta_);
         }
     }
 
@@ -258,16 +265,21 @@ private:
         PathVertex* pt = &cam[t - 1];
         PathVertex* qs_m = s > 1 ? &light[s - 2] : nullptr;
         PathVertex* pt_m = t > 1 ? &cam[t - 2] : nullptr;
-        struct Saved { float pt_rev = 0, ptm_rev = 0, qs_rev = 0, qsm_rev = 0; bool pt_delta = false, qs_delta = false; } sv;
+        struct Saved {
+            float pt_rev = 0, ptm_rev = 0, qs_rev = 0, qsm_rev = 0;
+            bool pt_delta = false, qs_delta = false;
+        } sv;
         sv.pt_rev = pt->pdf_rev;
         sv.pt_delta = pt->delta;
         if (pt_m) sv.ptm_rev = pt_m->pdf_rev;
-        if (qs) { sv.qs_rev = qs->pdf_rev; sv.qs_delta = qs->delta; }
+        if (qs) {
+            sv.qs_rev = qs->pdf_rev;
+            sv.qs_delta = qs->delta;
+        }
         if (qs_m) sv.qsm_rev = qs_m->pdf_rev;
 
         pt->pdf_rev = s > 0 ? pdf_to(scene, *qs, qs_m, *pt) : light_origin_pdf(scene, *pt, *pt_m);
-        if (pt_m)
-            pt_m->pdf_rev = s > 0 ? pdf_to(scene, *pt, qs, *pt_m) : emitter_pdf_to(scene, *pt, *pt_m);
+        if (pt_m) pt_m->pdf_rev = s > 0 ? pdf_to(scene, *pt, qs, *pt_m) : emitter_pdf_to(scene, *pt, *pt_m);
         if (qs) qs->pdf_rev = pdf_to(scene, *pt, pt_m, *qs);
         if (qs_m) qs_m->pdf_rev = pdf_to(scene, *qs, pt, *qs_m);
         pt->delta = false;  // the ends of a connection (or the emitter an s = 0 path ends on)
@@ -278,8 +290,9 @@ private:
         // ratio chain carries the one stored for the current strategy, so
         // each alternative's ratio is corrected by m(s') (nee_over_emission,
         // c = p_NEE / p_LE; 1 for emitters whose two densities agree).
-        float c = s >= 2 ? nee_over_emission(scene, light[0], light[1])
-                         : s == 1 ? nee_over_emission(scene, light[0], *pt) : nee_over_emission(scene, *pt, *pt_m);
+        float c = s >= 2   ? nee_over_emission(scene, light[0], light[1])
+                  : s == 1 ? nee_over_emission(scene, light[0], *pt)
+                           : nee_over_emission(scene, *pt, *pt_m);
         auto m = [&](int s_alt) {
             if (s_alt == 0 || c == 1.f) return 1.f;
             if (s_alt == 1) return s >= 2 ? c : 1.f;
@@ -300,7 +313,10 @@ private:
         pt->pdf_rev = sv.pt_rev;
         pt->delta = sv.pt_delta;
         if (pt_m) pt_m->pdf_rev = sv.ptm_rev;
-        if (qs) { qs->pdf_rev = sv.qs_rev; qs->delta = sv.qs_delta; }
+        if (qs) {
+            qs->pdf_rev = sv.qs_rev;
+            qs->delta = sv.qs_delta;
+        }
         if (qs_m) qs_m->pdf_rev = sv.qsm_rev;
         return 1.f / (1.f + sum);
     }
@@ -308,8 +324,8 @@ private:
     // The contribution of strategy (s, t) before its MIS weight `w`, its
     // effect class and, for t = 1, its film position. Veach 1997, eq. 10.8:
     // C = alpha^L_s c_{s,t} alpha^E_t.
-    Color connect(const Scene& scene, Sampler& sampler, const EmissionSample& es, int s, int t, Vec2& film,
-                  int& effect, float& w, bool hidden, ThreadStats& stats) const {
+    Color connect(const Scene& scene, Sampler& sampler, const EmissionSample& es, int s, int t, Vec2& film, int& effect,
+                  float& w, bool hidden, ThreadStats& stats) const {
         std::vector<PathVertex>& cam = cam_ref();
         std::vector<PathVertex>& light = light_ref();
         Color L(0.f);
@@ -394,12 +410,16 @@ private:
             }
             bool had = !light.empty();
             PathVertex saved;
-            if (had) saved = light[0];
-            else light.push_back(y0);
+            if (had)
+                saved = light[0];
+            else
+                light.push_back(y0);
             light[0] = y0;
             w = mis_weight(scene, s, t);
-            if (had) light[0] = saved;
-            else light.pop_back();
+            if (had)
+                light[0] = saved;
+            else
+                light.pop_back();
             return L;
         } else {
             // Connect y_{s-1} and z_{t-1}: f_L Tr f_E / d^2 (Veach 1997,

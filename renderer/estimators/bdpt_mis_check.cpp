@@ -42,7 +42,10 @@ FullPath full_path(const BdptMisProbe& bd, const Scene& scene, int s, int t) {
     for (int i = 0; i < t; ++i) x.push_back(cam[i]);
     for (int i = s - 1; i >= 0; --i) x.push_back(light[i]);
     const int k = fp.k = int(x.size()) - 1;
-    if (s > 0) { x[t - 1].delta = false; x[t].delta = false; }
+    if (s > 0) {
+        x[t - 1].delta = false;
+        x[t].delta = false;
+    }
     x[k].delta = false;
     if (s == 0) {  // the emitter the camera path ended on acts as the light vertex
         x[k].type = VType::Light;

@@ -34,7 +34,8 @@ std::unique_ptr<Integrator> make_direct(ParamReader& p);
 class DirectIntegrator final : public Integrator {
 public:
     explicit DirectIntegrator(ParamReader& p)
-        : n_light_(p.get_int("emitter_samples")), n_bsdf_(p.get_int("bsdf_samples")),
+        : n_light_(p.get_int("emitter_samples")),
+          n_bsdf_(p.get_int("bsdf_samples")),
           hide_(p.get_bool("hide_emitters")) {
         if (n_light_ + n_bsdf_ == 0)
             p.fail("emitter_samples", "emitter_samples and bsdf_samples must be >= 0, not both 0");
@@ -81,14 +82,17 @@ public:
             Color c(0.f);
             if (!scene.intersect(r, hit2)) {
                 for (const Emitter* e : scene.environment) {
-                    float w = bs.is_delta ? 1.f : mis_emission_hit(scene, *e, r.o, nullptr, bs.pdf_w, light_frac_, bsdf_frac_);
+                    float w = bs.is_delta
+                                  ? 1.f
+                                  : mis_emission_hit(scene, *e, r.o, nullptr, bs.pdf_w, light_frac_, bsdf_frac_);
                     c += e->eval_environment(r.d) * w;
                 }
             } else if (scene.shapes[hit2.shape]->emitter >= 0) {
                 const Emitter& e = *scene.emitters[scene.shapes[hit2.shape]->emitter];
                 Color le = e.eval(hit2, hit2.wi);
                 if (!is_black(le)) {
-                    float w = bs.is_delta ? 1.f : mis_emission_hit(scene, e, r.o, &hit2, bs.pdf_w, light_frac_, bsdf_frac_);
+                    float w =
+                        bs.is_delta ? 1.f : mis_emission_hit(scene, e, r.o, &hit2, bs.pdf_w, light_frac_, bsdf_frac_);
                     c += le * w;
                 }
             }

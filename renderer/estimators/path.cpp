@@ -12,10 +12,10 @@
 // A shape with a dipole BSSRDF (scene/dipole.h) is handled by
 // dipole_step (specular reflection or a sampled exit point, the path going
 // on from there with the exit lobe as its BSDF): step 4a.
-#include "transport/common.h"
-#include "transport/dipole_step.h"
 #include "estimators/volpath.h"
 #include "render/registry.h"
+#include "transport/common.h"
+#include "transport/dipole_step.h"
 
 namespace rm {
 
@@ -27,8 +27,9 @@ std::unique_ptr<Integrator> make_path(ParamReader& p);
     EstimatorInfo e;
     e.name = "path";
     e.aliases = {"volpath"};
-    e.doc = "unidirectional path tracing with next event estimation and MIS (Kajiya 1986; Veach 1997, ch. 9); "
-            "media through volpath's loop";
+    e.doc =
+        "unidirectional path tracing with next event estimation and MIS (Kajiya 1986; Veach 1997, ch. 9); "
+        "media through volpath's loop";
     e.params = {
         max_depth_param().described("longest path in segments (1: only emitters seen directly; 2: direct "
                                     "illumination); in media, scattering vertices"),
@@ -95,9 +96,8 @@ public:
             // 4a. A dipole BSSRDF (dipole_step.h): specular reflection, or the
             //     subsurface exit point xi, where the path goes on (a B vertex)
             //     with the exit lobe Sw as its BSDF.
-            if (shape.dipole >= 0 &&
-                !camera_dipole_vertex(scene, *scene.dipoles[shape.dipole], it, sampler, stats, beta, pc, bsdf,
-                                      wi, bs, sampled))
+            if (shape.dipole >= 0 && !camera_dipole_vertex(scene, *scene.dipoles[shape.dipole], it, sampler, stats,
+                                                           beta, pc, bsdf, wi, bs, sampled))
                 break;
 
             if (!sampled) {
@@ -111,7 +111,9 @@ public:
                         out.add(ncls, beta * ld);
                     } else {
                         // Keep the random-number stream aligned whatever the mask is.
-                        sampler.next_1d(); sampler.next_2d(); sampler.next_1d();
+                        sampler.next_1d();
+                        sampler.next_2d();
+                        sampler.next_1d();
                     }
                 }
                 // 5. Sample the BSDF for the next direction.

@@ -53,11 +53,11 @@
 #include <stdexcept>
 #include <thread>
 
-#include "transport/common.h"
-#include "transport/media_common.h"
 #include "core/warp.h"
 #include "render/pass_loop.h"
 #include "render/registry.h"
+#include "transport/common.h"
+#include "transport/media_common.h"
 #include "transport/photon_trace.h"
 
 namespace rm {
@@ -77,11 +77,14 @@ std::unique_ptr<Integrator> make_photonmapper(ParamReader& p);
         ParamSpec::integer("direct_samples", 16, "shadow rays per camera sample at the first non-specular vertex")
             .at_least(0)
             .alias("directSamples"),
-        ParamSpec::integer("global_photons", 250000, "photons stored in the global map").at_least(0).alias("globalPhotons"),
+        ParamSpec::integer("global_photons", 250000, "photons stored in the global map")
+            .at_least(0)
+            .alias("globalPhotons"),
         ParamSpec::integer("caustic_photons", 250000, "photons stored in the caustic map")
             .at_least(0)
             .alias("causticPhotons"),
-        ParamSpec::real("global_lookup_radius", 0.05, "maximum lookup radius in the global map, relative to the scene's")
+        ParamSpec::real("global_lookup_radius", 0.05,
+                        "maximum lookup radius in the global map, relative to the scene's")
             .greater_than(0)
             .alias("globalLookupRadius"),
         ParamSpec::real("caustic_lookup_radius", 0.0125,
@@ -90,11 +93,13 @@ std::unique_ptr<Integrator> make_photonmapper(ParamReader& p);
             .alias("causticLookupRadius"),
         ParamSpec::integer("lookup_size", 120, "photons per radiance estimate, n").at_least(1).alias("lookupSize"),
         ParamSpec::integer("gather_rays", 32, "final-gathering rays per camera sample").at_least(1),
-        ParamSpec::boolean("final_gather", true, "false: the global map read at the first vertex itself (shows its bias)"),
+        ParamSpec::boolean("final_gather", true,
+                           "false: the global map read at the first vertex itself (shows its bias)"),
         ParamSpec::integer("volume_photons", 250000, "photons stored in the volume map (scenes with media)")
             .at_least(0)
             .alias("volumePhotons"),
-        ParamSpec::real("volume_lookup_radius", 0.05, "maximum lookup radius in the volume map, relative to the scene's")
+        ParamSpec::real("volume_lookup_radius", 0.05,
+                        "maximum lookup radius in the volume map, relative to the scene's")
             .greater_than(0)
             .alias("volumeLookupRadius"),
         ParamSpec::integer("volume_lookup_size", 64, "photons per volume radiance estimate").at_least(1),
@@ -152,13 +157,21 @@ inline int photon_budget(int max_depth, int camera_segments) {
 class PhotonMapper final : public Integrator {
 public:
     explicit PhotonMapper(ParamReader& p)
-        : max_depth_(p.get_int("max_depth")), rr_depth_(p.get_int("rr_depth")), hide_(p.get_bool("hide_emitters")),
-          direct_samples_(p.get_int("direct_samples")), global_photons_(p.get_int("global_photons")),
-          caustic_photons_(p.get_int("caustic_photons")), global_radius_(p.get_float("global_lookup_radius")),
-          caustic_radius_(p.get_float("caustic_lookup_radius")), lookup_size_(p.get_int("lookup_size")),
-          gather_rays_(p.get_int("gather_rays")), final_gather_(p.get_bool("final_gather")),
-          volume_photons_(p.get_int("volume_photons")), volume_radius_(p.get_float("volume_lookup_radius")),
-          volume_lookup_size_(p.get_int("volume_lookup_size")), step_size_(p.get_float("step_size")),
+        : max_depth_(p.get_int("max_depth")),
+          rr_depth_(p.get_int("rr_depth")),
+          hide_(p.get_bool("hide_emitters")),
+          direct_samples_(p.get_int("direct_samples")),
+          global_photons_(p.get_int("global_photons")),
+          caustic_photons_(p.get_int("caustic_photons")),
+          global_radius_(p.get_float("global_lookup_radius")),
+          caustic_radius_(p.get_float("caustic_lookup_radius")),
+          lookup_size_(p.get_int("lookup_size")),
+          gather_rays_(p.get_int("gather_rays")),
+          final_gather_(p.get_bool("final_gather")),
+          volume_photons_(p.get_int("volume_photons")),
+          volume_radius_(p.get_float("volume_lookup_radius")),
+          volume_lookup_size_(p.get_int("volume_lookup_size")),
+          step_size_(p.get_float("step_size")),
           boundary_rays_(p.get_int("volume_boundary_rays")) {}
 
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
@@ -197,9 +210,8 @@ public:
                 // 2. Direct light by ray tracing: light samples only (nothing
                 //    else finds emitters from x, so no MIS weight: bsdf_frac 0).
                 // 3. Caustics from the caustic map.
-                direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb, [&] {
-                    return estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f);
-                });
+                direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb,
+                                    [&] { return estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f); });
                 // 4. Indirect light from the global map: final gathering, or the
                 //    map read at x itself.
                 int cls_i = via_specular ? kSpecular : kIndirect;
@@ -245,8 +257,8 @@ private:
         }
         int cls_c = via_specular ? kSpecular : kCaustic;
         if (maps.has_caustic && mask[cls_c])
-            out.add(cls_c, beta * estimate(maps.caustic, maps.r2_caustic, it, bsdf, wi, photon_budget(max_depth_, c),
-                                           nb));
+            out.add(cls_c,
+                    beta * estimate(maps.caustic, maps.r2_caustic, it, bsdf, wi, photon_budget(max_depth_, c), nb));
     }
 
     // Jensen 2001, eq. 7.6, over the lookup_size nearest photons within r2_max.
@@ -269,9 +281,12 @@ private:
             if (!(c > 1e-7f)) continue;
             // eval returns f |cos theta_p|; the photon's flux already holds the cosine.
             Color v = bsdf.eval(ctx, wi, wp) * ph.power * (1.f / c);
-            if (by_medium && (ph.flags & kPhotonVolumePath)) by_medium[0] += v * (1.f / (kPi * r2));
-            else if (by_medium && (ph.flags & kPhotonSubsurfacePath)) by_medium[1] += v * (1.f / (kPi * r2));
-            else sum += v;
+            if (by_medium && (ph.flags & kPhotonVolumePath))
+                by_medium[0] += v * (1.f / (kPi * r2));
+            else if (by_medium && (ph.flags & kPhotonSubsurfacePath))
+                by_medium[1] += v * (1.f / (kPi * r2));
+            else
+                sum += v;
         }
         return sum * (1.f / (kPi * r2));
     }
@@ -320,9 +335,9 @@ private:
     Color volume_estimate(const Scene& scene, const Maps& maps, int medium, const Vec3& p, const Vec3& wi,
                           const PhaseFunction& phase, int max_photon_depth, std::vector<Neighbour>& nb,
                           Sampler& sampler, ThreadStats& stats) const;
-    Color gather_media(const Scene& scene, const Maps& maps, Sampler& sampler, const Interaction& x,
-                       const Bsdf& bsdf, const Vec3& wi, int c, const MediumTracker& mt, const PathClass& pc,
-                       const Color& beta, EffectRadiance& out, std::vector<Neighbour>& nb, ThreadStats& stats) const;
+    Color gather_media(const Scene& scene, const Maps& maps, Sampler& sampler, const Interaction& x, const Bsdf& bsdf,
+                       const Vec3& wi, int c, const MediumTracker& mt, const PathClass& pc, const Color& beta,
+                       EffectRadiance& out, std::vector<Neighbour>& nb, ThreadStats& stats) const;
 
     int max_depth_, rr_depth_;
     bool hide_;
@@ -336,7 +351,6 @@ private:
     float step_size_;
     int boundary_rays_;
 };
-
 
 // ---------------------------------------------------------------------------
 // Scenes with media: the volume photon map and ray marching (Jensen &
@@ -450,8 +464,7 @@ float sphere_exit(const Ray& ray, const Vec3& center, float radius) {
 Color PhotonMapper::volume_estimate(const Scene& scene, const Maps& maps, int medium, const Vec3& p, const Vec3& wi,
                                     const PhaseFunction& phase, int max_photon_depth, std::vector<Neighbour>& nb,
                                     Sampler& sampler, ThreadStats& stats) const {
-    if (!maps.has_volume || max_photon_depth < 1 || medium < 0 || medium >= int(maps.volume.size()))
-        return Color(0.f);
+    if (!maps.has_volume || max_photon_depth < 1 || medium < 0 || medium >= int(maps.volume.size())) return Color(0.f);
     const PhotonMap& map = maps.volume[medium];
     if (map.empty()) return Color(0.f);
     map.knn(p, volume_lookup_size_, maps.r2_volume, nb, max_photon_depth);
@@ -488,8 +501,8 @@ Color PhotonMapper::volume_estimate(const Scene& scene, const Maps& maps, int me
 // to `out` and returns the segment's transmittance (with the Russian
 // roulette weight; zero when the roulette ended the ray).
 Color PhotonMapper::march(const Scene& scene, const Maps& maps, Sampler& sampler, const Ray& ray, float t_hit,
-                          const MediumTracker& mt, const PathClass& pc, int c, const Color& beta,
-                          EffectRadiance& out, std::vector<Neighbour>& nb, ThreadStats& stats) const {
+                          const MediumTracker& mt, const PathClass& pc, int c, const Color& beta, EffectRadiance& out,
+                          std::vector<Neighbour>& nb, ThreadStats& stats) const {
     const int m = mt.medium;
     const Medium& med = *scene.media[m];
     // A ray that leaves the scene in an unbounded homogeneous medium is
@@ -540,8 +553,9 @@ Color PhotonMapper::march(const Scene& scene, const Maps& maps, Sampler& sampler
         Interaction mi = medium_vertex(y, wi);
         Color s(0.f);
         if (nee)
-            s += ss * direct_through_media(scene, mi, m, sampler, stats,
-                                           [&](const Vec3& wo) { return Color(phase.eval(wi, wo)); }, nullptr);
+            s += ss *
+                 direct_through_media(
+                     scene, mi, m, sampler, stats, [&](const Vec3& wo) { return Color(phase.eval(wi, wo)); }, nullptr);
         s += volume_estimate(scene, maps, m, y, wi, phase, budget, nb, sampler, stats);
         out.add(cls, beta * tr * s * dt);
     }
@@ -554,9 +568,9 @@ Color PhotonMapper::march(const Scene& scene, const Maps& maps, Sampler& sampler
 // transmittance), and adds what the gather rays' medium points in-scatter
 // to `out` under their own class (V or B), times `beta`.
 Color PhotonMapper::gather_media(const Scene& scene, const Maps& maps, Sampler& sampler, const Interaction& x,
-                                 const Bsdf& bsdf, const Vec3& wi, int c, const MediumTracker& mt,
-                                 const PathClass& pc, const Color& beta, EffectRadiance& out,
-                                 std::vector<Neighbour>& nb, ThreadStats& stats) const {
+                                 const Bsdf& bsdf, const Vec3& wi, int c, const MediumTracker& mt, const PathClass& pc,
+                                 const Color& beta, EffectRadiance& out, std::vector<Neighbour>& nb,
+                                 ThreadStats& stats) const {
     BsdfContext ctx;
     Color sum(0.f);
     const float inv_n = 1.f / float(gather_rays_);
@@ -570,7 +584,7 @@ Color PhotonMapper::gather_media(const Scene& scene, const Maps& maps, Sampler& 
         gm.cross(x, wo, false);
         Ray r = x.spawn(wo);
         PathClass pg = pc;
-        pg.push(false);  // x
+        pg.push(false);                                                 // x
         for (int g = 1, guard = 0; g <= 64 && guard < 1024; ++guard) {  // g: segments from x (null boundaries excluded)
             Interaction it;
             ++stats.rays;
@@ -592,9 +606,9 @@ Color PhotonMapper::gather_media(const Scene& scene, const Maps& maps, Sampler& 
                     const PhaseFunction& phase = *med.phase;
                     Color li(0.f);
                     if (!scene.emitters.empty() && (max_depth_ < 0 || c + g + 1 <= max_depth_))
-                        li += direct_through_media(scene, mi, gm.medium, sampler, stats,
-                                                   [&](const Vec3& w2) { return Color(phase.eval(mi.wi, w2)); },
-                                                   nullptr);
+                        li += direct_through_media(
+                            scene, mi, gm.medium, sampler, stats,
+                            [&](const Vec3& w2) { return Color(phase.eval(mi.wi, w2)); }, nullptr);
                     Color lm = volume_estimate(scene, maps, gm.medium, y, mi.wi, phase,
                                                photon_budget(max_depth_, c + g), nb, sampler, stats);
                     Color ss = sigma_s_at(med, y);
@@ -685,9 +699,9 @@ void PhotonMapper::radiance_media(const Scene& scene, const Maps& maps, Sampler&
             // 4. Caustics from the caustic map (its photons came through
             //    media unscattered: L S+ D).
             direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb, [&] {
-                return direct_through_media(scene, it, mt.medium, sampler, stats,
-                                            [&](const Vec3& wo) { return bsdf.eval(ctx, wi, it.to_local(wo)); },
-                                            nullptr);
+                return direct_through_media(
+                    scene, it, mt.medium, sampler, stats,
+                    [&](const Vec3& wo) { return bsdf.eval(ctx, wi, it.to_local(wo)); }, nullptr);
             });
             // 5. Indirect light: final gathering through media, or the global
             //    map at x. Global photons whose light scattered in a medium
@@ -774,8 +788,8 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
     bool specular_chain = f.has_delta_bsdf && mask[kSpecular];
     bool need_caustic = lights && long_paths && caustic_photons_ > 0 && f.has_smooth_bsdf && f.has_delta_bsdf &&
                         (mask[kCaustic] || specular_chain);
-    bool need_global = lights && long_paths && global_photons_ > 0 && f.has_smooth_bsdf &&
-                       (mask[kIndirect] || specular_chain);
+    bool need_global =
+        lights && long_paths && global_photons_ > 0 && f.has_smooth_bsdf && (mask[kIndirect] || specular_chain);
     Vec3 center;
     float radius;
     scene.bounding_sphere(center, radius);
@@ -814,16 +828,14 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
     if (need_caustic) {
         PhotonTraceSpec spec = spec_for(1, 1);
         spec.caustic_only = true;
-        if (!build("caustic", spec, uint64_t(caustic_photons_), maps.caustic))
-            return false;
+        if (!build("caustic", spec, uint64_t(caustic_photons_), maps.caustic)) return false;
         maps.has_caustic = true;
         maps.r2_caustic = sqr(caustic_radius_ * radius);
     }
     if (need_global) {
         PhotonTraceSpec spec = spec_for(2, final_gather_ ? 2 : 1);
         spec.indirect_only = !final_gather_;
-        if (!build("global", spec, uint64_t(global_photons_), maps.global))
-            return false;
+        if (!build("global", spec, uint64_t(global_photons_), maps.global)) return false;
         maps.has_global = true;
         maps.r2_global = sqr(global_radius_ * radius);
     }
@@ -852,8 +864,7 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
             maps.volume.resize(per.size());
             for (size_t m = 0; m < per.size(); ++m) maps.volume[m].build(std::move(per[m]), threads);
         };
-        if (!trace_and_build("volume", spec, uint64_t(volume_photons_), per_medium))
-            return false;
+        if (!trace_and_build("volume", spec, uint64_t(volume_photons_), per_medium)) return false;
         maps.has_volume = true;
         maps.r2_volume = sqr(volume_radius_ * radius);
     }

@@ -47,8 +47,9 @@ std::unique_ptr<Integrator> make_ptracer(ParamReader& p);
 [[maybe_unused]] const bool kRegistered = register_estimator([] {
     EstimatorInfo e;
     e.name = "ptracer";
-    e.doc = "light tracing: light subpaths connected to the sensor at every non-specular vertex (the t = 1 "
-            "strategy, Veach 1997, sec. 10.2)";
+    e.doc =
+        "light tracing: light subpaths connected to the sensor at every non-specular vertex (the t = 1 "
+        "strategy, Veach 1997, sec. 10.2)";
     e.params = {
         max_depth_param().described("longest path in segments, sensor connection included (1: only emitters seen "
                                     "directly; 2: direct illumination)"),
@@ -69,7 +70,9 @@ std::unique_ptr<Integrator> make_ptracer(ParamReader& p);
 class LightTracer final : public Integrator {
 public:
     explicit LightTracer(ParamReader& p)
-        : max_depth_(p.get_int("max_depth")), rr_depth_(p.get_int("rr_depth")), hide_(p.get_bool("hide_emitters")),
+        : max_depth_(p.get_int("max_depth")),
+          rr_depth_(p.get_int("rr_depth")),
+          hide_(p.get_bool("hide_emitters")),
           strategy_depth_(p.get_int("strategy_images")) {}
     int strategy_depth() const override { return strategy_depth_; }
 
@@ -85,16 +88,18 @@ public:
                                         "point along one direction); use integrator 'path', or a camera or an "
                                         "irradiancemeter");
         if (!hide_ && !scene.environment.empty() && type == "orthographic")
-            throw std::invalid_argument("integrator 'ptracer': an orthographic camera sees an environment emitter "
-                                        "along a single direction, which light paths reach with probability 0; set "
-                                        "hide_emitters or use a perspective camera or integrator 'path'");
+            throw std::invalid_argument(
+                "integrator 'ptracer': an orthographic camera sees an environment emitter "
+                "along a single direction, which light paths reach with probability 0; set "
+                "hide_emitters or use a perspective camera or integrator 'path'");
         // An irradiancemeter sees an environment emitter over its whole
         // hemisphere; light tracing would need its own strategy for that
         // (bdpt's s = 0 has it).
         if (!hide_ && !scene.environment.empty() && scene.sensor->area_sensor())
-            throw std::invalid_argument("integrator 'ptracer': the irradiancemeter sees an environment emitter "
-                                        "directly, which light tracing does not connect; set hide_emitters or use "
-                                        "integrator 'bdpt' or 'path'");
+            throw std::invalid_argument(
+                "integrator 'ptracer': the irradiancemeter sees an environment emitter "
+                "directly, which light tracing does not connect; set hide_emitters or use "
+                "integrator 'bdpt' or 'path'");
     }
 
     void trace_light_path(const Scene& scene, Sampler& sampler, int, std::vector<Splat>& out,
@@ -139,8 +144,10 @@ private:
             // Through media a later vertex may be V or B (PathClass::can_reach).
             PathClass pc;
             for (size_t i = 1; i < p.size(); ++i)
-                if (p[i].type == VType::Medium) pc.push_medium(p[i].enclosed);
-                else if (!p[i].null_surface()) pc.push(p[i].delta);
+                if (p[i].type == VType::Medium)
+                    pc.push_medium(p[i].enclosed);
+                else if (!p[i].null_surface())
+                    pc.push(p[i].delta);
             return pc.volume || pc.subsurface ? pc.can_reach(mask, true)
                                               : mask[kVolume] || mask[kSubsurface] || reachable_surface(p);
         }

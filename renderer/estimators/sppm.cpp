@@ -40,9 +40,9 @@
 #include <thread>
 
 #include "render/pass_loop.h"
+#include "render/registry.h"
 #include "transport/camera_sample.h"
 #include "transport/common.h"
-#include "render/registry.h"
 #include "transport/photon_trace.h"
 
 namespace rm {
@@ -54,8 +54,9 @@ std::unique_ptr<Integrator> make_sppm(ParamReader& p);
 [[maybe_unused]] const bool kRegistered = register_estimator([] {
     EstimatorInfo e;
     e.name = "sppm";
-    e.doc = "stochastic progressive photon mapping: one camera pass and one photon pass per spp, shrinking "
-            "radii (Hachisuka & Jensen 2009)";
+    e.doc =
+        "stochastic progressive photon mapping: one camera pass and one photon pass per spp, shrinking "
+        "radii (Hachisuka & Jensen 2009)";
     e.params = {
         max_depth_param().alias("maxDepth"),
         rr_depth_param().alias("rrDepth"),
@@ -89,15 +90,15 @@ struct VisiblePoint {
     const Bsdf* bsdf = nullptr;  // null: no visible point this pass
     Vec3 wi;                     // local
     Color beta{0.f};
-    EffectRadiance er;           // the pass's ray-traced part (emission, direct)
+    EffectRadiance er;  // the pass's ray-traced part (emission, direct)
     bool via_specular = false;
-    int c = 0;                   // camera segments to x
+    int c = 0;  // camera segments to x
 };
 
 struct PixelStats {
     double r2 = 0, n = 0;
-    double tau[3][3] = {};    // [class][channel]
-    double ray[kNumEffects][3] = {};  // sums of the ray-traced parts over passes
+    double tau[3][3] = {};               // [class][channel]
+    double ray[kNumEffects][3] = {};     // sums of the ray-traced parts over passes
     double sum[3] = {}, sum_sq[3] = {};  // per-pass total estimates
 };
 
@@ -106,8 +107,11 @@ struct PixelStats {
 class Sppm final : public Integrator {
 public:
     explicit Sppm(ParamReader& p)
-        : max_depth_(p.get_int("max_depth")), rr_depth_(p.get_int("rr_depth")), hide_(p.get_bool("hide_emitters")),
-          photon_count_(p.get_int("photon_count")), initial_radius_(p.get_float("initial_radius")),
+        : max_depth_(p.get_int("max_depth")),
+          rr_depth_(p.get_int("rr_depth")),
+          hide_(p.get_bool("hide_emitters")),
+          photon_count_(p.get_int("photon_count")),
+          initial_radius_(p.get_float("initial_radius")),
           alpha_(p.get_float("alpha")) {}
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator 'sppm' renders through its own driver");
@@ -204,8 +208,7 @@ public:
             if (photons_needed_ && !photon_pass(loop, s, map)) return s;
             // 3. Gather and update every pixel's statistics (never cancelled:
             //    a pass is either wholly in the estimate or not at all).
-            loop.parallel_commit(size_t(scene_.sensor->height),
-                                 [&](size_t y, int) { gather_row(map, int(y)); });
+            loop.parallel_commit(size_t(scene_.sensor->height), [&](size_t y, int) { gather_row(map, int(y)); });
         }
         return s1;
     }

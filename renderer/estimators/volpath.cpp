@@ -36,10 +36,10 @@
 //    an interior or exterior medium (Mitsuba 3's rule: target_medium(d) is
 //    the exterior when d . n > 0, else the interior); the camera starts in
 //    the sensor's medium.
+#include "estimators/volpath.h"
 #include "transport/common.h"
 #include "transport/dipole_step.h"
 #include "transport/media_common.h"
-#include "estimators/volpath.h"
 
 namespace rm {
 
@@ -105,7 +105,9 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                             [&](const Vec3& wo) { return phase.pdf_w(mi.wi, wo); });
                         out.add(ncls, beta * ld);
                     } else {
-                        sampler.next_1d(); sampler.next_2d(); sampler.next_1d();
+                        sampler.next_1d();
+                        sampler.next_2d();
+                        sampler.next_1d();
                     }
                 }
                 pc = pn;
@@ -150,9 +152,8 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         //     reflection, or the exit point xi (a B vertex) with the exit
         //     lobe as its BSDF. The path never enters the object, so the
         //     current medium (outside it) stays.
-        if (shape.dipole >= 0 &&
-            !camera_dipole_vertex(scene, *scene.dipoles[shape.dipole], it, sampler, stats, beta, pc, bsdf_at, wi,
-                                  bs, sampled))
+        if (shape.dipole >= 0 && !camera_dipole_vertex(scene, *scene.dipoles[shape.dipole], it, sampler, stats, beta,
+                                                       pc, bsdf_at, wi, bs, sampled))
             break;
 
         if (!sampled) {
@@ -168,7 +169,9 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                         [&](const Vec3& wo) { return bsdf_at->pdf_w(ctx, wi, it.to_local(wo)); });
                     out.add(ncls, beta * ld);
                 } else {
-                    sampler.next_1d(); sampler.next_2d(); sampler.next_1d();
+                    sampler.next_1d();
+                    sampler.next_2d();
+                    sampler.next_1d();
                 }
             }
             // 9. BSDF sampling; the medium changes when the sample crosses a boundary.

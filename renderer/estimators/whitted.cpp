@@ -73,8 +73,9 @@ private:
 [[maybe_unused]] const bool kRegistered = register_estimator([] {
     EstimatorInfo e;
     e.name = "whitted";
-    e.doc = "Whitted ray tracing (1980): delta reflection and refraction, direct light at smooth surfaces; "
-            "no indirect light, no caustics";
+    e.doc =
+        "Whitted ray tracing (1980): delta reflection and refraction, direct light at smooth surfaces; "
+        "no indirect light, no caustics";
     e.params = {
         ParamSpec::integer("max_depth", 5, "longest path in segments (pbrt-v3's maxdepth)").at_least(1).at_most(1024),
         hide_emitters_param(),

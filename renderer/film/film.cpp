@@ -8,7 +8,7 @@
 namespace rm {
 
 const char* effect_name(int e) {
-    static const char* names[kNumEffects] = {"emission", "direct", "indirect", "caustic",
+    static const char* names[kNumEffects] = {"emission", "direct", "indirect",  "caustic",
                                              "specular", "volume", "subsurface"};
     return (e >= 0 && e < kNumEffects) ? names[e] : "?";
 }

@@ -69,8 +69,10 @@ void PhotonMap::build(std::vector<Photon> photons, int threads, bool keep_ids) {
         photons_[i] = photons[idx[i]];
         photons_[i].flags = (photons_[i].flags & ~3u) | axis[i];
     }
-    if (keep_ids) ids_ = std::move(idx);
-    else ids_.clear();
+    if (keep_ids)
+        ids_ = std::move(idx);
+    else
+        ids_.clear();
 }
 
 void PhotonMap::knn(const Vec3& q, int k, float r2_max, std::vector<Neighbour>& out, int max_depth) const {
@@ -98,7 +100,10 @@ void PhotonMap::knn(const Vec3& q, int k, float r2_max, std::vector<Neighbour>& 
     // splitting plane that separates them from q: a far side is skipped
     // when popped if the radius has shrunk below it meanwhile (at most two
     // entries per level: 96 covers 2^32 photons).
-    struct Range { uint32_t lo, hi; float plane_d2; };
+    struct Range {
+        uint32_t lo, hi;
+        float plane_d2;
+    };
     Range stack[96];
     int sp = 0;
     stack[sp++] = {0, uint32_t(photons_.size()), 0.f};
@@ -125,7 +130,9 @@ void PhotonMap::knn(const Vec3& q, int k, float r2_max, std::vector<Neighbour>& 
 
 void PhotonMap::range(const Vec3& q, float r2, std::vector<Neighbour>& out) const {
     out.clear();
-    struct Range { uint32_t lo, hi; };
+    struct Range {
+        uint32_t lo, hi;
+    };
     Range stack[96];
     int sp = 0;
     stack[sp++] = {0, uint32_t(photons_.size())};

@@ -2,9 +2,9 @@
 // section 3 (Heckbert's path notation).
 #pragma once
 #include <array>
+#include <cstdint>
 #include <functional>
 #include <initializer_list>
-#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -20,8 +20,11 @@ struct ThreadStats {
     uint64_t rays = 0, shadow_rays = 0, paths = 0, nan_samples = 0, inf_samples = 0;
     uint64_t photons = 0;  // photons stored (photon mapping estimators)
     void merge(const ThreadStats& o) {
-        rays += o.rays; shadow_rays += o.shadow_rays; paths += o.paths;
-        nan_samples += o.nan_samples; inf_samples += o.inf_samples;
+        rays += o.rays;
+        shadow_rays += o.shadow_rays;
+        paths += o.paths;
+        nan_samples += o.nan_samples;
+        inf_samples += o.inf_samples;
         photons += o.photons;
     }
 };
@@ -30,7 +33,11 @@ struct RenderOptions;
 struct RenderOutput;
 
 using EffectMask = std::array<bool, kNumEffects>;
-inline EffectMask all_effects() { EffectMask m; m.fill(true); return m; }
+inline EffectMask all_effects() {
+    EffectMask m;
+    m.fill(true);
+    return m;
+}
 
 // Tracks a camera path's vertex string E v1 v2 ... to file each contribution
 // under exactly one class: emission = LE, direct = LDE, caustic = LS+DE,
@@ -59,14 +66,18 @@ struct PathClass {
     }
     void push(bool is_delta) {
         ++scatter_vertices;
-        if (scatter_vertices == 1) first_specular = is_delta;
-        else rest_specular = rest_specular && is_delta;
+        if (scatter_vertices == 1)
+            first_specular = is_delta;
+        else
+            rest_specular = rest_specular && is_delta;
     }
     // A medium vertex: V, or B when `enclosed` (see above).
     void push_medium(bool enclosed) {
         push(false);
-        if (enclosed) subsurface = true;
-        else volume = true;
+        if (enclosed)
+            subsurface = true;
+        else
+            volume = true;
     }
     // Can any class in `mask` still be produced once the current vertex
     // (the next one to be pushed) scatters or samples a light? `media`: the
@@ -175,7 +186,7 @@ public:
     // sample): `path` hands a scene with media to its media-aware loop
     // (volpath.cpp), so that its own surface loop has no media code at all.
     virtual const Integrator& for_scene(const Scene&) const { return *this; }
-    std::string type;  // the estimator's name, for messages (set by make_integrator)
+    std::string type;   // the estimator's name, for messages (set by make_integrator)
     Capabilities caps;  // the estimator's declared capabilities (set by make_integrator)
     // Radiance along one camera ray, split by effect class, into `out`.
     virtual void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,

@@ -59,12 +59,13 @@ void batch_sizes(uint64_t paths, uint64_t pixels, double* n_b) {
             if (c_r) n += double(c_r) * double(count_residue(pixels, ((b - r) % kBatches + kBatches) % kBatches));
         }
         // the partial sample index `full`: pixels j < rem
-        n += double(count_residue(rem, int(((int64_t(b) - int64_t(full % kBatches)) % kBatches + kBatches) % kBatches)));
+        n +=
+            double(count_residue(rem, int(((int64_t(b) - int64_t(full % kBatches)) % kBatches + kBatches) % kBatches)));
         n_b[b] = n;
     }
 }
-constexpr uint64_t kItemPaths = 1024;   // light paths per work item
-constexpr uint64_t kChunkItems = 256;   // items traced before their splats join the film (bounds memory)
+constexpr uint64_t kItemPaths = 1024;  // light paths per work item
+constexpr uint64_t kChunkItems = 256;  // items traced before their splats join the film (bounds memory)
 
 struct ItemSplat {
     Splat s;
@@ -104,9 +105,11 @@ public:
                     continue;
                 }
                 float x = is.s.film.x, y = is.s.film.y;
-                int py0 = std::max(y0, int(std::ceil(y - 0.5f - r))), py1 = std::min(y1 - 1, int(std::floor(y - 0.5f + r)));
+                int py0 = std::max(y0, int(std::ceil(y - 0.5f - r))),
+                    py1 = std::min(y1 - 1, int(std::floor(y - 0.5f + r)));
                 if (py0 > py1) continue;
-                int px0 = std::max(0, int(std::ceil(x - 0.5f - r))), px1 = std::min(w_ - 1, int(std::floor(x - 0.5f + r)));
+                int px0 = std::max(0, int(std::ceil(x - 0.5f - r))),
+                    px1 = std::min(w_ - 1, int(std::floor(x - 0.5f + r)));
                 for (int py = py0; py <= py1; ++py) {
                     double wy = filter_.eval(y - float(py) - 0.5f) / norm_y_[py];
                     if (!(wy > 0)) continue;
@@ -288,9 +291,10 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
     const int n_strat = integrator.strategy_depth() > 0 ? num_strategies(integrator.strategy_depth()) : 0;
     double film_bytes = double(W) * double(H) * 3.0 * (kNumEffects + kBatches + 2 * n_strat) * sizeof(double);
     if (film_bytes > 16.0 * (1ull << 30))
-        throw std::invalid_argument("render: a " + std::to_string(W) + "x" + std::to_string(H) +
-                                    " film needs " + std::to_string(int(film_bytes / (1ull << 30))) +
-                                    " GiB of light-tracing buffers (limit 16 GiB); lower the resolution or strategy_images");
+        throw std::invalid_argument(
+            "render: a " + std::to_string(W) + "x" + std::to_string(H) + " film needs " +
+            std::to_string(int(film_bytes / (1ull << 30))) +
+            " GiB of light-tracing buffers (limit 16 GiB); lower the resolution or strategy_images");
     PassLoop loop(scene, opts, poll);
     LightStep step(scene, integrator, filter, n_strat, loop.threads());
     return loop.run(step);

@@ -130,7 +130,8 @@ bool in_interval(const ParamSpec& s, double x) {
 std::string interval_text(const ParamSpec& s) {
     if (s.has_min && s.has_max) {
         if (s.type == ParamType::Int && !s.min_open && !s.max_open) return bound_text(s.min) + ".." + bound_text(s.max);
-        return std::string(s.min_open ? "(" : "[") + bound_text(s.min) + ", " + bound_text(s.max) + (s.max_open ? ")" : "]");
+        return std::string(s.min_open ? "(" : "[") + bound_text(s.min) + ", " + bound_text(s.max) +
+               (s.max_open ? ")" : "]");
     }
     if (s.has_min) return (s.min_open ? "> " : ">= ") + bound_text(s.min);
     if (s.has_max) return (s.max_open ? "< " : "<= ") + bound_text(s.max);
@@ -149,8 +150,10 @@ std::string ParamSpec::range_text() const {
     std::vector<std::string> outside, inside;
     for (const auto& [v, meaning] : special) {
         std::string vt = param_type(v) == ParamType::String ? format_param_value(v) : bound_text(as_double(v));
-        if (!interval.empty() && in_interval(*this, as_double(v))) inside.push_back(vt + ": " + meaning);
-        else outside.push_back(vt + " (" + meaning + ")");
+        if (!interval.empty() && in_interval(*this, as_double(v)))
+            inside.push_back(vt + ": " + meaning);
+        else
+            outside.push_back(vt + " (" + meaning + ")");
     }
     if (interval.empty()) return join(outside, ", ", " or ");
     std::string s = join(outside, ", ", " or ");
@@ -230,8 +233,9 @@ void ParamReader::fail(const std::string& param, const std::string& message) con
 void ParamReader::report_unused() const {
     for (const auto& [n, v] : values_)
         if (std::find(read_.begin(), read_.end(), n) == read_.end())
-            throw ParamError(name_, n, prefix(name_) + "parameter '" + n +
-                                           "' is not used (declared, but the estimator never reads it)");
+            throw ParamError(
+                name_, n,
+                prefix(name_) + "parameter '" + n + "' is not used (declared, but the estimator never reads it)");
 }
 
 // ---- The registry -----------------------------------------------------------
@@ -311,8 +315,8 @@ const EstimatorInfo& lookup(const std::string& name) {
     std::vector<std::string> planned = planned_estimators();
     if (std::find(planned.begin(), planned.end(), name) != planned.end())
         throw ParamError(name, "", prefix(name) + "estimator '" + name + "' is not implemented yet");
-    throw ParamError(name, "", "integrator: unknown estimator '" + name + "' (known: " + join(known_names(), ", ", ", ") +
-                                   ")");
+    throw ParamError(name, "",
+                     "integrator: unknown estimator '" + name + "' (known: " + join(known_names(), ", ", ", ") + ")");
 }
 
 // `v` as a value of `type`: an integer is also a number; nothing else converts.
@@ -374,16 +378,18 @@ ParamSet resolve_params(const EstimatorInfo& info, const std::string& name, cons
             std::vector<std::string> known;
             for (const ParamSpec& p : info.params) known.push_back(p.name);
             std::sort(known.begin(), known.end());
-            throw ParamError(name, k, pre + "unknown parameter '" + k + "' for '" + name + "' (known: " +
-                                          join(known, ", ", ", ") + ")");
+            throw ParamError(
+                name, k,
+                pre + "unknown parameter '" + k + "' for '" + name + "' (known: " + join(known, ", ", ", ") + ")");
         }
         if (s->name != k && given.find(s->name))
-            throw ParamError(name, k, pre + "parameter '" + k + "' given together with its alias '" + s->name +
-                                          "'; give one");
+            throw ParamError(name, k,
+                             pre + "parameter '" + k + "' given together with its alias '" + s->name + "'; give one");
         ParamValue val;
         if (!convert(v, s->type, val))
-            throw ParamError(name, k, pre + "parameter '" + k + "' expects " + param_type_phrase(s->type) + ", got " +
-                                          format_param_value(v));
+            throw ParamError(
+                name, k,
+                pre + "parameter '" + k + "' expects " + param_type_phrase(s->type) + ", got " + format_param_value(v));
         std::string why = s->check(val);
         if (!why.empty())
             throw ParamError(name, k, pre + "parameter '" + k + "' " + why + ", got " + format_param_value(v));
@@ -393,19 +399,23 @@ ParamSet resolve_params(const EstimatorInfo& info, const std::string& name, cons
     ParamSet out;
     for (const ParamSpec& s : info.params) {
         if (s.ignored || !s.sets.empty()) continue;
-        if (const ParamValue* v = checked.find(s.name)) out.set(s.name, *v);
-        else out.set(s.name, s.default_value);
+        if (const ParamValue* v = checked.find(s.name))
+            out.set(s.name, *v);
+        else
+            out.set(s.name, s.default_value);
     }
     for (const ParamSpec* s : setters) {
         const ParamValue& v = *checked.find(s->name);
         for (const std::string& t : s->sets) {
             if (checked.find(t))
-                throw ParamError(name, s->name, pre + "parameter '" + s->name + "' sets " + join(s->sets, ", ", " and ") +
-                                                    "; give either it or them");
+                throw ParamError(name, s->name,
+                                 pre + "parameter '" + s->name + "' sets " + join(s->sets, ", ", " and ") +
+                                     "; give either it or them");
             std::string why = info.param(t)->check(v);
             if (!why.empty())
-                throw ParamError(name, s->name, pre + "parameter '" + s->name + "' sets '" + t + "', which " + why +
-                                                    ", got " + format_param_value(v));
+                throw ParamError(name, s->name,
+                                 pre + "parameter '" + s->name + "' sets '" + t + "', which " + why + ", got " +
+                                     format_param_value(v));
             out.set(t, v);
         }
     }

@@ -22,9 +22,15 @@ RenderOutput render(const Scene& scene, const Integrator& requested, const Rende
     if (scene.features.has_dipole && !integrator.supports_dipole()) {
         std::string shape;
         for (const auto& s : scene.shapes)
-            if (s->dipole >= 0) { shape = s->id; break; }
-        throw std::invalid_argument("integrator '" + integrator.type + "' cannot render the dipole BSSRDF (subsurface "
-                                    "'dipole' on shape '" + shape + "'): only the camera-path estimators sample its "
+            if (s->dipole >= 0) {
+                shape = s->id;
+                break;
+            }
+        throw std::invalid_argument("integrator '" + integrator.type +
+                                    "' cannot render the dipole BSSRDF (subsurface "
+                                    "'dipole' on shape '" +
+                                    shape +
+                                    "'): only the camera-path estimators sample its "
                                     "exit points; use integrator 'path' (or 'volpath')");
     }
     if (integrator.owns_driver()) return integrator.drive(scene, opts, poll);

@@ -16,10 +16,10 @@
 namespace rm {
 
 struct RenderOptions {
-    int spp = 16;              // samples per pixel; with seconds > 0 an upper bound (0: none)
-    double seconds = 0;        // wall-clock budget (steady clock); 0 = none
+    int spp = 16;        // samples per pixel; with seconds > 0 an upper bound (0: none)
+    double seconds = 0;  // wall-clock budget (steady clock); 0 = none
     uint64_t seed = 0;
-    int threads = 0;           // 0 = all hardware threads
+    int threads = 0;               // 0 = all hardware threads
     std::vector<int> checkpoints;  // spp counts at which to keep a snapshot
 };
 
@@ -36,7 +36,7 @@ struct PhotonMapStats {
     uint64_t paths = 0;           // light paths traced to store them (the power normaliser)
     double bytes_per_photon = 0;  // memory of the map per photon
     double trace_seconds = 0, build_seconds = 0;
-    bool target_reached = true;   // false: tracing gave up before storing the requested count
+    bool target_reached = true;  // false: tracing gave up before storing the requested count
 };
 
 struct RenderOutput {

@@ -122,8 +122,7 @@ private:
 
 class ConductorBsdf final : public Bsdf {
 public:
-    ConductorBsdf(const Color& eta, const Color& k, const Color& specular)
-        : eta_(eta), k_(k), specular_(specular) {
+    ConductorBsdf(const Color& eta, const Color& k, const Color& specular) : eta_(eta), k_(k), specular_(specular) {
         flags_ = kDeltaReflection;
     }
 
@@ -153,8 +152,7 @@ private:
 
 class RoughConductorBsdf final : public Bsdf {
 public:
-    RoughConductorBsdf(const MicrofacetDistribution& distr, const Color& eta, const Color& k,
-                       const Color& specular)
+    RoughConductorBsdf(const MicrofacetDistribution& distr, const Color& eta, const Color& k, const Color& specular)
         : distr_(distr), eta_(eta), k_(k), specular_(specular) {
         flags_ = kGlossyReflection;
     }
@@ -402,7 +400,8 @@ private:
 
 class ThinDielectricBsdf final : public Bsdf {
 public:
-    ThinDielectricBsdf(float eta, const Color& spec_r, const Color& spec_t) : eta_(eta), spec_r_(spec_r), spec_t_(spec_t) {
+    ThinDielectricBsdf(float eta, const Color& spec_r, const Color& spec_t)
+        : eta_(eta), spec_r_(spec_r), spec_t_(spec_t) {
         flags_ = kDeltaReflection | kNull;
     }
 

@@ -35,12 +35,12 @@ struct BsdfContext {
 };
 
 struct BsdfSample {
-    Vec3 wo{0, 0, 1};        // sampled direction, local frame
-    Color weight{0.f};       // eval / pdf_w, selection probabilities included; 0 = failed
-    float pdf_w = 0.f;       // solid-angle density; for a delta lobe the probability of picking it
-    bool is_delta = false;   // the sampled lobe is a Dirac delta
+    Vec3 wo{0, 0, 1};            // sampled direction, local frame
+    Color weight{0.f};           // eval / pdf_w, selection probabilities included; 0 = failed
+    float pdf_w = 0.f;           // solid-angle density; for a delta lobe the probability of picking it
+    bool is_delta = false;       // the sampled lobe is a Dirac delta
     uint32_t sampled_flags = 0;  // the BsdfFlags bit of the lobe that was sampled
-    float eta = 1.f;         // relative IOR crossed (eta_t / eta_i) on refraction, 1 otherwise
+    float eta = 1.f;             // relative IOR crossed (eta_t / eta_i) on refraction, 1 otherwise
 };
 
 class Bsdf {

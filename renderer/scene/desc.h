@@ -15,28 +15,28 @@ using Matrix4 = std::array<double, 16>;  // row-major 4x4
 inline Matrix4 identity4() { return {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}; }
 
 struct BsdfDesc {
-    std::string type = "diffuse";  // diffuse conductor roughconductor dielectric roughdielectric
-                                   // thindielectric plastic twosided null
-    std::string id;                // for error messages
-    Color reflectance{0.5f};              // diffuse
-    Color diffuse_reflectance{0.5f};      // plastic
-    Color specular_reflectance{1.f};      // conductor, dielectric, plastic
-    Color specular_transmittance{1.f};    // dielectric
-    Color eta{0.f}, k{1.f};               // conductor (relative to ext_ior); material "none" = (0, 1)
+    std::string type = "diffuse";       // diffuse conductor roughconductor dielectric roughdielectric
+                                        // thindielectric plastic twosided null
+    std::string id;                     // for error messages
+    Color reflectance{0.5f};            // diffuse
+    Color diffuse_reflectance{0.5f};    // plastic
+    Color specular_reflectance{1.f};    // conductor, dielectric, plastic
+    Color specular_transmittance{1.f};  // dielectric
+    Color eta{0.f}, k{1.f};             // conductor (relative to ext_ior); material "none" = (0, 1)
     float int_ior = 1.5046f, ext_ior = 1.000277f;
-    float alpha_u = 0.1f, alpha_v = 0.1f; // rough*: microfacet roughness
+    float alpha_u = 0.1f, alpha_v = 0.1f;   // rough*: microfacet roughness
     std::string distribution = "beckmann";  // "beckmann" | "ggx"
     bool sample_visible = true;
-    bool nonlinear = false;               // plastic
-    std::vector<BsdfDesc> nested;         // twosided: 1 (both sides) or 2 (front, back)
+    bool nonlinear = false;        // plastic
+    std::vector<BsdfDesc> nested;  // twosided: 1 (both sides) or 2 (front, back)
 };
 
 struct EmitterDesc {
     std::string type = "area";  // area point spot directional constant
     std::string id;
-    Color radiance{1.f};    // area, constant
-    Color intensity{1.f};   // point, spot
-    Color irradiance{1.f};  // directional
+    Color radiance{1.f};             // area, constant
+    Color intensity{1.f};            // point, spot
+    Color irradiance{1.f};           // directional
     Matrix4 to_world = identity4();  // point/spot: position + frame (spot looks along +z)
     float cutoff_angle = 20.f;       // spot, degrees
     float beam_width = -1.f;         // spot, degrees; < 0: 3/4 of cutoff_angle (Mitsuba default)
@@ -71,9 +71,9 @@ struct GridDesc {
 
 struct MediumDesc {
     std::string type = "homogeneous";  // homogeneous | heterogeneous
-    std::string id;                 // for error messages
-    Color sigma_t{1.f};             // extinction per unit length, scale applied
-    Color albedo{0.75f};            // sigma_s / sigma_t, in [0, 1]
+    std::string id;                    // for error messages
+    Color sigma_t{1.f};                // extinction per unit length, scale applied
+    Color albedo{0.75f};               // sigma_s / sigma_t, in [0, 1]
     // heterogeneous: a grid (nx > 0) replaces the constant above; the
     // medium's `scale` is applied to sigma_t_grid's values by the renderer.
     GridDesc sigma_t_grid, albedo_grid;

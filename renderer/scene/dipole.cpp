@@ -77,7 +77,9 @@ float transmitted_fraction(float eta) {
 }  // namespace
 
 Dipole::Dipole(const DipoleDesc& d) {
-    auto bad = [&](const std::string& msg) { return std::invalid_argument("subsurface 'dipole' " + d.id + ": " + msg); };
+    auto bad = [&](const std::string& msg) {
+        return std::invalid_argument("subsurface 'dipole' " + d.id + ": " + msg);
+    };
     for (int c = 0; c < 3; ++c) {
         if (!(d.sigma_a[c] >= 0.f) || !std::isfinite(d.sigma_a[c])) throw bad("sigma_a must be finite and >= 0");
         if (!(d.sigma_s[c] >= 0.f) || !std::isfinite(d.sigma_s[c])) throw bad("sigma_s must be finite and >= 0");
@@ -182,7 +184,10 @@ double Dipole::sample_r(int c, double u) const {
     double lo = 0.0, hi = r_max_[c], r = 0.5 * hi;
     for (int i = 0; i < 100; ++i) {
         double f = tail(c, r) - target;
-        if (f > 0.0) lo = r; else hi = r;
+        if (f > 0.0)
+            lo = r;
+        else
+            hi = r;
         if (std::fabs(f) < 1e-12 || hi - lo <= 1e-12 * hi) break;
         double dfdr = -2.0 * kPiD * r * pdf_a(c, r) * kCdfMax;
         double next = dfdr < 0.0 ? r - f / dfdr : 0.5 * (lo + hi);

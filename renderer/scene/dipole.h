@@ -31,10 +31,10 @@
 namespace rm {
 
 struct DipoleDesc {
-    std::string id;          // for error messages
-    Color sigma_a{0.f};      // absorption per unit length (scale applied)
-    Color sigma_s{1.f};      // scattering per unit length, NOT reduced (scale applied)
-    float g = 0.f;           // mean cosine of the phase function: sigma_s' = sigma_s (1 - g)
+    std::string id;      // for error messages
+    Color sigma_a{0.f};  // absorption per unit length (scale applied)
+    Color sigma_s{1.f};  // scattering per unit length, NOT reduced (scale applied)
+    float g = 0.f;       // mean cosine of the phase function: sigma_s' = sigma_s (1 - g)
     float int_ior = 1.5046f, ext_ior = 1.000277f;
 };
 

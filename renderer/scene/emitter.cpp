@@ -290,11 +290,16 @@ std::unique_ptr<Emitter> make_area_emitter(const EmitterDesc& desc, const Shape*
 
 std::unique_ptr<Emitter> make_emitter(const EmitterDesc& desc) {
     std::unique_ptr<Emitter> e;
-    if (desc.type == "point") e = std::make_unique<PointEmitter>(desc);
-    else if (desc.type == "spot") e = std::make_unique<SpotEmitter>(desc);
-    else if (desc.type == "directional") e = std::make_unique<DirectionalEmitter>(desc);
-    else if (desc.type == "constant") e = std::make_unique<ConstantEmitter>(desc);
-    else throw std::invalid_argument("emitter '" + desc.id + "': unknown type '" + desc.type + "'");
+    if (desc.type == "point")
+        e = std::make_unique<PointEmitter>(desc);
+    else if (desc.type == "spot")
+        e = std::make_unique<SpotEmitter>(desc);
+    else if (desc.type == "directional")
+        e = std::make_unique<DirectionalEmitter>(desc);
+    else if (desc.type == "constant")
+        e = std::make_unique<ConstantEmitter>(desc);
+    else
+        throw std::invalid_argument("emitter '" + desc.id + "': unknown type '" + desc.type + "'");
     e->id = desc.id;
     return e;
 }

@@ -14,10 +14,10 @@ class Shape;
 
 // A point on (or direction to) an emitter, sampled from a reference point.
 struct DirectSample {
-    Vec3 p, n;            // position on the emitter and its normal (unused for delta/infinite)
-    Vec3 d;               // unit direction from the reference point towards the emitter
-    float dist = kInf;    // distance to p; infinite for directional and constant
-    float pdf_w = 0.f;    // solid-angle density at the reference point; 1 for delta emitters
+    Vec3 p, n;          // position on the emitter and its normal (unused for delta/infinite)
+    Vec3 d;             // unit direction from the reference point towards the emitter
+    float dist = kInf;  // distance to p; infinite for directional and constant
+    float pdf_w = 0.f;  // solid-angle density at the reference point; 1 for delta emitters
     bool is_delta = false;
     Color radiance{0.f};  // radiance arriving along -d (for point/spot: intensity / dist^2)
     float eps = 0.f;      // offset that clears p's floating-point error (area emitters)
@@ -31,13 +31,13 @@ struct DirectSample {
 // flux the ray carries, Le |cos| / (pdf_a pdf_w) (intensity / pdf_w for point
 // and spot lights, whose position is a delta).
 struct EmissionSample {
-    Vec3 p;               // origin of the ray
-    Vec3 n;               // surface normal at p (area emitters; zero otherwise)
-    Vec3 d;               // unit direction the light travels
-    Color weight{0.f};    // Le |cos| / (pdf_a pdf_w); black = failed sample
-    float pdf_a = 0.f;    // origin density (1 for a delta position)
-    float pdf_w = 0.f;    // direction density (1 for a delta direction)
-    float eps = 0.f;      // ray-origin offset that clears p's floating-point error
+    Vec3 p;             // origin of the ray
+    Vec3 n;             // surface normal at p (area emitters; zero otherwise)
+    Vec3 d;             // unit direction the light travels
+    Color weight{0.f};  // Le |cos| / (pdf_a pdf_w); black = failed sample
+    float pdf_a = 0.f;  // origin density (1 for a delta position)
+    float pdf_w = 0.f;  // direction density (1 for a delta direction)
+    float eps = 0.f;    // ray-origin offset that clears p's floating-point error
 };
 
 class Emitter {

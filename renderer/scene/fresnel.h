@@ -86,8 +86,7 @@ inline Color fresnel_conductor(float cos_theta_i, const Color& eta, const Color&
 // eta >= 1: d'Eon & Irving 2011, "A Quantized-Diffusion Model for Rendering
 // Translucent Materials", eq. 5 (polynomial in 1/eta).
 inline float fresnel_diffuse_reflectance(float eta) {
-    if (eta < 1.f)
-        return -1.4399f * (eta * eta) + 0.7099f * eta + 0.6681f + 0.0636f / eta;
+    if (eta < 1.f) return -1.4399f * (eta * eta) + 0.7099f * eta + 0.6681f + 0.0636f / eta;
     const float i1 = 1.f / eta, i2 = i1 * i1, i3 = i2 * i1, i4 = i3 * i1, i5 = i4 * i1;
     return 0.919317f - 3.4793f * i1 + 6.75335f * i2 - 7.80989f * i3 + 4.98554f * i4 - 1.36881f * i5;
 }

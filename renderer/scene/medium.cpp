@@ -36,8 +36,10 @@ Grid::Grid(const GridDesc& d, const std::string& who) : nx_(d.nx), ny_(d.ny), nz
         if (!(v >= 0.f) || !std::isfinite(v))
             throw std::invalid_argument(who + ": grid values must be finite and >= 0, got " + std::to_string(v));
         int c = ch_ == 1 ? -1 : int(i % 3);
-        if (c < 0) max_ = vmax(max_, Color(v));
-        else max_[c] = std::max(max_[c], v);
+        if (c < 0)
+            max_ = vmax(max_, Color(v));
+        else
+            max_[c] = std::max(max_[c], v);
     }
     if (!xf_.set(d.to_world.data())) throw std::invalid_argument(who + ": singular grid to_world");
 }
@@ -152,7 +154,8 @@ Color Grid::eval(const Vec3& p_world) const {
     Vec3 u = xf_.inv_point(p_world);
     // Clamped before the integer conversion (far outside the grid the
     // border value holds, and int() of a huge float is undefined).
-    float fx = std::min(std::max(u.x * nx_ - 0.5f, -1.f), float(nx_)), fy = std::min(std::max(u.y * ny_ - 0.5f, -1.f), float(ny_)),
+    float fx = std::min(std::max(u.x * nx_ - 0.5f, -1.f), float(nx_)),
+          fy = std::min(std::max(u.y * ny_ - 0.5f, -1.f), float(ny_)),
           fz = std::min(std::max(u.z * nz_ - 0.5f, -1.f), float(nz_));
     float x0 = std::floor(fx), y0 = std::floor(fy), z0 = std::floor(fz);
     float tx = fx - x0, ty = fy - y0, tz = fz - z0;

@@ -111,9 +111,7 @@ public:
 
     // Beer-Lambert transmittance over a distance t (t may be infinite: a
     // channel with sigma_t = 0 keeps 1 there, the others 0). Homogeneous only.
-    Color transmittance(float t) const {
-        return {tr1(sigma_t.x, t), tr1(sigma_t.y, t), tr1(sigma_t.z, t)};
-    }
+    Color transmittance(float t) const { return {tr1(sigma_t.x, t), tr1(sigma_t.y, t), tr1(sigma_t.z, t)}; }
     static Color exp_neg(const Color& sigma, float t) { return {tr1(sigma.x, t), tr1(sigma.y, t), tr1(sigma.z, t)}; }
     // Heterogeneous: the coefficients at a point.
     void coefficients(const Vec3& p, Color& sig_t, Color& sig_s) const;

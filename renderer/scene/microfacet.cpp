@@ -88,8 +88,7 @@ Vec2 beckmann_visible_slopes_11(double cos_theta_i, Vec2 u) {
 
 }  // namespace
 
-MicrofacetDistribution::MicrofacetDistribution(MicrofacetType type, float alpha_u, float alpha_v,
-                                               bool sample_visible)
+MicrofacetDistribution::MicrofacetDistribution(MicrofacetType type, float alpha_u, float alpha_v, bool sample_visible)
     : type_(type),
       alpha_u_(std::max(alpha_u, kMinAlpha)),
       alpha_v_(std::max(alpha_v, kMinAlpha)),
@@ -125,7 +124,7 @@ float MicrofacetDistribution::lambda(const Vec3& v) const {
     const double xy = double(alpha_u_ * v.x) * (alpha_u_ * v.x) + double(alpha_v_ * v.y) * (alpha_v_ * v.y);
     if (xy == 0.0) return 0.f;  // normal incidence: nothing is masked
     const double z2 = double(v.z) * v.z;
-    if (z2 == 0.0) return kInf;  // grazing: everything is masked
+    if (z2 == 0.0) return kInf;         // grazing: everything is masked
     const double tan2_alpha = xy / z2;  // (alpha_o tan theta_o)^2 with the projected roughness
     if (type_ == MicrofacetType::GGX) {
         // Lambda = (-1 + sqrt(1 + alpha^2 tan^2)) / 2.

@@ -22,8 +22,8 @@ namespace rm {
 enum class MicrofacetType { Beckmann, GGX };
 
 struct MicrofacetSample {
-    Vec3 m{0, 0, 1};   // sampled microfacet normal (upper hemisphere)
-    float pdf_w = 0.f; // solid-angle density of m; 0 = failed
+    Vec3 m{0, 0, 1};    // sampled microfacet normal (upper hemisphere)
+    float pdf_w = 0.f;  // solid-angle density of m; 0 = failed
 };
 
 class MicrofacetDistribution {
@@ -59,7 +59,7 @@ public:
     float pdf_w(const Vec3& wi, const Vec3& m) const;
 
     // The two techniques, usable directly.
-    MicrofacetSample sample_all(Vec2 u) const;              // pdf = D(m) cos theta_m
+    MicrofacetSample sample_all(Vec2 u) const;                             // pdf = D(m) cos theta_m
     MicrofacetSample sample_visible_normal(const Vec3& wi, Vec2 u) const;  // pdf = VNDF
     float pdf_all(const Vec3& m) const { return D(m) * std::max(m.z, 0.f); }
     float pdf_visible(const Vec3& wi, const Vec3& m) const;

@@ -21,14 +21,14 @@ struct Interaction {
     VertexKind kind = VertexKind::Surface;
     bool valid = false;
     float t = kInf;
-    Vec3 p;          // position, world space
-    Vec3 n;          // geometric normal, oriented as the shape declares (flip_normals applied)
-    Frame sh;        // shading frame (z = shading normal, same side as n)
+    Vec3 p;    // position, world space
+    Vec3 n;    // geometric normal, oriented as the shape declares (flip_normals applied)
+    Frame sh;  // shading frame (z = shading normal, same side as n)
     Vec2 uv;
     Vec3 wi;         // direction towards the previous vertex, world space
     int shape = -1;  // index in Scene::shapes
     int prim = -1;
-    float eps = 0.f; // ray-origin offset that clears this hit's floating-point error
+    float eps = 0.f;  // ray-origin offset that clears this hit's floating-point error
     // Medium slots (filled by the medium-aware estimators; -1 = vacuum).
     int medium_inside = -1, medium_outside = -1;
 

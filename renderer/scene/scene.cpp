@@ -76,10 +76,12 @@ int Scene::add_mesh(const std::string& id, std::vector<float> positions, std::ve
     for (float v : positions)
         if (!std::isfinite(v)) throw std::invalid_argument("shape '" + id + "': non-finite vertex position");
     for (uint32_t i : indices)
-        if (i >= nv) throw std::invalid_argument("shape '" + id + "': vertex index " + std::to_string(i) + " out of range");
+        if (i >= nv)
+            throw std::invalid_argument("shape '" + id + "': vertex index " + std::to_string(i) + " out of range");
     if (!normals.empty() && normals.size() != positions.size())
         throw std::invalid_argument("shape '" + id + "': normals must match positions");
-    if (!uvs.empty() && uvs.size() != 2 * nv) throw std::invalid_argument("shape '" + id + "': uvs must match positions");
+    if (!uvs.empty() && uvs.size() != 2 * nv)
+        throw std::invalid_argument("shape '" + id + "': uvs must match positions");
     auto m = std::make_unique<Mesh>(std::move(positions), std::move(indices), std::move(normals), std::move(uvs));
     m->id = id;
     return add_shape(std::move(m), bsdf, flip_normals);
@@ -142,7 +144,8 @@ int Scene::add_medium(const MediumDesc& desc) {
 }
 
 void Scene::set_shape_media(int shape, int interior, int exterior) {
-    if (shape < 0 || shape >= int(shapes.size())) throw std::invalid_argument("set_shape_media: shape index out of range");
+    if (shape < 0 || shape >= int(shapes.size()))
+        throw std::invalid_argument("set_shape_media: shape index out of range");
     for (int m : {interior, exterior})
         if (m < -1 || m >= int(media.size()))
             throw std::invalid_argument("shape '" + shapes[shape]->id + "': medium index out of range");
@@ -201,7 +204,6 @@ void Scene::commit() {
     committed_ = true;
 }
 
-
 static void check_ray(const Ray& ray) {
     auto ok = [](const Vec3& v) {
         return std::fabs(v.x) <= kEmbreeRayLimit && std::fabs(v.y) <= kEmbreeRayLimit &&
@@ -222,8 +224,12 @@ bool Scene::intersect(const Ray& ray, Interaction& it) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRayHit rh;
-    rh.ray.org_x = ray.o.x; rh.ray.org_y = ray.o.y; rh.ray.org_z = ray.o.z;
-    rh.ray.dir_x = ray.d.x; rh.ray.dir_y = ray.d.y; rh.ray.dir_z = ray.d.z;
+    rh.ray.org_x = ray.o.x;
+    rh.ray.org_y = ray.o.y;
+    rh.ray.org_z = ray.o.z;
+    rh.ray.dir_x = ray.d.x;
+    rh.ray.dir_y = ray.d.y;
+    rh.ray.dir_z = ray.d.z;
     rh.ray.tnear = ray.tmin;
     rh.ray.tfar = ray.tmax;
     rh.ray.mask = 0xFFFFFFFFu;
@@ -255,8 +261,12 @@ bool Scene::occluded(const Ray& ray) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRay r;
-    r.org_x = ray.o.x; r.org_y = ray.o.y; r.org_z = ray.o.z;
-    r.dir_x = ray.d.x; r.dir_y = ray.d.y; r.dir_z = ray.d.z;
+    r.org_x = ray.o.x;
+    r.org_y = ray.o.y;
+    r.org_z = ray.o.z;
+    r.dir_x = ray.d.x;
+    r.dir_y = ray.d.y;
+    r.dir_z = ray.d.z;
     r.tnear = ray.tmin;
     r.tfar = ray.tmax;
     r.mask = 0xFFFFFFFFu;

@@ -21,13 +21,13 @@ namespace rm {
 
 // What light transport the scene can produce; estimators skip the rest.
 struct SceneFeatures {
-    bool has_delta_bsdf = false;     // some surface is specular (caustic/specular classes possible)
-    bool has_smooth_bsdf = false;    // some surface is diffuse or glossy
+    bool has_delta_bsdf = false;   // some surface is specular (caustic/specular classes possible)
+    bool has_smooth_bsdf = false;  // some surface is diffuse or glossy
     bool has_area_emitters = false;
     bool has_delta_emitters = false;
     bool has_environment = false;
-    bool has_media = false;          // some shape or the sensor references a medium
-    bool has_dipole = false;         // some shape has a dipole BSSRDF (only path/volpath render it)
+    bool has_media = false;   // some shape or the sensor references a medium
+    bool has_dipole = false;  // some shape has a dipole BSSRDF (only path/volpath render it)
 };
 
 class Scene {

@@ -34,8 +34,7 @@ public:
         aspect_ = float(width) / float(height);
         near_ = d.near_clip;
         far_ = d.far_clip;
-        if (!(near_ > 0.f) || !(far_ > near_))
-            throw std::invalid_argument("sensor: need 0 < near_clip < far_clip");
+        if (!(near_ > 0.f) || !(far_ > near_)) throw std::invalid_argument("sensor: need 0 < near_clip < far_clip");
     }
 
 protected:

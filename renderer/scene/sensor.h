@@ -31,13 +31,13 @@ struct SensorRay {
 // times the conversion of dw to film area).
 struct ImportanceSample {
     bool valid = false;
-    Vec2 film;          // continuous film position, [0, width] x [0, height]
-    Vec3 p;             // the sensor point reached (pinhole, or the orthographic film-plane point)
-    Vec3 d;             // unit direction from the reference point towards p
-    float dist = 0.f;   // distance from the reference point to p
-    float weight = 0.f; // importance as described above; per steradian for eval_direction
-    float clip = 0.f;   // distance from p towards the reference point at which camera rays start (near clip)
-    Vec3 n{0.f};        // area sensors: the normal at p; zero for a pinhole
+    Vec2 film;           // continuous film position, [0, width] x [0, height]
+    Vec3 p;              // the sensor point reached (pinhole, or the orthographic film-plane point)
+    Vec3 d;              // unit direction from the reference point towards p
+    float dist = 0.f;    // distance from the reference point to p
+    float weight = 0.f;  // importance as described above; per steradian for eval_direction
+    float clip = 0.f;    // distance from p towards the reference point at which camera rays start (near clip)
+    Vec3 n{0.f};         // area sensors: the normal at p; zero for a pinhole
 };
 
 class Sensor {

@@ -47,8 +47,8 @@ RTCGeometry Mesh::create_geometry(RTCDevice device, unsigned geom_id) {
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, pos_.data(), 0, 3 * sizeof(float),
                                num_vertices_);
-    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices_.data(), 0,
-                               3 * sizeof(uint32_t), triangle_count());
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices_.data(), 0, 3 * sizeof(uint32_t),
+                               triangle_count());
     rtcCommitGeometry(g);
     return g;
 }
@@ -119,8 +119,12 @@ template <class S>
 void user_bounds(const RTCBoundsFunctionArguments* args) {
     const S* s = static_cast<const S*>(args->geometryUserPtr);
     Vec3 lo = s->bbox_min(), hi = s->bbox_max();
-    args->bounds_o->lower_x = lo.x; args->bounds_o->lower_y = lo.y; args->bounds_o->lower_z = lo.z;
-    args->bounds_o->upper_x = hi.x; args->bounds_o->upper_y = hi.y; args->bounds_o->upper_z = hi.z;
+    args->bounds_o->lower_x = lo.x;
+    args->bounds_o->lower_y = lo.y;
+    args->bounds_o->lower_z = lo.z;
+    args->bounds_o->upper_x = hi.x;
+    args->bounds_o->upper_y = hi.y;
+    args->bounds_o->upper_z = hi.z;
 }
 
 // Sphere roots in double, after Haines et al., "Precision Improvements for
@@ -159,8 +163,11 @@ void sphere_intersect_impl(const Sphere& s, RTCRay& ray, RTCHit* hit, unsigned g
     ray.tfar = float(t);
     double px = ray.org_x + t * ray.dir_x - s.cx_, py = ray.org_y + t * ray.dir_y - s.cy_,
            pz = ray.org_z + t * ray.dir_z - s.cz_;
-    hit->Ng_x = float(px); hit->Ng_y = float(py); hit->Ng_z = float(pz);
-    hit->u = 0; hit->v = 0;
+    hit->Ng_x = float(px);
+    hit->Ng_y = float(py);
+    hit->Ng_z = float(pz);
+    hit->u = 0;
+    hit->v = 0;
     hit->primID = 0;
     hit->geomID = geom_id;
     hit->instID[0] = RTC_INVALID_GEOMETRY_ID;
@@ -199,7 +206,9 @@ void disk_intersect_impl(const Disk& d, RTCRay& ray, RTCHit* hit, unsigned geom_
     ray.tfar = float(t);
     hit->u = float(x);
     hit->v = float(y);
-    hit->Ng_x = 0; hit->Ng_y = 0; hit->Ng_z = 1;
+    hit->Ng_x = 0;
+    hit->Ng_y = 0;
+    hit->Ng_z = 1;
     hit->primID = 0;
     hit->geomID = geom_id;
     hit->instID[0] = RTC_INVALID_GEOMETRY_ID;
@@ -219,8 +228,14 @@ void disk_occluded(const RTCOccludedFunctionNArguments* args) {
 
 // ---------------------------------------------------------------- sphere
 Sphere::Sphere(Vec3 center, float radius) : cx_(center.x), cy_(center.y), cz_(center.z), r_(radius) {}
-Vec3 Sphere::bbox_min() const { return Vec3(float(cx_ - r_), float(cy_ - r_), float(cz_ - r_)) - abs(Vec3(float(cx_), float(cy_), float(cz_))) * 1e-6f - Vec3(float(r_) * 1e-6f); }
-Vec3 Sphere::bbox_max() const { return Vec3(float(cx_ + r_), float(cy_ + r_), float(cz_ + r_)) + abs(Vec3(float(cx_), float(cy_), float(cz_))) * 1e-6f + Vec3(float(r_) * 1e-6f); }
+Vec3 Sphere::bbox_min() const {
+    return Vec3(float(cx_ - r_), float(cy_ - r_), float(cz_ - r_)) -
+           abs(Vec3(float(cx_), float(cy_), float(cz_))) * 1e-6f - Vec3(float(r_) * 1e-6f);
+}
+Vec3 Sphere::bbox_max() const {
+    return Vec3(float(cx_ + r_), float(cy_ + r_), float(cz_ + r_)) +
+           abs(Vec3(float(cx_), float(cy_), float(cz_))) * 1e-6f + Vec3(float(r_) * 1e-6f);
+}
 
 RTCGeometry Sphere::create_geometry(RTCDevice device, unsigned geom_id) {
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
@@ -238,7 +253,15 @@ void Sphere::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Intera
     double px = double(ray.o.x) + double(t) * ray.d.x - cx_, py = double(ray.o.y) + double(t) * ray.d.y - cy_,
            pz = double(ray.o.z) + double(t) * ray.d.z - cz_;
     double l = std::sqrt(px * px + py * py + pz * pz);
-    if (l > 0) { px /= l; py /= l; pz /= l; } else { px = 0; py = 0; pz = 1; }
+    if (l > 0) {
+        px /= l;
+        py /= l;
+        pz /= l;
+    } else {
+        px = 0;
+        py = 0;
+        pz = 1;
+    }
     it.p = Vec3(float(cx_ + r_ * px), float(cy_ + r_ * py), float(cz_ + r_ * pz));
     Vec3 n{float(px), float(py), float(pz)};
     // Mitsuba's sphere uv: (phi / 2pi, theta / pi) in the local frame.
@@ -293,7 +316,7 @@ bool sphere_cone(const Sphere& s, const Vec3& ref, double& dc, double& sin2max, 
 bool Sphere::sample_direction(const Vec3& ref, Vec2 u, PositionSample& ps, float& pdf_w) const {
     double dc, sin2max, omc;
     if (!sphere_cone(*this, ref, dc, sin2max, omc)) return false;
-    double a = double(u.x) * omc;        // 1 - cos theta, uniform on [0, 1 - cos theta_max]
+    double a = double(u.x) * omc;  // 1 - cos theta, uniform on [0, 1 - cos theta_max]
     double cos_t = 1.0 - a, sin2_t = a * (2.0 - a);
     double sin_max = std::sqrt(sin2max);
     double cos_alpha = sin2_t / sin_max + cos_t * std::sqrt(std::max(0.0, 1.0 - sin2_t / sin2max));

@@ -28,7 +28,7 @@ public:
     int emitter = -1;  // index into Scene::emitters, area light attached to this shape
     bool flip_normals = false;
     int medium_interior = -1, medium_exterior = -1;  // indices into Scene::media; -1: none
-    int dipole = -1;   // index into Scene::dipoles: a dipole BSSRDF replaces the BSDF (dipole.h)
+    int dipole = -1;  // index into Scene::dipoles: a dipole BSSRDF replaces the BSDF (dipole.h)
 
     virtual RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) = 0;
     // Fills the geometric part of `it` for a hit reported by Embree.

@@ -121,9 +121,8 @@ DipoleStep dipole_step(const Scene& scene, const Dipole& dp, Interaction& it, Sa
     return st;
 }
 
-bool camera_dipole_vertex(const Scene& scene, const Dipole& dp, Interaction& it, Sampler& sampler,
-                          ThreadStats& stats, Color& beta, PathClass& pc, const Bsdf*& bsdf, Vec3& wi,
-                          BsdfSample& bs, bool& sampled) {
+bool camera_dipole_vertex(const Scene& scene, const Dipole& dp, Interaction& it, Sampler& sampler, ThreadStats& stats,
+                          Color& beta, PathClass& pc, const Bsdf*& bsdf, Vec3& wi, BsdfSample& bs, bool& sampled) {
     DipoleStep st = dipole_step(scene, dp, it, sampler, stats);
     if (st.kind == DipoleStep::kFailed) return false;
     if (st.kind == DipoleStep::kReflected) {

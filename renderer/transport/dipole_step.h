@@ -30,9 +30,8 @@ DipoleStep dipole_step(const Scene& scene, const Dipole& dp, Interaction& it, Sa
 // takes the weight, the path class is marked subsurface, and `bsdf` / `wi`
 // become the exit lobe and its local incident direction (the normal).
 // Returns false when the path ends (light from inside, or no exit point).
-bool camera_dipole_vertex(const Scene& scene, const Dipole& dp, Interaction& it, Sampler& sampler,
-                          ThreadStats& stats, Color& beta, PathClass& pc, const Bsdf*& bsdf, Vec3& wi,
-                          BsdfSample& bs, bool& sampled);
+bool camera_dipole_vertex(const Scene& scene, const Dipole& dp, Interaction& it, Sampler& sampler, ThreadStats& stats,
+                          Color& beta, PathClass& pc, const Bsdf*& bsdf, Vec3& wi, BsdfSample& bs, bool& sampled);
 
 // The exit-point proposal on its own (tests): from `xo` on shape `shape`,
 // with the random numbers given; returns false on failure, else the exit

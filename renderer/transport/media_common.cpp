@@ -18,8 +18,8 @@ FlightEvent free_flight_homogeneous(const Medium& med, float t_hit, Sampler& sam
     return tr[h] > 0.f && th.rescale(tr / tr[h]) ? kPassed : kAbsorbed;
 }
 
-FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, Sampler& sampler,
-                                 SpectralThroughput& th, float& t) {
+FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, Sampler& sampler, SpectralThroughput& th,
+                                 float& t) {
     int h = th.hero;
     const Color& maj = med.majorant;
     float m = maj[h];
@@ -134,8 +134,7 @@ MediumTracker emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, 
     // Inside shape `s` (the side against its normal) behind a non-null BSDF:
     // a subsurface medium (MediumTracker::cross's rule).
     auto enclosed_in = [&](const Shape& s, int medium) {
-        return medium >= 0 && medium == s.medium_interior && s.bsdf >= 0 &&
-               scene.bsdfs[s.bsdf]->flags() != kNull;
+        return medium >= 0 && medium == s.medium_interior && s.bsdf >= 0 && scene.bsdfs[s.bsdf]->flags() != kNull;
     };
     MediumTracker mt;
     if (it_shape >= 0) {

@@ -47,8 +47,7 @@ enum FlightEvent { kPassed, kScattered, kAbsorbed };
 // (mean 1 / sigma_t); at a collision, scatter with probability
 // sigma_s / sigma_t of the hero, else absorb (the seed). Density of
 // collide-and-scatter per channel: sigma_s Tr(t); of passing: Tr(t_hit).
-FlightEvent free_flight_homogeneous(const Medium& med, float t_hit, Sampler& sampler, SpectralThroughput& th,
-                                    float& t);
+FlightEvent free_flight_homogeneous(const Medium& med, float t_hit, Sampler& sampler, SpectralThroughput& th, float& t);
 
 // Heterogeneous: delta tracking with null collisions against the majorant
 // (Woodcock et al. 1965; the null-scattering path integral of Miller et al.
@@ -58,8 +57,8 @@ FlightEvent free_flight_homogeneous(const Medium& med, float t_hit, Sampler& sam
 // hero's). Per-channel densities: sigma_s Tm, sigma_n Tm (Tm the majorant's
 // transmittance). A medium with a majorant grid (Medium::has_majorant_grid)
 // goes to free_flight_tracking_local: the same with the cells' majorants.
-FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, Sampler& sampler,
-                                 SpectralThroughput& th, float& t);
+FlightEvent free_flight_tracking(const Medium& med, const Ray& r, float t_hit, Sampler& sampler, SpectralThroughput& th,
+                                 float& t);
 // The same over [t_start, t_end] (the medium's extent) with the local
 // majorants of the medium's majorant grid (Medium::has_majorant_grid).
 FlightEvent free_flight_tracking_local(const Medium& med, const Ray& r, float t_start, float t_end, Sampler& sampler,
@@ -118,8 +117,8 @@ Color transmittance_from_infinity(const Scene& scene, int medium);
 // pdf_of = nullptr: light samples only, no MIS weight (photonmapper, where
 // nothing else finds the emitters from `it`).
 template <typename EvalF, typename PdfF>
-Color direct_through_media(const Scene& scene, const Interaction& it, int medium, Sampler& sampler,
-                           ThreadStats& stats, EvalF f_of, PdfF pdf_of) {
+Color direct_through_media(const Scene& scene, const Interaction& it, int medium, Sampler& sampler, ThreadStats& stats,
+                           EvalF f_of, PdfF pdf_of) {
     DirectSample ds;
     if (!sample_light(scene, it.p, sampler, ds)) return Color(0.f);
     Color f = f_of(ds.d);

@@ -22,8 +22,8 @@ struct Item {
 };
 
 // Traces the paths [g0, g0 + n) in items of kItemPaths; returns false on cancel.
-bool trace_chunk(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass, uint64_t g0,
-                 uint64_t n, std::vector<Item>& items, int threads, const std::function<bool()>& poll,
+bool trace_chunk(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass, uint64_t g0, uint64_t n,
+                 std::vector<Item>& items, int threads, const std::function<bool()>& poll,
                  std::vector<ThreadStats>& tstats) {
     size_t n_items = size_t((n + kItemPaths - 1) / kItemPaths);
     if (items.size() < n_items) items.resize(n_items);
@@ -46,7 +46,6 @@ void normalise(std::vector<Photon>& ph, uint64_t paths) {
     float inv = float(1.0 / double(paths));
     for (Photon& p : ph) p.power *= inv;
 }
-
 
 // Photon storage (Jensen 2001, sec. 5.2), a visitor on the vertices of the
 // light walk (subpath.h), which brings the emitter pick, the emission
@@ -104,8 +103,8 @@ public:
                         : spec_.indirect_only ? !all_specular_
                                               : (spec_.store_direct || !direct);
             if (keep)
-                store(v, (direct ? kPhotonDirect : 0u) | (all_specular_ ? 0u : kPhotonIndirect) | medium_flags_ |
-                             depth);
+                store(v,
+                      (direct ? kPhotonDirect : 0u) | (all_specular_ ? 0u : kPhotonIndirect) | medium_flags_ | depth);
         }
         // 4. A caustic path goes on only through a delta lobe (a BSDF with a
         //    delta and a smooth lobe, plastic's coat, passes caustics on
@@ -135,8 +134,8 @@ private:
 
 }  // namespace
 
-void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path,
-                       uint64_t pass, std::vector<Photon>& out, ThreadStats& stats) {
+void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path, uint64_t pass,
+                       std::vector<Photon>& out, ThreadStats& stats) {
     Sampler sampler(mix64(seed + 0x70686f746f6eULL + spec.stream), path, pass);
     thread_local std::vector<PathVertex> light;
     PhotonStore store(spec, out, stats);
@@ -204,7 +203,8 @@ PhotonPass trace_photon_paths(const Scene& scene, const PhotonTraceSpec& spec, u
             break;
         }
         size_t n_items = size_t((n + kItemPaths - 1) / kItemPaths);
-        for (size_t i = 0; i < n_items; ++i) r.photons.insert(r.photons.end(), items[i].photons.begin(), items[i].photons.end());
+        for (size_t i = 0; i < n_items; ++i)
+            r.photons.insert(r.photons.end(), items[i].photons.begin(), items[i].photons.end());
     }
     r.paths = paths;
     for (auto& s : tstats) stats.merge(s);

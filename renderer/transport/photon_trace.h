@@ -13,8 +13,8 @@
 #include <functional>
 #include <vector>
 
-#include "render/integrator.h"
 #include "photon/photon_map.h"
+#include "render/integrator.h"
 
 namespace rm {
 
@@ -27,12 +27,12 @@ constexpr int kPhotonMediumShift = 16;
 inline int photon_medium(const Photon& p) { return int(p.flags >> kPhotonMediumShift) - 1; }
 
 struct PhotonTraceSpec {
-    int max_depth = -1;        // light-path segments to the last stored photon; -1 = unbounded
-    int rr_depth = 5;          // segments from which Russian roulette may stop the path
-    bool caustic_only = false; // keep only L S+ D photons; a path stops at its first non-specular vertex
-    bool store_direct = true;  // keep photons at the first vertex (L D: direct light)
-    bool indirect_only = false;// keep only photons whose path had a non-specular vertex before
-    uint64_t stream = 0;       // decorrelates the random streams of different maps
+    int max_depth = -1;          // light-path segments to the last stored photon; -1 = unbounded
+    int rr_depth = 5;            // segments from which Russian roulette may stop the path
+    bool caustic_only = false;   // keep only L S+ D photons; a path stops at its first non-specular vertex
+    bool store_direct = true;    // keep photons at the first vertex (L D: direct light)
+    bool indirect_only = false;  // keep only photons whose path had a non-specular vertex before
+    uint64_t stream = 0;         // decorrelates the random streams of different maps
     // Scenes with media only (Scene::features.has_media): keep only volume
     // photons, at medium scattering events that follow at least one
     // scattering vertex (L X+ V: multiple scattering and volume caustics;
@@ -54,8 +54,8 @@ struct PhotonTraceSpec {
 // hero-channel spectral MIS throughput of media_common.h; `depth` then
 // counts scattering vertices (surface or medium, null boundaries
 // excluded), as volpath's max_depth does.
-void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path,
-                       uint64_t pass, std::vector<Photon>& out, ThreadStats& stats);
+void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path, uint64_t pass,
+                       std::vector<Photon>& out, ThreadStats& stats);
 
 struct PhotonPass {
     std::vector<Photon> photons;  // power already divided by `paths`

@@ -230,8 +230,10 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
         if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
         Vec3 wo = it.to_world(bs.wo);
         Color f = bs.weight;
-        if (mode == TransportMode::Importance) f *= shading_correction(it, it.wi, wo);
-        else eta_scale *= sqr(bs.eta);
+        if (mode == TransportMode::Importance)
+            f *= shading_correction(it, it.wi, wo);
+        else
+            eta_scale *= sqr(bs.eta);
         th.beta *= f;
         thr *= f;
         v.delta = bs.is_delta;
@@ -253,9 +255,8 @@ static int emitter_shape(const Scene& scene, const Emitter& e) {
     return -1;
 }
 
-bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
-                   std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats,
-                   const VertexVisitor* visit, bool densities) {
+bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth, std::vector<PathVertex>& light,
+                   EmissionSample& es, ThreadStats& stats, const VertexVisitor* visit, bool densities) {
     light.clear();
     // 1. An emitter picked uniformly (as next event estimation) and a ray of
     //    light leaving it, its weight the flux Le |cos| / (pdf_a pdf_w) / pick
@@ -304,8 +305,8 @@ bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int r
     if (visit && !(*visit)(light)) return true;
     if (is_black(beta)) return true;  // y0 alone: light from infinity that no unbounded medium lets through
     // 4. The adjoint walk.
-    random_walk(scene, sampler, ray, beta, TransportMode::Importance, max_vertices, rr_depth, light, stats,
-                visit, scene.features.has_media ? &mt : nullptr, densities);
+    random_walk(scene, sampler, ray, beta, TransportMode::Importance, max_vertices, rr_depth, light, stats, visit,
+                scene.features.has_media ? &mt : nullptr, densities);
     return true;
 }
 
@@ -357,8 +358,10 @@ int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<Path
     PathClass pc;
     int last_cam = s == 0 ? t - 2 : t - 1;
     auto push = [&pc](const PathVertex& v, bool end) {
-        if (v.type == VType::Medium) pc.push_medium(v.enclosed);
-        else if (!v.null_surface()) pc.push(end ? false : v.delta);
+        if (v.type == VType::Medium)
+            pc.push_medium(v.enclosed);
+        else if (!v.null_surface())
+            pc.push(end ? false : v.delta);
     };
     for (int i = 1; i <= last_cam; ++i) push(cam[i], i == t - 1);
     for (int i = s - 1; i >= 1; --i) push(light[i], i == s - 1);

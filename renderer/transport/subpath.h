@@ -24,13 +24,14 @@ enum class VType : uint8_t { Camera, Light, Surface, Medium };
 // the other direction would sample it (Veach 1997, sec. 10.2.1: p_i^->, p_i^<-).
 struct PathVertex {
     VType type = VType::Surface;
-    Interaction it;        // p, n (zero for a delta-position light), wi towards the previous vertex
-    Color beta{0.f};       // throughput of the subpath up to this vertex (Veach's alpha_i)
+    Interaction it;   // p, n (zero for a delta-position light), wi towards the previous vertex
+    Color beta{0.f};  // throughput of the subpath up to this vertex (Veach's alpha_i)
     float pdf_fwd = 0.f, pdf_rev = 0.f;
-    bool delta = false;    // the walk sampled a delta lobe here
-    bool infinite = false; // a Light vertex at infinity (directional, environment): it.p is a far point along its direction
+    bool delta = false;  // the walk sampled a delta lobe here
+    bool infinite =
+        false;  // a Light vertex at infinity (directional, environment): it.p is a far point along its direction
     const Bsdf* bsdf = nullptr;
-    const Emitter* emitter = nullptr;  // the light of a Light vertex, or the area emitter a surface carries
+    const Emitter* emitter = nullptr;      // the light of a Light vertex, or the area emitter a surface carries
     const PhaseFunction* phase = nullptr;  // a Medium vertex's phase function
     // Through media: pdf_fwd / pdf_rev above are the geometric densities
     // only (solid angle to area, no cosine at a medium vertex), without the
@@ -117,9 +118,8 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
 // scene has no emitter or the sample failed. In a scene with media the
 // walk goes through them (random_walk's `media`), starting in the
 // emitter's medium (emitter_medium). `densities` as in random_walk.
-bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
-                   std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats,
-                   const VertexVisitor* visit = nullptr, bool densities = true);
+bool light_subpath(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth, std::vector<PathVertex>& light,
+                   EmissionSample& es, ThreadStats& stats, const VertexVisitor* visit = nullptr, bool densities = true);
 
 // The sensor end of a connection from `ref`: Sensor::sample_direction, with
 // a point drawn on an area sensor (random numbers only for those, so a
