@@ -43,7 +43,7 @@
 // density 0), and the other strategies, z1 found by the meter's ray, are
 // weighted among themselves.
 //
-// Participating media (issue 6; Veach 1997 ch. 10 over the volume path
+// Participating media (Veach 1997 ch. 10 over the volume path
 // measure of Pauly et al. 2000; pbrt-v3 sec. 16.3): both subpaths walk
 // through media with subpath.cpp's random_walk, the camera subpath from the
 // near clip in the sensor's medium (as volpath's camera rays), the light

@@ -8,7 +8,7 @@
 // A render of `spp` traces spp * width * height light paths (as Mitsuba), and
 // the driver (light_render.cpp) splats, filters and averages their splats.
 //
-// Participating media (issue 6; pbrt-v4's volumetric light paths, PBR4
+// Participating media (pbrt-v4's volumetric light paths, PBR4
 // sec. 14.2, with the null-scattering formulation of Miller et al. 2019):
 // a light subpath starts in its emitter's medium (media_common.h's
 // emitter_medium), samples free flights there as volpath does (hero
