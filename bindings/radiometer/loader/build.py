@@ -22,16 +22,20 @@ from ..scene_desc import (
 )
 from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _rectangle_mesh
 from .nodes import _Node, _Prop, _Ref
-from .parameters import _Params
+from .parameters import INT32_RANGE, _Params
 from .transforms import _frame_along, _translate
 from .volumes import _read_vol
 
 _MAX_RESOLUTION = 16384
+_MAX_SPP = 1 << 24  # render()'s limit on spp, which the sampler's sample_count sets
 
 
 class _Builder:
-    def __init__(self, base_dir):
+    def __init__(self, base_dir, confine=False):
         self.base_dir = base_dir
+        # Untrusted scenes (load_file's base_dir_only): referenced files stay
+        # inside base_dir, and errors quote nothing read from them.
+        self.confine = confine
         self.built = {}  # id(node) -> description, so refs share one object
         self.in_progress = set()
 
@@ -46,6 +50,28 @@ class _Builder:
         self.in_progress.discard(key)
         self.built[key] = desc
         return desc
+
+    def file(self, p, what):
+        """The path of the file named by parameter 'filename' of p's node,
+        relative to base_dir unless absolute; checked to exist and, for an
+        untrusted scene, to lie inside base_dir once '..' and symbolic links
+        are resolved (checked before existence, so that the error says nothing
+        about files outside). An untrusted scene reads the resolved path, so a
+        link changed after the check is not followed."""
+        filename = p.string("filename")
+        place = p.node.props["filename"].place
+        if "\0" in filename:
+            raise p.error("parameter 'filename' contains a NUL character", place)
+        path = os.path.join(self.base_dir, filename)  # an absolute filename stays as it is
+        if self.confine:
+            root = os.path.realpath(self.base_dir)
+            path = os.path.realpath(path)
+            if os.path.commonpath([root, path]) != root:
+                raise p.error(f"{what} file '{filename}' lies outside the scene's folder {root} (an untrusted "
+                              f"scene may only name files inside it)", place)
+        if not os.path.isfile(path):
+            raise p.error(f"{what} file not found: '{filename}' (looked for {path})", place)
+        return path
 
     # -- BSDFs ---------------------------------------------------------------
 
@@ -171,11 +197,8 @@ class _Builder:
             v = p.rgb("value", 1.0)
             p.done()
             return v
-        filename = p.string("filename")
-        path = filename if os.path.isabs(filename) else os.path.join(self.base_dir, filename)
-        if not os.path.isfile(path):
-            raise p.error(f"volume file not found: '{filename}' (looked for {path})", node.props["filename"].place)
-        data, bbox = _read_vol(path, f"{node.place}: {node.label()}")
+        path = self.file(p, "volume")
+        data, bbox = _read_vol(path, f"{node.place}: {node.label()}", quote=not self.confine)
         m = p.transform("to_world")
         m = np.eye(4) if m is None else m
         if p.bool("use_grid_bbox", False):
@@ -256,16 +279,13 @@ class _Builder:
         m = np.eye(4) if m is None else m
         s = ShapeDesc(id=node.place, flip_normals=p.bool("flip_normals", False))
         if t in ("obj", "ply"):
-            filename = p.string("filename")
+            path = self.file(p, "mesh")
             face_normals = p.bool("face_normals", False)
             flip_tex = p.bool("flip_tex_coords", True) if t == "obj" else False
-            path = filename if os.path.isabs(filename) else os.path.join(self.base_dir, filename)
-            if not os.path.isfile(path):
-                raise p.error(f"mesh file not found: '{filename}' (looked for {path})",
-                              node.props["filename"].place)
             where = f"{node.place}: {node.label()}"
-            pos, f, n, uv = (_read_obj(path, flip_tex, where) if t == "obj"
-                             else _read_ply(path, where))
+            quote = not self.confine
+            pos, f, n, uv = (_read_obj(path, flip_tex, where, quote) if t == "obj"
+                             else _read_ply(path, where, quote))
             _mesh_shape(s, m, pos, f, n, uv, face_normals)
         elif t == "rectangle":
             p.bool("face_normals", False)  # Mitsuba accepts it; a plane has no other normal
@@ -414,7 +434,7 @@ class _Builder:
         s.spp = 4
         if sampler is not None:
             sp = _Params(sampler)
-            s.spp = sp.int("sample_count", 4, lo=1, hi=2**31 - 1)
+            s.spp = sp.int("sample_count", 4, lo=1, hi=_MAX_SPP)
             sp.int("seed", 0)  # accepted; the render call's seed decides
             sp.done()
         m = p.transform("to_world") if t != "irradiancemeter" else None
@@ -530,11 +550,25 @@ class _Builder:
                               f"string", prop.place)
             if prop.kind == "float" and not math.isfinite(prop.value):
                 raise p.error(f"parameter '{name}': non-finite value {prop.value}", prop.place)
+            lo, hi = INT32_RANGE
+            if prop.kind == "integer" and not lo <= prop.value <= hi:
+                raise p.error(f"parameter '{name}' = {prop.value} is outside the range of a 32-bit integer "
+                              f"[{lo}, {hi}]", prop.place)
             params[name] = prop.value
         if node.children:
             raise p.error(f"unexpected nested {node.children[0][1].label()}",
                           node.children[0][1].place)
-        return IntegratorDesc(type=node.type, params=params)
+        desc = IntegratorDesc(type=node.type, params=params)
+        # The estimator's own parameter check, at load time so that the
+        # message carries the file:line (render() checks again, for its
+        # `integrator=` argument).
+        from ..render import _integrator_desc
+
+        try:
+            _integrator_desc(None, desc)
+        except SceneError as e:
+            raise SceneError(f"{node.place}: {e}") from None
+        return desc
 
 
 def _resolve_refs(nodes, ids):
@@ -558,9 +592,9 @@ def _resolve_refs(nodes, ids):
                 stack.append(child)
 
 
-def _assemble(nodes, ids, source, base_dir):
+def _assemble(nodes, ids, source, base_dir, confine=False):
     _resolve_refs(nodes, ids)
-    b = _Builder(base_dir)
+    b = _Builder(base_dir, confine)
     scene = SceneDesc(source=source)
     sensors, integrators = [], []
     for node in nodes:
