@@ -22,7 +22,7 @@ from ..scene_desc import (
 )
 from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _rectangle_mesh
 from .nodes import _Node, _Prop, _Ref
-from .parameters import INT32_RANGE, _Params
+from .parameters import INT32_RANGE, _Params, _parse_float
 from .transforms import _frame_along, _translate
 from .volumes import _read_vol
 
@@ -132,6 +132,7 @@ class _Builder:
     def medium(self, node):
         return self.cached(node, self._medium)
 
+    @np.errstate(over="ignore")  # overflowing coefficients are refused below, by name
     def _medium(self, node):
         p, t = _Params(node), node.type
         m = MediumDesc(type=t, id=node.id or node.place)
@@ -344,6 +345,7 @@ class _Builder:
     def subsurface(self, node):
         return self.cached(node, self._subsurface)
 
+    @np.errstate(over="ignore")  # overflowing coefficients are refused below, by name
     def _subsurface(self, node):
         p = _Params(node)
         if p.has("material"):
@@ -490,7 +492,7 @@ class _Builder:
             text = p.string("focal_length", "50mm")
             num = text[:-2] if text.endswith("mm") else text
             try:
-                f = float(num)
+                f = _parse_float(num)
             except ValueError:
                 raise p.error(f"cannot parse focal_length '{text}'",
                               p.node.props["focal_length"].place) from None
@@ -511,7 +513,8 @@ class _Builder:
             return math.degrees(2.0 * math.atan(half * aspect))
         if axis == "diagonal":
             return math.degrees(2.0 * math.atan(half / math.sqrt(1.0 + 1.0 / aspect**2)))
-        raise p.error(f"fov_axis '{axis}' is not one of x, y, diagonal, smaller, larger")
+        raise p.error(f"fov_axis '{axis}' is not one of x, y, diagonal, smaller, larger",
+                      p.node.props["fov_axis"].place)
 
     @staticmethod
     def _film(node, s):
@@ -588,6 +591,7 @@ def _resolve_refs(nodes, ids):
                                      f"id '{child.id}'")
                 target.referenced = True
                 node.children[i] = (name, target)
+                node.ref_places[i] = child.place
             else:
                 stack.append(child)
 

@@ -49,6 +49,7 @@ class _Node:
         self.id = id_
         self.props = {}  # name -> _Prop
         self.children = []  # [(name, _Node | _Ref)], refs resolved before building
+        self.ref_places = {}  # index in children -> place of the ref that put the node there
         self.referenced = False
 
     def label(self):

@@ -236,4 +236,7 @@ class _Params:
                 raise self.error(f"unknown parameter '{name}'", prop.place)
         for i, (_, child) in enumerate(self.node.children):
             if i not in self.used_children:
+                if i in self.node.ref_places:  # a ref: name where it stands and what it refers to
+                    raise self.error(f"unexpected nested {child.label()} (the reference to {child.place})",
+                                     self.node.ref_places[i])
                 raise self.error(f"unexpected nested {child.label()}", child.place)
