@@ -318,6 +318,10 @@ XML = [
     ("twosided_twosided", '<shape type="sphere"><bsdf type="twosided">\n<bsdf type="twosided"><bsdf '
                           'type="diffuse"/></bsdf>' + MARK + "\n</bsdf></shape>",
      ["cannot nest another twosided"]),
+    ("twosided_dielectric", '<shape type="sphere"><bsdf type="twosided">\n<bsdf type="dielectric"/>' + MARK
+     + "\n</bsdf></shape>", ["nests only reflective bsdfs, got 'dielectric'"]),
+    ("twosided_null", '<shape type="sphere"><bsdf type="twosided">\n<bsdf type="diffuse"/>\n<bsdf type="null"/>'
+     + MARK + "\n</bsdf></shape>", ["nests only reflective bsdfs, got 'null'"]),
     ("spot_cutoff", '<emitter type="spot"><float name="cutoff_angle" value="200"/></emitter>' + MARK,
      ["exceeds 180 degrees"]),
     ("directional_zero", '<emitter type="directional"><vector name="direction" value="0 0 0"/></emitter>'
@@ -384,8 +388,10 @@ XML = [
      ["either sigma_t + albedo or sigma_a + sigma_s"]),
     ("scale_negative", _medium('<float name="scale" value="-2"/>'), ["parameter 'scale': negative value"]),
     ("sigma_overflow", '<shape type="cube"><bsdf type="null"/>\n<medium type="homogeneous" name="interior">'
-                       + MARK + '\n<rgb name="sigma_t" value="1e300"/><float name="scale" value="1e300"/>\n'
-                                '</medium></shape>', ["sigma_t * scale overflows"]),
+                       + MARK + '\n<rgb name="sigma_t" value="1e30"/><float name="scale" value="1e30"/>\n'
+                                '</medium></shape>', ["sigma_t * scale", "beyond the float32 range"]),
+    ("sigma_beyond_float32", _medium('<rgb name="sigma_t" value="1e39"/>'), ["parameter 'sigma_t': 1e+39 is beyond "
+                                                                             "the float32 range"]),
     ("sample_emitters_false", _medium('<boolean name="sample_emitters" value="false"/>'),
      ["sample_emitters = false is not supported"]),
     ("hg_g_one", '<shape type="cube"><bsdf type="null"/>\n<medium type="homogeneous" name="interior">\n'
@@ -775,6 +781,9 @@ WARNINGS = [
      ["shape scene['ball'] declares an interior medium but no exterior", "sensor's medium"]),
     ("ball_in_fog_cube", lambda: load_dict(_medium_ball_in_fog(False)),
      ["shape scene['ball'] declares an interior medium but no exterior", "shape scene['fog']"]),
+    ("irradiancemeter_film", lambda: load_dict(_s(meter={"type": "rectangle", "sensor": {
+        "type": "irradiancemeter", "film": {"type": "hdrfilm", "width": 4, "height": 3}}})),
+     ["scene['meter']['sensor']: sensor 'irradiancemeter': a 4x3 film", "1x1 image"]),
     # core: a camera whose far_clip misses every shape (a scene scaled up past it renders black).
     ("far_clip_misses", lambda: rm.load_dict(_s(ball={"type": "sphere", "center": [0, 0, 50.0]},
                                                 cam={"type": "perspective", "far_clip": 10.0})).core(),

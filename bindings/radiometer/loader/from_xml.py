@@ -297,7 +297,8 @@ class _XmlReader:
                 step = _look_at(o, t, up, place)
             else:
                 raise SceneError(f"{place}: unknown transform operation <{op.tag}>")
-            m = step @ m
+            with np.errstate(over="ignore", invalid="ignore"):  # overflow: refused where it is used
+                m = step @ m
         return m
 
     def _xyz(self, op, default):

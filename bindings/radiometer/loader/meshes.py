@@ -185,10 +185,11 @@ def _read_ply(path, err, quote=True):
     return p, f.astype(np.uint32), n, uv
 
 
-def _mesh_shape(shape, m, p, f, n, uv, face_normals):
-    """Fill a mesh ShapeDesc in world space (float64 maths, float32 storage)."""
+def _mesh_shape(shape, m, p, f, n, uv, face_normals, err):
+    """Fill a mesh ShapeDesc in world space (float64 maths, float32 storage);
+    `err` prefixes errors."""
     shape.type = "mesh"
-    shape.positions = np.ascontiguousarray(_apply_points(m, p))
+    shape.positions = np.ascontiguousarray(_apply_points(m, p, err))
     shape.indices = np.ascontiguousarray(f.astype(np.uint32).reshape(-1, 3))
     if face_normals:
         shape.normals = None

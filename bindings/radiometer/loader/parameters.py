@@ -9,6 +9,7 @@ import re
 import numpy as np
 
 from ..scene_desc import SceneError
+from .transforms import FLOAT32_MAX
 
 # Refractive indices at ~589 nm (sodium D line) of the materials Mitsuba names;
 # physical constants (e.g. Hecht, "Optics"; refractiveindex.info).
@@ -110,6 +111,9 @@ class _Params:
             raise self.error(f"parameter '{name}': value {str(x)[:20]}... is too large", place) from None
         if not math.isfinite(x):
             raise self.error(f"parameter '{name}': non-finite value {x}", place)
+        if abs(x) > FLOAT32_MAX:
+            raise self.error(f"parameter '{name}': {x:g} is beyond the float32 range (|x| <= {FLOAT32_MAX:.3g}) "
+                             f"the renderer computes in", place)
         return x
 
     def float(self, name, default=None, check=None):
