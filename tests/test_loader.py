@@ -258,7 +258,7 @@ SMALL_XML = """<scene version="3.0.0">
     <integrator type="bdpt">
         <integer name="max_depth" value="5"/>
         <boolean name="hide_emitters" value="true"/>
-        <string name="weights" value="power"/>
+        <string name="mis" value="power"/>
         <float name="beta" value="2"/>
     </integrator>
     <sensor type="perspective">
@@ -313,7 +313,7 @@ SMALL_XML = """<scene version="3.0.0">
 SMALL_DICT = {
     "type": "scene",
     "integrator": {"type": "bdpt", "max_depth": 5, "hide_emitters": True,
-                   "weights": "power", "beta": 2.0},
+                   "mis": "power", "beta": 2.0},
     "sensor": {
         "type": "perspective", "fov": 30.0, "fov_axis": "y",
         "to_world": [[1, 0, 0, 0.5], [0, 1, 0, 0], [0, 0, 1, -3], [0, 0, 0, 1]],
@@ -342,7 +342,7 @@ def test_xml_equals_dict_without_mitsuba(tmp_path):
     a, b = load_file(path), load_dict(SMALL_DICT)
     assert_same(a, b, atol=1e-12)
     assert a.integrator.params == {"max_depth": 5, "hide_emitters": True,
-                                   "weights": "power", "beta": 2.0}
+                                   "mis": "power", "beta": 2.0}
     s = a.sensor
     assert (s.width, s.height, s.rfilter, s.filter_radius, s.spp) == (64, 32, "tent", 1.5, 4)
     # fov 30 about y on a 2:1 film: tan(x/2) = 2 tan(15 deg)

@@ -106,7 +106,7 @@ def _parse_effects(arg):
 
 def cmd_render(a) -> int:
     effects = _parse_effects(a.effects)
-    scene = load_file(_scene_path(a.scene))
+    scene = load_file(_scene_path(a.scene), base_dir_only=a.untrusted)
     integrator = _parse_integrator(a.integrator)
     if a.max_depth is not None:
         from .render import _integrator_desc
@@ -359,6 +359,9 @@ def main(argv=None) -> int:
     r.add_argument("--threads", type=int, default=0, help="0 = all cores")
     r.add_argument("--effects", help=f"comma-separated subset of: {','.join(EFFECTS)}")
     r.add_argument("-o", "--output", default="out.exr")
+    r.add_argument("--untrusted", action="store_true",
+                   help="the scene comes from an untrusted source: it may only name files inside its own folder, "
+                        "and errors quote nothing from them")
     r.set_defaults(func=cmd_render)
     f = sub.add_parser("refs", help="regenerate the Mitsuba 3 references of the canonical scenes")
     f.add_argument("scenes", nargs="*", help="scene folders (default: every scene with a Mitsuba reference)")

@@ -78,8 +78,9 @@ rfilter    box (radius 0.5), tent: radius [1], gaussian: stddev [0.5]
                (radius = 4 stddev).
 sampler    independent: sample_count [4] -> SensorDesc.spp, seed (accepted).
 integrator every estimator the core registers (radiometer.registry); its
-           parameters (ints, floats, bools, strings) go to IntegratorDesc.params,
-           checked against the estimator's declaration at render time.
+           parameters (ints, floats, bools, strings; integers within 32 bits)
+           are checked against the estimator's declaration at load, so that
+           errors carry the file:line, and kept as given in IntegratorDesc.params.
 medium     homogeneous: sigma_t [1] + albedo [0.75] (Mitsuba 3), or sigma_a +
                sigma_s (Mitsuba 0.6's form; albedo = sigma_s / sigma_t, 0
                where sigma_t is 0), scale [1] multiplying the coefficients;
@@ -133,6 +134,19 @@ Decisions where Mitsuba leaves a choice (see also the functions' comments)
 - A directional emitter's `to_world` is an orthonormal frame whose +z column is
   the (normalised) direction of travel of the light.
 - Point and spot emitters store their position as the to_world translation.
+
+Hostile input
+-------------
+Numbers in XML are decimal and ASCII ('1_6', which Python's int() reads as 16,
+is refused); dict arrays hold real numbers only (no booleans, strings or
+complex numbers, which numpy would convert); plugins nest at most _MAX_DEPTH
+levels; integers too large for a float are refused where a float is needed.
+`load_file(path, base_dir_only=True)` (`radiometer render --untrusted`) is for
+scenes from an untrusted source: every referenced file (meshes, volumes; XML
+<include> is not supported at all) must resolve, through '..' and symbolic
+links, to a file inside the scene's folder; messages then quote nothing read
+from those files; the XML may not declare a DTD. Without it, as in Mitsuba,
+a scene may name any readable file, and parse errors quote the offending line.
 """
 from __future__ import annotations
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 
 import numpy as np
 
@@ -22,16 +23,23 @@ from ..scene_desc import (
 )
 from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _rectangle_mesh
 from .nodes import _Node, _Prop, _Ref
-from .parameters import _Params
-from .transforms import _frame_along, _translate
+from .parameters import INT32_RANGE, _Params, _parse_float
+from .transforms import FLOAT32_MAX, _frame_along, _translate, _unit
 from .volumes import _read_vol
 
 _MAX_RESOLUTION = 16384
+# BSDFs that transmit light (a null boundary included).
+_TRANSMITTING = ("dielectric", "roughdielectric", "thindielectric", "null")
+_MAX_SPP = 1 << 24  # render()'s limit on spp, which the sampler's sample_count sets
 
 
 class _Builder:
-    def __init__(self, base_dir):
+    def __init__(self, base_dir, confine=False):
         self.base_dir = base_dir
+        # Untrusted scenes (load_file's base_dir_only): referenced files stay
+        # inside base_dir, and errors quote nothing read from them.
+        self.confine = confine
+        self.warnings = []  # SceneWarning messages, given once the scene is assembled
         self.built = {}  # id(node) -> description, so refs share one object
         self.in_progress = set()
 
@@ -46,6 +54,28 @@ class _Builder:
         self.in_progress.discard(key)
         self.built[key] = desc
         return desc
+
+    def file(self, p, what):
+        """The path of the file named by parameter 'filename' of p's node,
+        relative to base_dir unless absolute; checked to exist and, for an
+        untrusted scene, to lie inside base_dir once '..' and symbolic links
+        are resolved (checked before existence, so that the error says nothing
+        about files outside). An untrusted scene reads the resolved path, so a
+        link changed after the check is not followed."""
+        filename = p.string("filename")
+        place = p.node.props["filename"].place
+        if "\0" in filename:
+            raise p.error("parameter 'filename' contains a NUL character", place)
+        path = os.path.join(self.base_dir, filename)  # an absolute filename stays as it is
+        if self.confine:
+            root = os.path.realpath(self.base_dir)
+            path = os.path.realpath(path)
+            if os.path.commonpath([root, path]) != root:
+                raise p.error(f"{what} file '{filename}' lies outside the scene's folder {root} (an untrusted "
+                              f"scene may only name files inside it)", place)
+        if not os.path.isfile(path):
+            raise p.error(f"{what} file not found: '{filename}' (looked for {path})", place)
+        return path
 
     # -- BSDFs ---------------------------------------------------------------
 
@@ -85,6 +115,9 @@ class _Builder:
             for k in kids:
                 if k.type == "twosided":
                     raise p.error("a twosided bsdf cannot nest another twosided", k.place)
+                if k.type in _TRANSMITTING:  # as Mitsuba: a two-sided surface has no inside to transmit to
+                    raise p.error(f"a twosided bsdf nests only reflective bsdfs, got '{k.type}', which "
+                                  f"transmits light", k.place)
             b.nested = [self.bsdf(k) for k in kids]
         if t in ("roughconductor", "roughdielectric"):
             b.distribution = p.string("distribution", "beckmann", ("beckmann", "ggx"))
@@ -106,6 +139,7 @@ class _Builder:
     def medium(self, node):
         return self.cached(node, self._medium)
 
+    @np.errstate(over="ignore")  # overflowing coefficients are refused below, by name
     def _medium(self, node):
         p, t = _Params(node), node.type
         m = MediumDesc(type=t, id=node.id or node.place)
@@ -144,8 +178,8 @@ class _Builder:
         m.scale = scale
         if t == "heterogeneous":
             p.bool("has_spectral_extinction", True)  # an optimisation hint in Mitsuba; no effect here
-        if not all(math.isfinite(x) for x in m.sigma_t):
-            raise p.error(f"sigma_t * scale overflows: {m.sigma_t}")
+        if not all(abs(x) <= FLOAT32_MAX for x in m.sigma_t):
+            raise p.error(f"sigma_t * scale {m.sigma_t} is beyond the float32 range")
         if not p.bool("sample_emitters", True):
             raise p.error("sample_emitters = false is not supported (next event estimation is always on)",
                           node.props["sample_emitters"].place)
@@ -171,18 +205,18 @@ class _Builder:
             v = p.rgb("value", 1.0)
             p.done()
             return v
-        filename = p.string("filename")
-        path = filename if os.path.isabs(filename) else os.path.join(self.base_dir, filename)
-        if not os.path.isfile(path):
-            raise p.error(f"volume file not found: '{filename}' (looked for {path})", node.props["filename"].place)
-        data, bbox = _read_vol(path, f"{node.place}: {node.label()}")
+        path = self.file(p, "volume")
+        data, bbox = _read_vol(path, f"{node.place}: {node.label()}", quote=not self.confine)
         m = p.transform("to_world")
         m = np.eye(4) if m is None else m
         if p.bool("use_grid_bbox", False):
             lo, hi = bbox
             if not np.all(hi > lo):
                 raise p.error(f"use_grid_bbox: the file's bounding box {lo.tolist()} .. {hi.tolist()} is empty")
-            m = m @ _translate(lo) @ np.diag([*(hi - lo), 1.0])
+            with np.errstate(over="ignore", invalid="ignore"):
+                m = m @ _translate(lo) @ np.diag([*(hi - lo), 1.0])
+            if not np.all(np.isfinite(m)):
+                raise p.error("use_grid_bbox: the file's bounding box times to_world overflows")
         p.string("filter_type", "trilinear", ("trilinear",))
         p.string("wrap_mode", "clamp", ("clamp",))
         p.bool("raw", False)  # linear RGB values either way (no spectral upsampling here)
@@ -239,9 +273,10 @@ class _Builder:
             e.irradiance = p.rgb("irradiance", 1.0)
             if d is None:
                 d = np.array([0.0, 0.0, 1.0]) if m is None else m[:3, 2]
-            if not np.linalg.norm(d) > 0:
+            d = _unit(d)
+            if d is None:
                 raise p.error("the direction has zero length")
-            e.to_world = _frame_along(d / np.linalg.norm(d))
+            e.to_world = _frame_along(d)
         p.done()
         return e
 
@@ -255,26 +290,23 @@ class _Builder:
         m = p.transform("to_world")
         m = np.eye(4) if m is None else m
         s = ShapeDesc(id=node.place, flip_normals=p.bool("flip_normals", False))
+        where = f"{node.place}: {node.label()}"
         if t in ("obj", "ply"):
-            filename = p.string("filename")
+            path = self.file(p, "mesh")
             face_normals = p.bool("face_normals", False)
             flip_tex = p.bool("flip_tex_coords", True) if t == "obj" else False
-            path = filename if os.path.isabs(filename) else os.path.join(self.base_dir, filename)
-            if not os.path.isfile(path):
-                raise p.error(f"mesh file not found: '{filename}' (looked for {path})",
-                              node.props["filename"].place)
-            where = f"{node.place}: {node.label()}"
-            pos, f, n, uv = (_read_obj(path, flip_tex, where) if t == "obj"
-                             else _read_ply(path, where))
-            _mesh_shape(s, m, pos, f, n, uv, face_normals)
+            quote = not self.confine
+            pos, f, n, uv = (_read_obj(path, flip_tex, where, quote) if t == "obj"
+                             else _read_ply(path, where, quote))
+            _mesh_shape(s, m, pos, f, n, uv, face_normals, where)
         elif t == "rectangle":
             p.bool("face_normals", False)  # Mitsuba accepts it; a plane has no other normal
             pos, f, uv = _rectangle_mesh()
-            _mesh_shape(s, m, pos, f, None, uv, face_normals=True)
+            _mesh_shape(s, m, pos, f, None, uv, True, where)
         elif t == "cube":
             face_normals = p.bool("face_normals", False)
             pos, f, n, uv = _cube_mesh()
-            _mesh_shape(s, m, pos, f, n, uv, face_normals)
+            _mesh_shape(s, m, pos, f, n, uv, face_normals, where)
         elif t == "disk":
             s.type, s.to_world = "disk", m
         elif t == "sphere":
@@ -324,6 +356,7 @@ class _Builder:
     def subsurface(self, node):
         return self.cached(node, self._subsurface)
 
+    @np.errstate(over="ignore")  # overflowing coefficients are refused below, by name
     def _subsurface(self, node):
         p = _Params(node)
         if p.has("material"):
@@ -368,8 +401,8 @@ class _Builder:
                        sigma_a=tuple(float(x) for x in sa * scale),
                        sigma_s=tuple(float(x) for x in ss * scale),
                        int_ior=p.ior(i_, "bk7"), ext_ior=p.ior(e_, "air"))
-        if not all(math.isfinite(x) for x in d.sigma_a + d.sigma_s):
-            raise p.error(f"the coefficients times scale overflow: {d.sigma_a}, {d.sigma_s}")
+        if not all(abs(x) <= FLOAT32_MAX for x in d.sigma_a + d.sigma_s):
+            raise p.error(f"the coefficients times scale, {d.sigma_a} and {d.sigma_s}, are beyond the float32 range")
         if not any(a + b > 0 for a, b in zip(d.sigma_a, d.sigma_s)):
             raise p.error("sigma_a + sigma_s is 0 in every channel: nothing to scatter")
         p.done()
@@ -380,7 +413,10 @@ class _Builder:
         decomposition into rotation Q and a stretch that must be uniform."""
         center = p.vec3("center", (0.0, 0.0, 0.0))
         radius = p.float("radius", 1.0, check="positive")
-        full = m @ _translate(center) @ np.diag([radius, radius, radius, 1.0])
+        with np.errstate(over="ignore", invalid="ignore"):
+            full = m @ _translate(center) @ np.diag([radius, radius, radius, 1.0])
+        if not np.all(np.abs(full) <= FLOAT32_MAX):
+            raise p.error("center, radius and to_world place the sphere beyond the float32 range")
         u, sig, vt = np.linalg.svd(full[:3, :3])
         if sig.max() - sig.min() > 1e-4 * sig.max():
             raise p.error(f"sphere to_world must not shear or scale non-uniformly "
@@ -414,7 +450,7 @@ class _Builder:
         s.spp = 4
         if sampler is not None:
             sp = _Params(sampler)
-            s.spp = sp.int("sample_count", 4, lo=1, hi=2**31 - 1)
+            s.spp = sp.int("sample_count", 4, lo=1, hi=_MAX_SPP)
             sp.int("seed", 0)  # accepted; the render call's seed decides
             sp.done()
         m = p.transform("to_world") if t != "irradiancemeter" else None
@@ -445,11 +481,17 @@ class _Builder:
             if (o is None) != (d is None):
                 raise p.error("give both origin and direction")
             if d is not None:
-                if not np.linalg.norm(d) > 0:
+                d = _unit(d)
+                if d is None:
                     raise p.error("the direction has zero length")
-                m = _translate(o) @ _frame_along(d / np.linalg.norm(d))
+                m = _translate(o) @ _frame_along(d)
             if (s.width, s.height) != (1, 1):
                 raise p.error(f"a radiancemeter needs a 1x1 film, got {s.width}x{s.height}")
+        elif t == "irradiancemeter" and (s.width, s.height) != (1, 1):
+            # Mitsuba 3.9.1 accepts it and fills each pixel with an independent
+            # estimate of the same irradiance; the renderer measures one.
+            self.warnings.append(f"{node.place}: {node.label()}: a {s.width}x{s.height} film; the irradiance is "
+                                 f"measured as one value, rendered as a 1x1 image")
         s.to_world = np.eye(4) if m is None else m
         p.done()
         return s
@@ -470,7 +512,7 @@ class _Builder:
             text = p.string("focal_length", "50mm")
             num = text[:-2] if text.endswith("mm") else text
             try:
-                f = float(num)
+                f = _parse_float(num)
             except ValueError:
                 raise p.error(f"cannot parse focal_length '{text}'",
                               p.node.props["focal_length"].place) from None
@@ -491,7 +533,8 @@ class _Builder:
             return math.degrees(2.0 * math.atan(half * aspect))
         if axis == "diagonal":
             return math.degrees(2.0 * math.atan(half / math.sqrt(1.0 + 1.0 / aspect**2)))
-        raise p.error(f"fov_axis '{axis}' is not one of x, y, diagonal, smaller, larger")
+        raise p.error(f"fov_axis '{axis}' is not one of x, y, diagonal, smaller, larger",
+                      p.node.props["fov_axis"].place)
 
     @staticmethod
     def _film(node, s):
@@ -530,11 +573,25 @@ class _Builder:
                               f"string", prop.place)
             if prop.kind == "float" and not math.isfinite(prop.value):
                 raise p.error(f"parameter '{name}': non-finite value {prop.value}", prop.place)
+            lo, hi = INT32_RANGE
+            if prop.kind == "integer" and not lo <= prop.value <= hi:
+                raise p.error(f"parameter '{name}' = {prop.value} is outside the range of a 32-bit integer "
+                              f"[{lo}, {hi}]", prop.place)
             params[name] = prop.value
         if node.children:
             raise p.error(f"unexpected nested {node.children[0][1].label()}",
                           node.children[0][1].place)
-        return IntegratorDesc(type=node.type, params=params)
+        desc = IntegratorDesc(type=node.type, params=params)
+        # The estimator's own parameter check, at load time so that the
+        # message carries the file:line (render() checks again, for its
+        # `integrator=` argument).
+        from ..render import _integrator_desc
+
+        try:
+            _integrator_desc(None, desc)
+        except SceneError as e:
+            raise SceneError(f"{node.place}: {e}") from None
+        return desc
 
 
 def _resolve_refs(nodes, ids):
@@ -554,13 +611,14 @@ def _resolve_refs(nodes, ids):
                                      f"id '{child.id}'")
                 target.referenced = True
                 node.children[i] = (name, target)
+                node.ref_places[i] = child.place
             else:
                 stack.append(child)
 
 
-def _assemble(nodes, ids, source, base_dir):
+def _assemble(nodes, ids, source, base_dir, confine=False):
     _resolve_refs(nodes, ids)
-    b = _Builder(base_dir)
+    b = _Builder(base_dir, confine)
     scene = SceneDesc(source=source)
     sensors, integrators = [], []
     for node in nodes:
@@ -605,7 +663,9 @@ def _assemble(nodes, ids, source, base_dir):
                          f"{integrators[0][1]})")
     if integrators:
         scene.integrator = integrators[0][0]
-    _warn_media(scene)
+    for msg in b.warnings + _media_warnings(scene):
+        scene.warnings.append(msg)
+        warnings.warn(msg, SceneWarning, stacklevel=4)
     return scene
 
 
@@ -623,8 +683,8 @@ def _bbox(shape):
     return None  # disks: flat, they enclose nothing
 
 
-def _warn_media(scene):
-    """Warns about a shape that declares an interior medium but no exterior
+def _media_warnings(scene):
+    """Warnings about a shape that declares an interior medium but no exterior
     while it sits in another medium (inside the bounding box of a shape
     whose interior is a medium, or in a camera medium that no shape bounds).
     Such a scene is valid, and rendered as Mitsuba 3 renders it: the medium
@@ -634,8 +694,7 @@ def _warn_media(scene):
     which of the two they trace (measured: bdpt 0.955 of volpath for a
     medium-filled glass ball in fog without an exterior). Usually the
     exterior was forgotten."""
-    import warnings
-
+    out = []
     bounded = {id(m) for s in scene.shapes for m in (s.interior, s.exterior) if m is not None}
     cam = scene.sensor.medium
     for s in scene.shapes:
@@ -656,5 +715,5 @@ def _warn_media(scene):
                    f"and it lies in {around}: paths leaving it continue in vacuum (Mitsuba 3's rule: the "
                    f"medium changes only at shapes that declare one); declare <ref name=\"exterior\" "
                    f"id=\"...\"/> on it if it sits in that medium")
-            scene.warnings.append(msg)
-            warnings.warn(msg, SceneWarning, stacklevel=4)
+            out.append(msg)
+    return out

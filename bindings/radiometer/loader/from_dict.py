@@ -7,8 +7,42 @@ import numpy as np
 
 from ..scene_desc import SceneDesc, SceneError
 from .build import _assemble
-from .nodes import _fmt_path, _Node, _Prop, _Ref, _register
+from .nodes import _MAX_DEPTH, _fmt_path, _Node, _Prop, _quote, _Ref, _register
 from .plugins import _CATEGORY_OF
+
+
+def _real(x):
+    """A real number, as Python or numpy has them (not a bool, complex or string)."""
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+
+
+def _real_array(v, place):
+    """`v` (a list, tuple, numpy array or Mitsuba vector/matrix) as a float64
+    array, refusing what numpy would otherwise convert: booleans (to 0/1),
+    strings of digits, complex numbers (dropping the imaginary part)."""
+    if isinstance(v, (list, tuple)):
+        flat, todo = [], [(v, 0)]
+        while todo:  # iterative, and shallow: a 4x4 matrix is two levels
+            x, depth = todo.pop()
+            if isinstance(x, (list, tuple)) and depth < 2:
+                todo.extend((y, depth + 1) for y in x)
+            elif not _real(x):
+                raise SceneError(f"{place}: expected real numbers, got {type(x).__name__} "
+                                 f"{_quote(x)} in {_quote(v)}")
+    try:
+        a = np.asarray(v)
+    except (TypeError, ValueError, OverflowError):
+        raise SceneError(f"{place}: unsupported value of type {type(v).__name__}") from None
+    if a.ndim == 0 and not _real(v):  # None, a complex number, any other object
+        raise SceneError(f"{place}: unsupported value of type {type(v).__name__}")
+    if a.dtype.kind == "O":  # Python integers too large for int64: convert one by one
+        try:
+            a = a.astype(np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise SceneError(f"{place}: numbers out of range or not real in {_quote(v)}") from None
+    if a.dtype.kind not in "iuf":
+        raise SceneError(f"{place}: expected real numbers, got an array of {a.dtype} ({_quote(v)})")
+    return a.astype(np.float64)
 
 
 def _dict_value(v, keys):
@@ -27,20 +61,17 @@ def _dict_value(v, keys):
     if m is not None:
         try:
             m = np.squeeze(np.array(m, dtype=np.float64))
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             m = None
         if m is not None and m.shape == (4, 4):
             _check_inverse_transpose(v, m, place)
             return _Prop("transform", m, place)
-    try:
-        a = np.asarray(v, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SceneError(f"{place}: unsupported value of type {type(v).__name__}") from None
+    a = _real_array(v, place)
     if a.shape == (3,):
         return _Prop("vec3", a, place)
     if a.shape == (4, 4):
         return _Prop("transform", a, place)
-    raise SceneError(f"{place}: unsupported value {v!r} (expected a number, string, "
+    raise SceneError(f"{place}: unsupported value {_quote(v)} (expected a number, string, "
                      f"3-vector, 4x4 matrix, transform or plugin dict)")
 
 
@@ -69,33 +100,32 @@ def _dict_colour(v, keys):
     place = _fmt_path(keys)
     extra = set(v) - {"type", "value"}
     if extra:
-        raise SceneError(f"{place}: {v['type']} value: unknown key '{sorted(extra)[0]}'")
+        raise SceneError(f"{place}: {v['type']} value: unknown key {_quote(sorted(map(str, extra))[0])}")
     if "value" not in v:
         raise SceneError(f"{place}: {v['type']} value: missing 'value'")
     val = v["value"]
-    if isinstance(val, (bool, np.bool_)) or isinstance(val, str):
-        raise SceneError(f"{place}: {v['type']} value must be numeric, got {val!r}")
-    if np.isscalar(val):
-        return _Prop(v["type"], float(val), place)
+    if not isinstance(val, (list, tuple, np.ndarray)) and np.ndim(val) == 0:
+        if not _real(val):
+            raise SceneError(f"{place}: {v['type']} value must be a real number, got {_quote(val)}")
+        return _Prop(v["type"], val, place)
     if v["type"] == "spectrum":
         raise SceneError(f"{place}: only uniform spectra (a single float) are supported")
-    try:
-        a = np.asarray(val, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SceneError(f"{place}: rgb value must be 3 numbers, got {val!r}") from None
+    a = _real_array(val, place)
     if a.shape != (3,):
-        raise SceneError(f"{place}: rgb value must be 3 numbers, got {val!r}")
+        raise SceneError(f"{place}: rgb value must be 3 numbers, got {_quote(val)}")
     return _Prop("rgb", a, place)
 
 
 def _dict_node(d, keys, ids):
     place = _fmt_path(keys)
+    if len(keys) > _MAX_DEPTH:
+        raise SceneError(f"{place}: plugin dicts nested deeper than {_MAX_DEPTH} levels")
     t = d.get("type")
     if not isinstance(t, str):
         raise SceneError(f"{place}: plugin dict needs a string 'type'")
     category = _CATEGORY_OF.get(t)
     if category is None:
-        raise SceneError(f"{place}: plugin type '{t}' is not supported")
+        raise SceneError(f"{place}: plugin type {_quote(t)} is not supported")
     node = _Node(category, t, place)
     for k, v in d.items():
         if k == "type":

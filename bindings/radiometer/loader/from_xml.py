@@ -11,7 +11,8 @@ import numpy as np
 
 from ..scene_desc import SceneDesc, SceneError
 from .build import _assemble
-from .nodes import _Node, _Prop, _Ref, _register
+from .nodes import _MAX_DEPTH, _Node, _Prop, _quote, _Ref, _register
+from .parameters import _parse_float, _parse_int
 from .plugins import PLUGINS
 from .transforms import _look_at, _rotate, _translate
 
@@ -28,8 +29,10 @@ class _XmlElem:
         self.tag, self.attrib, self.line, self.children = tag, attrib, line, []
 
 
-def _parse_xml(path, src):
-    """Parse with expat (stdlib) so that every element keeps its line number."""
+def _parse_xml(path, src, untrusted=False):
+    """Parse with expat (stdlib) so that every element keeps its line number.
+    Nesting is bounded (_MAX_DEPTH); an untrusted file may not declare a DTD
+    (entities are the XML way to blow a small file up or pull in another)."""
     try:
         with open(path, "rb") as f:
             data = f.read()
@@ -40,19 +43,33 @@ def _parse_xml(path, src):
 
     def start(tag, attrib):
         elem = _XmlElem(tag, dict(attrib), parser.CurrentLineNumber)
+        if len(stack) >= _MAX_DEPTH:
+            raise SceneError(f"{src}:{elem.line}: <{tag}>: elements nested deeper than {_MAX_DEPTH} levels")
         (stack[-1].children if stack else roots).append(elem)
         stack.append(elem)
 
     def end(tag):
         stack.pop()
 
+    def doctype(name, *_):
+        raise SceneError(f"{src}:{parser.CurrentLineNumber}: a DOCTYPE declaration is not allowed in an "
+                         f"untrusted scene")
+
     parser.StartElementHandler = start
     parser.EndElementHandler = end
+    if untrusted:
+        parser.StartDoctypeDeclHandler = doctype
     try:
         parser.Parse(data, True)
     except xml.parsers.expat.ExpatError as e:
         raise SceneError(f"{src}:{e.lineno}: malformed XML: "
                          f"{xml.parsers.expat.ErrorString(e.code)}") from None
+    except LookupError as e:  # an encoding Python does not know
+        raise SceneError(f"{src}:{parser.CurrentLineNumber}: unsupported XML encoding ({e})") from None
+    except ValueError as e:  # SceneError from the handlers, or text that does not decode
+        if isinstance(e, SceneError):
+            raise
+        raise SceneError(f"{src}:{parser.CurrentLineNumber}: cannot decode the XML ({type(e).__name__})") from None
     return roots[0]
 
 
@@ -62,15 +79,15 @@ _PARAM_RE = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
 def _numbers(text, place, what, counts):
     parts = [p for p in re.split(r"[,\s]+", text.strip()) if p]
     try:
-        vals = [float(p) for p in parts]
+        vals = [_parse_float(p) for p in parts]
     except ValueError:
-        raise SceneError(f"{place}: {what}: cannot parse numbers from '{text}'") from None
+        raise SceneError(f"{place}: {what}: cannot parse numbers from {_quote(text)}") from None
     if len(vals) not in counts:
         raise SceneError(f"{place}: {what}: expected {' or '.join(map(str, counts))} "
-                         f"numbers, got {len(vals)} in '{text}'")
+                         f"numbers, got {len(vals)} in {_quote(text)}")
     for v in vals:
         if not math.isfinite(v):
-            raise SceneError(f"{place}: {what}: non-finite value in '{text}'")
+            raise SceneError(f"{place}: {what}: non-finite value in {_quote(text)}")
     return vals
 
 
@@ -210,15 +227,16 @@ class _XmlReader:
             value = _numbers(text, place, "<float>", (1,))[0]
         elif tag == "integer":
             try:
-                value = int(text.strip())
+                value = _parse_int(text.strip())
             except ValueError:
-                raise SceneError(f"{place}: <integer>: cannot parse '{text}' as an "
-                                 f"integer") from None
+                if text.strip().isdigit():
+                    raise SceneError(f"{place}: <integer>: {_quote(text)} has too many digits") from None
+                raise SceneError(f"{place}: <integer>: cannot parse {_quote(text)} as an integer") from None
         elif tag == "boolean":
             low = text.strip().lower()
             if low not in ("true", "false"):
                 raise SceneError(f"{place}: <boolean>: value must be 'true' or 'false', "
-                                 f"got '{text}'")
+                                 f"got {_quote(text)}")
             value = low == "true"
         elif tag == "string":
             value = text
@@ -279,7 +297,8 @@ class _XmlReader:
                 step = _look_at(o, t, up, place)
             else:
                 raise SceneError(f"{place}: unknown transform operation <{op.tag}>")
-            m = step @ m
+            with np.errstate(over="ignore", invalid="ignore"):  # overflow: refused where it is used
+                m = step @ m
         return m
 
     def _xyz(self, op, default):
@@ -292,16 +311,22 @@ class _XmlReader:
                 for k in "xyz"]
 
 
-def load_file(path, **params) -> SceneDesc:
+def load_file(path, base_dir_only=False, **params) -> SceneDesc:
     """Load a Mitsuba 3 XML scene. `params` override the file's <default>
     values ($name substitution); a parameter the file neither declares nor
-    uses is an error. Mesh files resolve relative to the XML file."""
+    uses is an error. Mesh and volume files resolve relative to the XML file.
+
+    base_dir_only=True is for scenes from an untrusted source: every file
+    the scene names must lie in the scene file's folder (or below it), after
+    resolving `..` and symbolic links; errors quote no content of those
+    files; the XML may not declare a DTD. Without it (the default, Mitsuba's
+    behaviour) a scene may name any file the process can read."""
     src = os.fspath(path)
     if not os.path.isfile(src):
         raise SceneError(f"{src}: scene file not found")
     text_params = {k: ("true" if v else "false") if isinstance(v, bool) else str(v)
                    for k, v in params.items()}
     reader = _XmlReader(src, text_params)
-    root = _parse_xml(src, src)
+    root = _parse_xml(src, src, untrusted=bool(base_dir_only))
     nodes = reader.read(root)
-    return _assemble(nodes, reader.ids, src, reader.dir)
+    return _assemble(nodes, reader.ids, src, reader.dir, confine=bool(base_dir_only))

@@ -3,9 +3,12 @@
 ShapeDesc in world space."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..scene_desc import SceneError
+from .nodes import _quote
 from .transforms import _apply_normals, _apply_points
 
 
@@ -39,12 +42,15 @@ def _vertex_normals(p, f):
     return acc.astype(np.float32)
 
 
-def _read_obj(path, flip_tex_coords, err):
+def _read_obj(path, flip_tex_coords, err, quote=True):
     """Wavefront OBJ with Mitsuba's semantics: a vertex per distinct
     (position, texcoord, normal) index triple, numbered in order of first use;
     polygons as fans (v0, v[i-1], v[i]); 'vt' v flipped to 1 - v by default.
     Negative (relative) indices are rejected, as Mitsuba does. Statements
     other than v/vt/vn/f (o, g, s, usemtl, mtllib, l, #) are ignored.
+    Numbers are decimal and finite (float() alone also takes '1_0', 'nan').
+    quote=False: messages name the line but quote nothing of it (the file
+    may be one an untrusted scene pointed at).
 
     Parsed here rather than with trimesh/meshio: meshio ignores the vt/vn
     indices of faces and trimesh merges vertices and needs PIL for texcoords,
@@ -52,7 +58,20 @@ def _read_obj(path, flip_tex_coords, err):
     positions, texcoords, normals = [], [], []
     keys = {}
     tris = []
-    with open(path, "r", encoding="utf-8", errors="replace") as fh:
+    try:
+        fh = open(path, "r", encoding="utf-8", errors="replace")
+    except OSError as e:
+        raise SceneError(f"{err}: {path}: cannot read the OBJ file ({e.strerror})") from None
+
+    def numbers(head, parts, count, lineno):
+        vals = [float(x) for x in parts[:count]]
+        if len(vals) != count or any(not x.isascii() or "_" in x for x in parts[:count]):
+            raise ValueError
+        if not all(math.isfinite(x) for x in vals):
+            raise SceneError(f"{err}: {path}:{lineno}: non-finite value in a '{head}' statement")
+        return vals
+
+    with fh:
         for lineno, line in enumerate(fh, 1):
             parts = line.split()
             if not parts:
@@ -60,38 +79,34 @@ def _read_obj(path, flip_tex_coords, err):
             head = parts[0]
             try:
                 if head == "v":
-                    positions.append([float(x) for x in parts[1:4]])
-                    if len(positions[-1]) != 3:
-                        raise ValueError
+                    positions.append(numbers(head, parts[1:], 3, lineno))
                 elif head == "vn":
-                    normals.append([float(x) for x in parts[1:4]])
-                    if len(normals[-1]) != 3:
-                        raise ValueError
+                    normals.append(numbers(head, parts[1:], 3, lineno))
                 elif head == "vt":
-                    uv = [float(x) for x in parts[1:3]]
-                    if len(uv) != 2:
-                        raise ValueError
-                    texcoords.append(uv)
+                    texcoords.append(numbers(head, parts[1:], 2, lineno))
                 elif head == "f":
                     ids = []
                     for tok in parts[1:]:
                         idx = tok.split("/")
-                        if len(idx) > 3:
+                        if len(idx) > 3 or not tok.isascii() or "_" in tok:
                             raise ValueError
                         key = tuple(int(s) if s else 0 for s in idx) + (0,) * (3 - len(idx))
                         if key[0] < 1 or key[0] > len(positions) or min(key) < 0:
-                            raise SceneError(f"{err}: {path}:{lineno}: face index '{tok}' "
-                                             f"is out of range (only positive indices of "
-                                             f"earlier vertices are supported)")
+                            raise SceneError(f"{err}: {path}:{lineno}: face index "
+                                             f"{_quote(tok) + ' ' if quote else ''}is out of range (only "
+                                             f"positive indices of earlier vertices are supported)")
                         ids.append(keys.setdefault(key, len(keys)))
                     if len(ids) < 3:
                         raise SceneError(f"{err}: {path}:{lineno}: face with fewer than 3 "
                                          f"vertices")
                     for i in range(2, len(ids)):
                         tris.append((ids[0], ids[i - 1], ids[i]))
-            except ValueError:
-                raise SceneError(f"{err}: {path}:{lineno}: cannot parse OBJ line "
-                                 f"'{line.strip()}'") from None
+            except ValueError as e:
+                if isinstance(e, SceneError):
+                    raise
+                # Unquoted, the line is named by its statement (one of the four above).
+                what = _quote(line.strip()) if quote else f"(a '{head}' statement)"
+                raise SceneError(f"{err}: {path}:{lineno}: cannot parse OBJ line {what}") from None
     if not tris:
         raise SceneError(f"{err}: {path}: the OBJ file has no faces")
     key_arr = np.array(list(keys), dtype=np.int64)
@@ -104,6 +119,8 @@ def _read_obj(path, flip_tex_coords, err):
         uv = t[key_arr[:, 1]]
         if flip_tex_coords:
             uv[:, 1] = 1.0 - uv[:, 1]
+    elif key_arr[:, 1].max() > 0:
+        raise SceneError(f"{err}: {path}: reference to an invalid texture coordinate")
     n = None
     if normals:
         if key_arr[:, 2].max() > len(normals):
@@ -112,10 +129,12 @@ def _read_obj(path, flip_tex_coords, err):
             raise SceneError(f"{err}: {path}: some face vertices have normals and some "
                              f"do not")
         n = np.asarray(normals, dtype=np.float64)[key_arr[:, 2] - 1]
+    elif key_arr[:, 2].max() > 0:
+        raise SceneError(f"{err}: {path}: reference to an invalid vertex normal")
     return p, np.asarray(tris, dtype=np.uint32), n, uv
 
 
-def _read_ply(path, err):
+def _read_ply(path, err, quote=True):
     """PLY (ascii or binary) through plyfile; Mitsuba's names: x y z, nx ny nz,
     u v | texture_u texture_v | s t, face list vertex_indices | vertex_index.
     Faces must be triangles (Mitsuba 3.9.1 rejects other polygons). Other
@@ -128,7 +147,9 @@ def _read_ply(path, err):
     try:
         ply = PlyData.read(path)
     except Exception as e:  # plyfile raises several exception types
-        raise SceneError(f"{err}: {path}: cannot read PLY file ({e})") from None
+        # Its messages may quote the header; an untrusted scene's gets the type only.
+        why = _quote(e, 200) if quote else type(e).__name__
+        raise SceneError(f"{err}: {path}: cannot read PLY file ({why})") from None
     names = [el.name for el in ply.elements]
     if "vertex" not in names or "face" not in names:
         raise SceneError(f"{err}: {path}: PLY file needs 'vertex' and 'face' elements")
@@ -159,15 +180,16 @@ def _read_ply(path, err):
     f = np.array(np.vstack(lists), dtype=np.int64)
     if f.min() < 0 or f.max() >= len(p):
         raise SceneError(f"{err}: {path}: face index out of range")
-    if not np.all(np.isfinite(p)) or (n is not None and not np.all(np.isfinite(n))):
+    if not all(a is None or np.all(np.isfinite(a)) for a in (p, n, uv)):
         raise SceneError(f"{err}: {path}: non-finite vertex data")
     return p, f.astype(np.uint32), n, uv
 
 
-def _mesh_shape(shape, m, p, f, n, uv, face_normals):
-    """Fill a mesh ShapeDesc in world space (float64 maths, float32 storage)."""
+def _mesh_shape(shape, m, p, f, n, uv, face_normals, err):
+    """Fill a mesh ShapeDesc in world space (float64 maths, float32 storage);
+    `err` prefixes errors."""
     shape.type = "mesh"
-    shape.positions = np.ascontiguousarray(_apply_points(m, p))
+    shape.positions = np.ascontiguousarray(_apply_points(m, p, err))
     shape.indices = np.ascontiguousarray(f.astype(np.uint32).reshape(-1, 3))
     if face_normals:
         shape.normals = None

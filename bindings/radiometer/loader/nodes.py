@@ -4,9 +4,24 @@ from __future__ import annotations
 
 from ..scene_desc import SceneError
 
+# Deepest nesting of plugins (and of property elements in XML) accepted. Real
+# scenes nest a handful of levels (shape > twosided > bsdf; medium > volume);
+# the bound turns a runaway or cyclic input into a SceneError long before
+# Python's recursion limit.
+_MAX_DEPTH = 64
+
 
 def _fmt_path(keys):
+    if len(keys) > 8:  # a path at the depth limit: its ends say where
+        return _fmt_path(keys[:3]) + f"...({len(keys) - 5} more)..." + "".join(f"[{k!r}]" for k in keys[-2:])
     return "scene" + "".join(f"[{k!r}]" for k in keys)
+
+
+def _quote(text, limit=40):
+    """`text` for a message, cut to `limit` characters: a value is quoted to
+    say which one is wrong, not to echo a long input back."""
+    text = str(text)
+    return repr(text if len(text) <= limit else text[:limit] + "...")
 
 
 class _Prop:
@@ -34,6 +49,7 @@ class _Node:
         self.id = id_
         self.props = {}  # name -> _Prop
         self.children = []  # [(name, _Node | _Ref)], refs resolved before building
+        self.ref_places = {}  # index in children -> place of the ref that put the node there
         self.referenced = False
 
     def label(self):

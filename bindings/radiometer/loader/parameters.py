@@ -4,10 +4,12 @@ and the tables they use."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
 from ..scene_desc import SceneError
+from .transforms import FLOAT32_MAX
 
 # Refractive indices at ~589 nm (sodium D line) of the materials Mitsuba names;
 # physical constants (e.g. Hecht, "Optics"; refractiveindex.info).
@@ -40,6 +42,31 @@ NAMED_IOR = {
 # Perspective-camera parameters that have no effect on a pinhole camera without
 # motion: accepted (type-checked) and ignored.
 PERSPECTIVE_IGNORED = ("focus_distance", "shutter_open", "shutter_close")
+
+
+# Number syntax in scene text: decimal, ASCII only. Python's float() and int()
+# also take "1_6" (as 16), Unicode digits and surrounding whitespace; Mitsuba's
+# parser (strtof) takes none of them. "inf" and "nan" parse, so that their
+# message says non-finite rather than unparsable.
+_FLOAT_RE = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)",
+                       re.IGNORECASE)
+_INT_RE = re.compile(r"[+-]?[0-9]+")
+# Integers the renderer stores in 32 bits (C++ int).
+INT32_RANGE = (-2**31, 2**31 - 1)
+
+
+def _parse_float(text):
+    """A float from scene text; ValueError if it is not a decimal number."""
+    if not _FLOAT_RE.fullmatch(text):
+        raise ValueError(text)
+    return float(text)
+
+
+def _parse_int(text):
+    """An integer from scene text; ValueError if it is not a decimal integer."""
+    if len(text) > 4000 or not _INT_RE.fullmatch(text):  # 4000: below int()'s own digit limit
+        raise ValueError(text)
+    return int(text)
 
 
 _KIND_WORDS = {
@@ -76,8 +103,17 @@ class _Params:
         return prop
 
     def _finite(self, name, x, place):
+        """x as a finite float (an integer too large for a float, 10**400,
+        included in the refusal)."""
+        try:
+            x = float(x)
+        except OverflowError:
+            raise self.error(f"parameter '{name}': value {str(x)[:20]}... is too large", place) from None
         if not math.isfinite(x):
             raise self.error(f"parameter '{name}': non-finite value {x}", place)
+        if abs(x) > FLOAT32_MAX:
+            raise self.error(f"parameter '{name}': {x:g} is beyond the float32 range (|x| <= {FLOAT32_MAX:.3g}) "
+                             f"the renderer computes in", place)
         return x
 
     def float(self, name, default=None, check=None):
@@ -85,7 +121,7 @@ class _Params:
         prop = self._take(name, ("float", "integer"), "a float")
         if prop is None:
             return default
-        x = self._finite(name, float(prop.value), prop.place)
+        x = self._finite(name, prop.value, prop.place)
         if check == "positive" and not x > 0:
             raise self.error(f"parameter '{name}' must be > 0, got {x}", prop.place)
         if check == "nonneg" and x < 0:
@@ -124,9 +160,8 @@ class _Params:
         if prop is None:
             return (float(default),) * 3 if np.isscalar(default) else tuple(default)
         v = prop.value
-        vals = [float(v)] * 3 if np.isscalar(v) else [float(c) for c in v]
+        vals = [self._finite(name, c, prop.place) for c in ([v] * 3 if np.isscalar(v) else v)]
         for c in vals:
-            self._finite(name, c, prop.place)
             if nonneg and c < 0:
                 raise self.error(f"parameter '{name}': negative value {c}", prop.place)
         return tuple(vals)
@@ -168,7 +203,7 @@ class _Params:
                 raise self.error(f"parameter '{name}': unknown IOR name '{prop.value}' "
                                  f"(known: {', '.join(NAMED_IOR)})", prop.place)
             return NAMED_IOR[key]
-        x = self._finite(name, float(prop.value), prop.place)
+        x = self._finite(name, prop.value, prop.place)
         if not x > 0:
             raise self.error(f"parameter '{name}' must be > 0, got {x}", prop.place)
         return x
@@ -205,4 +240,7 @@ class _Params:
                 raise self.error(f"unknown parameter '{name}'", prop.place)
         for i, (_, child) in enumerate(self.node.children):
             if i not in self.used_children:
+                if i in self.node.ref_places:  # a ref: name where it stands and what it refers to
+                    raise self.error(f"unexpected nested {child.label()} (the reference to {child.place})",
+                                     self.node.ref_places[i])
                 raise self.error(f"unexpected nested {child.label()}", child.place)

@@ -37,15 +37,36 @@ def _onb_first(n):
     return np.array([1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]])
 
 
+def _unit(v):
+    """v / |v|, or None for a zero vector. The same arithmetic as v / norm(v)
+    wherever the norm neither overflows nor underflows (|v| ~ 1e200 or
+    1e-200); there v is first divided by its largest component."""
+    v = np.asarray(v, dtype=np.float64)
+    with np.errstate(over="ignore", under="ignore"):
+        n = np.linalg.norm(v)
+    if not (math.isfinite(n) and n > 1e-150):
+        s = float(np.abs(v).max())
+        if not s > 0:
+            return None
+        v = v / s
+        n = np.linalg.norm(v)
+    return v / n
+
+
 def _look_at(origin, target, up, place):
     """Camera-to-world frame looking from origin to target: columns are left,
     up, forward (+z) and origin, as Mitsuba's Transform4f::look_at."""
-    d = np.asarray(target, dtype=np.float64) - origin
-    if not np.linalg.norm(d) > 0:
+    with np.errstate(over="ignore", invalid="ignore"):
+        d = np.asarray(target, dtype=np.float64) - origin
+    if not np.all(np.isfinite(d)):
+        raise SceneError(f"{place}: lookat: origin and target are too far apart for a float")
+    d = _unit(d)
+    if d is None:
         raise SceneError(f"{place}: lookat: origin and target coincide")
-    d = d / np.linalg.norm(d)
     if up is None:
         up = _onb_first(d)
+    elif not 1e-150 < np.abs(up).max() < 1e150:  # keep the cross product in range
+        up = np.asarray(up) / np.abs(up).max() if np.abs(up).max() > 0 else np.asarray(up)
     left = np.cross(up, d)
     if not np.linalg.norm(left) > 1e-12:
         raise SceneError(f"{place}: lookat: 'up' is parallel to the viewing direction")
@@ -61,13 +82,30 @@ def _frame_along(d):
     return _look_at(np.zeros(3), d, None, "<frame>")
 
 
-def _apply_points(m, p):
-    return (p.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
+# The largest float32: world-space data beyond it cannot be stored.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def _apply_points(m, p, err):
+    """Points to world space in float64, stored as float32; `err` (a
+    message prefix) names the shape if they leave the float32 range."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        w = p.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+    if not np.all(np.abs(w) <= FLOAT32_MAX):
+        raise SceneError(f"{err}: vertices beyond the float32 range (|x| > {FLOAT32_MAX:.3g}) after to_world")
+    return w.astype(np.float32)
 
 
 def _apply_normals(m, n):
-    """Normals transform by the inverse transpose of the linear part."""
-    nt = n.astype(np.float64) @ np.linalg.inv(m[:3, :3])
+    """Normals transform by the inverse transpose of the linear part. Its
+    scale does not matter (they are normalised), so a linear part scaled far
+    from 1 (1e-300) is first brought near 1, lest its inverse or the lengths
+    overflow; ordinary ones are used as they are."""
+    a = m[:3, :3]
+    s = float(np.abs(a).max())
+    if not 1e-100 < s < 1e100:
+        a = a / s
+    nt = n.astype(np.float64) @ np.linalg.inv(a)
     length = np.linalg.norm(nt, axis=1, keepdims=True)
     length[length == 0] = 1.0
     return (nt / length).astype(np.float32)
