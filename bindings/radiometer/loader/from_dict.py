@@ -21,7 +21,7 @@ def _real_array(v, place):
     array, refusing what numpy would otherwise convert: booleans (to 0/1),
     strings of digits, complex numbers (dropping the imaginary part)."""
     if isinstance(v, (list, tuple)):
-        flat, todo = [], [(v, 0)]
+        todo = [(v, 0)]
         while todo:  # iterative, and shallow: a 4x4 matrix is two levels
             x, depth = todo.pop()
             if isinstance(x, (list, tuple)) and depth < 2:
