@@ -14,7 +14,7 @@ PYB=$("$VPY" -c "import pybind11; print(pybind11.get_cmake_dir())")
 SAN="-fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer"
 .venv/bin/cmake -S . -B "$B/build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_FLAGS="$SAN -O1" -DCMAKE_SHARED_LINKER_FLAGS="$SAN" \
-  -Dpybind11_DIR="$PYB" -DPython_EXECUTABLE="$VPY" > "$B/cmake.log"
+  -DCMAKE_MAKE_PROGRAM="$(pwd)/.venv/bin/ninja" -Dpybind11_DIR="$PYB" -DPython_EXECUTABLE="$VPY" > "$B/cmake.log"
 .venv/bin/cmake --build "$B/build" -j "$(nproc)" > "$B/build.log" || { tail -30 "$B/build.log"; exit 1; }
 rm -rf "$B/pkg" && mkdir -p "$B/pkg"
 cp -r bindings/radiometer "$B/pkg/radiometer"
