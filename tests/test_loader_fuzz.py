@@ -27,7 +27,10 @@ from hypothesis import strategies as st  # noqa: E402
 
 import radiometer as rm  # noqa: E402
 from radiometer.loader import PLUGINS, SceneWarning, load_dict, load_file  # noqa: E402
-from radiometer.render import INTEGRATOR_PARAMS, MITSUBA06_ALIASES  # noqa: E402
+from radiometer.render import INTEGRATOR_PARAMS  # noqa: E402
+
+# Mitsuba 0.6's camelCase names of each estimator's parameters, from the registry.
+ALIASES = {t: [a for p in e["params"].values() for a in p["aliases"]] for t, e in rm.estimators().items()}
 from radiometer.scene_desc import SceneError  # noqa: E402
 
 EXAMPLES = int(os.environ.get("RADIOMETER_FUZZ_EXAMPLES", "250"))
@@ -89,7 +92,7 @@ PARAMS = {
                               "scale": "float", "g": "g", "int_ior": "ior", "ext_ior": "ior"}},
     "integrator": {t: {**{k: {int: "int", float: "float", bool: "bool", str: "string"}[typ]
                           for k, (typ, _) in schema.items()},
-                       **{k: "int" for k in MITSUBA06_ALIASES.get(t, {})}}
+                       **{k: "int" for k in ALIASES.get(t, [])}}
                    for t, schema in INTEGRATOR_PARAMS.items()},
 }
 assert {c: set(t) for c, t in PARAMS.items()} == {c: set(t) for c, t in PLUGINS.items()}, \
