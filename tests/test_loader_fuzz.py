@@ -1,7 +1,7 @@
 """Fuzzing both scene loaders with hypothesis: random scene trees built from
 the loader's plugin table (radiometer.loader.PLUGINS) and the parameters
-each plugin reads (PARAMS below, the estimators' from
-radiometer.render.INTEGRATOR_PARAMS), with mostly sensible values, some
+each plugin reads (PARAMS below, the estimators' from the core's registry,
+radiometer.registry), with mostly sensible values, some
 extreme or mistyped ones and some unknown names, written out as a dict and
 as XML (plus XML-only damage: bad number text, truncation, encodings).
 
@@ -27,13 +27,10 @@ from hypothesis import strategies as st  # noqa: E402
 
 import radiometer as rm  # noqa: E402
 from radiometer.loader import PLUGINS, SceneWarning, load_dict, load_file  # noqa: E402
-from radiometer.render import INTEGRATOR_PARAMS  # noqa: E402
-
-# Mitsuba 0.6's camelCase names of each estimator's parameters, from the registry.
-ALIASES = {t: [a for p in e["params"].values() for a in p["aliases"]] for t, e in rm.estimators().items()}
+from radiometer.registry import estimators  # noqa: E402
 from radiometer.scene_desc import SceneError  # noqa: E402
 
-EXAMPLES = int(os.environ.get("RADIOMETER_FUZZ_EXAMPLES", "250"))
+EXAMPLES = int(os.environ.get("RADIOMETER_FUZZ_EXAMPLES", "600"))
 PROFILE = settings(max_examples=EXAMPLES, derandomize=not os.environ.get("RADIOMETER_FUZZ_RANDOM"),
                    database=None, deadline=None, print_blob=True,
                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
@@ -90,10 +87,10 @@ PARAMS = {
                "constvolume": {"value": "rgb"}},
     "subsurface": {"dipole": {"sigma_a": "rgb", "sigma_s": "rgb", "sigma_t": "rgb", "albedo": "rgb",
                               "scale": "float", "g": "g", "int_ior": "ior", "ext_ior": "ior"}},
-    "integrator": {t: {**{k: {int: "int", float: "float", bool: "bool", str: "string"}[typ]
-                          for k, (typ, _) in schema.items()},
-                       **{k: "int" for k in ALIASES.get(t, [])}}
-                   for t, schema in INTEGRATOR_PARAMS.items()},
+    # The estimators' declarations in the core's registry, Mitsuba 0.6 names included.
+    "integrator": {n: {name: {"int": "int", "float": "float", "bool": "bool", "string": "string"}[p["type"]]
+                       for k, p in e["params"].items() for name in [k, *p["aliases"]]}
+                   for e in estimators().values() for n in [e["name"], *e["aliases"]]},
 }
 assert {c: set(t) for c, t in PARAMS.items()} == {c: set(t) for c, t in PLUGINS.items()}, \
     "the fuzzer's schema must cover the loader's plugin table"

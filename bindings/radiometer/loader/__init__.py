@@ -52,7 +52,8 @@ bsdf       diffuse: reflectance [0.5]
            roughdielectric: as dielectric + the microfacet parameters
            plastic: diffuse_reflectance [0.5], specular_reflectance [1],
                int_ior ['polypropylene'], ext_ior ['air'], nonlinear [false]
-           twosided: one or two nested bsdfs; null: none.
+           twosided: one or two nested reflective bsdfs (as Mitsuba: not
+               dielectric, thindielectric, roughdielectric or null); null: none.
            An IOR is a float or one of the names in NAMED_IOR (any case).
 emitter    area (nested in a shape): radiance [1]
            point: intensity [1], position or to_world
@@ -70,7 +71,9 @@ sensor     perspective: fov + fov_axis ['x'|'y'|'diagonal'|'smaller'|
            orthographic: to_world (its scale sets the extent), near_clip,
                far_clip.
            radiancemeter: to_world or origin + direction; needs a 1x1 film.
-           irradiancemeter: only nested in a shape.
+           irradiancemeter: only nested in a shape; it measures one value,
+               so a film other than 1x1 warns (Mitsuba fills each pixel
+               with an independent estimate).
            Each sensor may nest a film and a sampler.
 film       hdrfilm: width [768], height [576] (1..16384), pixel_format
                ['rgb'|'rgba'], component_format ['float16'|'float32'], rfilter.
@@ -140,7 +143,8 @@ Hostile input
 Numbers in XML are decimal and ASCII ('1_6', which Python's int() reads as 16,
 is refused); dict arrays hold real numbers only (no booleans, strings or
 complex numbers, which numpy would convert); plugins nest at most _MAX_DEPTH
-levels; integers too large for a float are refused where a float is needed.
+levels; a float parameter lies within float32's range (|x| <= 3.4e38, what
+the renderer computes in), and so do mesh vertices after their to_world.
 `load_file(path, base_dir_only=True)` (`radiometer render --untrusted`) is for
 scenes from an untrusted source: every referenced file (meshes, volumes; XML
 <include> is not supported at all) must resolve, through '..' and symbolic
