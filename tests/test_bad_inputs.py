@@ -289,6 +289,17 @@ XML = [
     ("lookat_up_parallel", '<sensor type="perspective"><transform name="to_world">\n<lookat origin="0 0 0" '
                            'target="0 1 0" up="0 1 0"/>' + MARK + "\n</transform></sensor>",
      ["parallel to the viewing direction"]),
+    ("radius_beyond_float32", '<shape type="sphere"><float name="radius" value="1e39"/></shape>' + MARK,
+     ["parameter 'radius': 1e+39 is beyond the float32 range"]),
+    ("vertices_beyond_float32", '<shape type="rectangle"><transform name="to_world"><scale value="1e39"/>'
+                                '</transform></shape>' + MARK, ["vertices beyond the float32 range"]),
+    ("sphere_beyond_float32", '<shape type="sphere"><float name="radius" value="1e20"/><transform name="to_world">'
+                              '<scale value="1e20"/></transform></shape>' + MARK,
+     ["place the sphere beyond the float32 range"]),
+    ("lookat_far_apart", '<sensor type="perspective"><transform name="to_world">\n<lookat origin="1e308 0 0" '
+                         'target="-1e308 0 0"/>' + MARK + "\n</transform></sensor>", ["too far apart"]),
+    ("transform_overflow", '<shape type="cube"><transform name="to_world">' + MARK + '\n<scale value="1e200"/>'
+                           '<scale value="1e200"/>\n</transform></shape>', ["non-finite matrix entries"]),
     ("transform_for_float", '<shape type="sphere"><transform name="radius"><scale value="2"/></transform>'
                             '</shape>' + MARK, ["parameter 'radius' must be a float, got a transform"]),
     ("unknown_param", '<shape type="sphere"><bsdf type="diffuse"><rgb name="reflectanse" value="0.5"/></bsdf>'
@@ -801,6 +812,18 @@ def test_suspicious_scenes_warn(case):
     assert len(found) == 1, [str(w.message) for w in caught]
     for w in words:
         assert w in found[0], found[0]
+
+
+def test_extreme_but_valid_inputs_load():
+    """Values near the ends of float64 load without numpy's overflow: a
+    direction of length 1e-200 (normalised), a cube scaled by 1e-300 (its
+    normals still unit vectors)."""
+    sun = load_dict(_s(sun={"type": "directional", "direction": [1e-200, 1e-200, 0.0]})).emitters[0]
+    np.testing.assert_allclose(sun.to_world[:3, 2], [2**-0.5, 2**-0.5, 0.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        box = load_dict(_s(box={"type": "cube", "to_world": np.diag([1e-300, 1e-300, 1e-300, 1.0])})).shapes[0]
+    np.testing.assert_allclose(np.linalg.norm(box.normals, axis=1), 1.0, rtol=1e-6)
 
 
 def test_corpus_size():

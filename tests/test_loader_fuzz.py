@@ -170,7 +170,7 @@ def _matrix(draw, camera=False):
     elif kind == "singular":
         m[1, 1] = 0.0
     elif kind == "huge":
-        m[:3, :3] *= draw(st.sampled_from([1e-30, 1e-13, 1e13, 1e30]))
+        m[:3, :3] *= draw(st.sampled_from([1e-300, 1e-30, 1e-13, 1e13, 1e30, 1e39, 1e300]))
     return ("transform", m.tolist())
 
 
