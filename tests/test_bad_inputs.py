@@ -517,6 +517,9 @@ XML = [
      ["32-bit integer"]),
     ("max_depth_float", _integrator("path", '<float name="max_depth" value="3"/>'),
      ["parameter 'max_depth'", "expects an integer"]),
+    ("max_depth_at_its_line", '<integrator type="path">\n<integer name="rr_depth" value="2"/>\n'
+                              '<integer name="max_depth" value="0"/>' + MARK + "\n</integrator>",
+     ["parameter 'max_depth' must be -1 (unbounded) or >= 1"]),
     ("rr_depth_zero", _integrator("path", '<integer name="rr_depth" value="0"/>'), ["parameter 'rr_depth'", ">= 1"]),
     ("integrator_unknown_param", _integrator("path", '<integer name="maxdepth" value="3"/>'),
      ["unknown parameter 'maxdepth' for 'path'"]),

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import warnings
 
 import numpy as np
@@ -590,7 +591,10 @@ class _Builder:
         try:
             _integrator_desc(None, desc)
         except SceneError as e:
-            raise SceneError(f"{node.place}: {e}") from None
+            # At the parameter's own place when the message names one.
+            named = re.search(r"parameter '([^']*)'", str(e))
+            prop = node.props.get(named.group(1)) if named else None
+            raise SceneError(f"{(prop or node).place}: {e}") from None
         return desc
 
 
