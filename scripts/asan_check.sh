@@ -27,10 +27,12 @@ if [ ! -x "$B/venv/bin/python" ]; then "$VPY" -m venv --without-pip "$B/venv"; f
 SITE=$("$B/venv/bin/python" -c "import sysconfig; print(sysconfig.get_paths()['purelib'])")
 echo "$(pwd)/$B/pkg" > "$SITE/00_asan_pkg.pth"
 "$VPY" -c "import sysconfig; print(sysconfig.get_paths()['purelib'])" > "$SITE/01_venv_site.pth"
-"$B/venv/bin/python" -c "import radiometer, sys; p = radiometer.__file__; print('instrumented radiometer:', p); sys.exit(0 if '/out/asan/' in p else 1)"
+# The sanitizer runtimes first in every process that loads the instrumented core
+# (importing radiometer loads it).
 export LD_PRELOAD="$(g++ -print-file-name=libasan.so):$(g++ -print-file-name=libubsan.so)"
 export ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:halt_on_error=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+"$B/venv/bin/python" -c "import radiometer, sys; p = radiometer.__file__; print('instrumented radiometer:', p); sys.exit(0 if '/out/asan/' in p else 1)"
 if [ "$#" -eq 0 ]; then
   set -- tests/test_loader.py tests/test_stress.py tests/test_render.py tests/test_float_range.py tests/test_effects.py
 fi
