@@ -378,36 +378,9 @@ private:
             return L;
         } else if (s == 1) {
             // Next event estimation with a fresh emitter sample.
-            PathVertex& z = cam[t - 1];
-            if (!z.connectible() || (z.type != VType::Surface && z.type != VType::Medium)) return L;
-            const Emitter* picked = pick_emitter(scene, u_pick);
-            if (!picked) return L;
-            const Emitter& e = *picked;
-            DirectSample ds = e.sample_direct(z.it.p, u_l, u_extra);
-            if (!(ds.pdf_w > 0.f) || is_black(ds.radiance)) return L;
-            Color f = scatter_value(z, ds.d, TransportMode::Radiance);
-            if (is_black(f)) return L;
-            Color tr = connection_transmittance(scene, z, ds, sampler, stats);
-            if (is_black(tr)) return L;
-            float pick = emitter_pick_prob(scene);
-            L = z.beta * f * tr * ds.radiance / (ds.pdf_w * pick);
             PathVertex y0;
-            y0.type = VType::Light;
-            y0.emitter = &e;
-            if (e.is_infinite()) {
-                y0.infinite = true;
-                Ray toward;
-                toward.o = z.it.p;
-                toward.d = ds.d;
-                y0.it.p = far_point(scene, toward);
-                y0.pdf_fwd = light_origin_pdf(scene, y0, z);
-            } else {
-                y0.it.p = ds.p;
-                y0.it.n = e.is_delta() ? Vec3(0.f) : ds.n;
-                float pdf_a = 1.f;
-                if (!e.is_delta()) pdf_a = ds.pdf_w * std::fabs(dot(ds.n, ds.d)) / (ds.dist * ds.dist);
-                y0.pdf_fwd = pick * pdf_a;
-            }
+            L = connect_emitter_sample(scene, cam[t - 1], u_pick, u_l, u_extra, sampler, stats, y0);
+            if (is_black(L)) return L;
             bool had = !light.empty();
             PathVertex saved;
             if (had)
@@ -450,34 +423,6 @@ private:
         }
         w = mis_weight(scene, s, t);
         return L;
-    }
-
-    // What a connection end v scatters towards wo, v.it.wi pointing back
-    // along its own subpath: at a medium vertex the phase function alone
-    // (the volume path measure has no cosine; pbrt-v3 sec. 16.3.1's
-    // Vertex::f), at a surface the BSDF times |cos|, adjoint with the
-    // shading-normal correction on the light subpath (common.h).
-    static Color scatter_value(const PathVertex& v, const Vec3& wo, TransportMode mode) {
-        if (v.type == VType::Medium) return Color(v.phase->eval(v.it.wi, wo));
-        BsdfContext ctx{mode};
-        Color f = v.bsdf->eval(ctx, v.it.to_local(v.it.wi), v.it.to_local(wo));
-        if (mode == TransportMode::Importance) f *= shading_correction(v.it, v.it.wi, wo);
-        return f;
-    }
-
-    // The transmittance of the connection from z (a surface or medium
-    // vertex) to ds.p: without media visibility (1 or 0); with media
-    // Scene::transmittance, starting in the medium on the side of z the
-    // connection leaves to (a medium vertex's own), Beer-Lambert per segment
-    // or ratio tracking in grids (an unbiased estimate per channel, drawing
-    // from `sampler`), 0 at any surface that is not index-matched, as
-    // volpath's next event estimation.
-    static Color connection_transmittance(const Scene& scene, const PathVertex& z, const DirectSample& ds,
-                                          Sampler& sampler, ThreadStats& stats) {
-        ++stats.shadow_rays;
-        if (!scene.features.has_media) return scene.visible(z.it, ds) ? Color(1.f) : Color(0.f);
-        int m = z.type == VType::Medium ? z.medium : Scene::medium_after(z.it, ds.d, z.medium);
-        return scene.transmittance(z.it, ds, m, stats.rays, sampler);
     }
 
     int classify(int s, int t) const { return classify_strategy(cam_ref(), light_ref(), s, t); }

@@ -355,6 +355,10 @@ Color connect_to_sensor(const Scene& scene, const PathVertex& y, ImportanceSampl
 }
 
 int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<PathVertex>& light, int s, int t) {
+    return classify_vertices(cam.data(), t, light.data(), s, true);
+}
+
+int classify_vertices(const PathVertex* cam, int t, const PathVertex* light, int s, bool light_end) {
     PathClass pc;
     int last_cam = s == 0 ? t - 2 : t - 1;
     auto push = [&pc](const PathVertex& v, bool end) {
@@ -364,8 +368,59 @@ int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<Path
             pc.push(end ? false : v.delta);
     };
     for (int i = 1; i <= last_cam; ++i) push(cam[i], i == t - 1);
-    for (int i = s - 1; i >= 1; --i) push(light[i], i == s - 1);
+    for (int i = s - 1; i >= 1; --i) push(light[i], light_end && i == s - 1);
     return pc.classify();
+}
+
+Color scatter_value(const PathVertex& v, const Vec3& wo, TransportMode mode) {
+    if (v.type == VType::Medium) return Color(v.phase->eval(v.it.wi, wo));
+    BsdfContext ctx{mode};
+    Color f = v.bsdf->eval(ctx, v.it.to_local(v.it.wi), v.it.to_local(wo));
+    if (mode == TransportMode::Importance) f *= shading_correction(v.it, v.it.wi, wo);
+    return f;
+}
+
+Color connection_transmittance(const Scene& scene, const PathVertex& z, const DirectSample& ds, Sampler& sampler,
+                               ThreadStats& stats) {
+    ++stats.shadow_rays;
+    if (!scene.features.has_media) return scene.visible(z.it, ds) ? Color(1.f) : Color(0.f);
+    int m = z.type == VType::Medium ? z.medium : Scene::medium_after(z.it, ds.d, z.medium);
+    return scene.transmittance(z.it, ds, m, stats.rays, sampler);
+}
+
+Color connect_emitter_sample(const Scene& scene, const PathVertex& z, float u_pick, Vec2 u_l, float u_extra,
+                             Sampler& sampler, ThreadStats& stats, PathVertex& y0) {
+    Color L(0.f);
+    if (!z.connectible() || (z.type != VType::Surface && z.type != VType::Medium)) return L;
+    const Emitter* picked = pick_emitter(scene, u_pick);
+    if (!picked) return L;
+    const Emitter& e = *picked;
+    DirectSample ds = e.sample_direct(z.it.p, u_l, u_extra);
+    if (!(ds.pdf_w > 0.f) || is_black(ds.radiance)) return L;
+    Color f = scatter_value(z, ds.d, TransportMode::Radiance);
+    if (is_black(f)) return L;
+    Color tr = connection_transmittance(scene, z, ds, sampler, stats);
+    if (is_black(tr)) return L;
+    float pick = emitter_pick_prob(scene);
+    L = z.beta * f * tr * ds.radiance / (ds.pdf_w * pick);
+    y0 = PathVertex();
+    y0.type = VType::Light;
+    y0.emitter = &e;
+    if (e.is_infinite()) {
+        y0.infinite = true;
+        Ray toward;
+        toward.o = z.it.p;
+        toward.d = ds.d;
+        y0.it.p = far_point(scene, toward);
+        y0.pdf_fwd = light_origin_pdf(scene, y0, z);
+    } else {
+        y0.it.p = ds.p;
+        y0.it.n = e.is_delta() ? Vec3(0.f) : ds.n;
+        float pdf_a = 1.f;
+        if (!e.is_delta()) pdf_a = ds.pdf_w * std::fabs(dot(ds.n, ds.d)) / (ds.dist * ds.dist);
+        y0.pdf_fwd = pick * pdf_a;
+    }
+    return L;
 }
 
 }  // namespace rm

@@ -140,10 +140,41 @@ Color connect_to_sensor(const Scene& scene, const PathVertex& y, ImportanceSampl
 Color transmittance_to_sensor(const Scene& scene, const Interaction& from, int medium, const ImportanceSample& is,
                               ThreadStats& stats, Sampler& sampler);
 
+// What a connection end v scatters towards wo, v.it.wi pointing back
+// along its own subpath: at a medium vertex the phase function alone
+// (the volume path measure has no cosine; pbrt-v3 sec. 16.3.1's
+// Vertex::f), at a surface the BSDF times |cos|, adjoint with the
+// shading-normal correction on the light subpath (common.h). Shared by
+// bdpt's and vcm's connections.
+Color scatter_value(const PathVertex& v, const Vec3& wo, TransportMode mode);
+
+// The transmittance of a connection from z (a surface or medium vertex)
+// to ds.p: without media visibility (1 or 0); with media
+// Scene::transmittance, starting in the medium on the side of z the
+// connection leaves to (a medium vertex's own), Beer-Lambert per segment
+// or ratio tracking in grids (an unbiased estimate per channel, drawing
+// from `sampler`), 0 at any surface that is not index-matched, as
+// volpath's next event estimation.
+Color connection_transmittance(const Scene& scene, const PathVertex& z, const DirectSample& ds, Sampler& sampler,
+                               ThreadStats& stats);
+
+// Next event estimation from camera vertex z (the s = 1 strategy of bdpt
+// and vcm) with the random numbers given: an emitter picked uniformly, a
+// point on it by light sampling. Returns z.beta f Tr Le / (p_w pick)
+// (black when z cannot connect, the sample fails or is occluded) and the
+// emitter vertex y0 with its area density (pdf_fwd) as the MIS weights
+// read it.
+Color connect_emitter_sample(const Scene& scene, const PathVertex& z, float u_pick, Vec2 u_l, float u_extra,
+                             Sampler& sampler, ThreadStats& stats, PathVertex& y0);
+
 // Effect class (DESIGN sec. 3) of strategy (s, t)'s vertex string
 // E z1 .. z_{t-1} y_{s-1} .. y1 L: connection ends scatter through smooth
 // lobes (D), walk vertices by the lobe they sampled; null boundaries are
 // no vertices. For s = 0, z_{t-1} is the emitter.
 int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<PathVertex>& light, int s, int t);
+// The same over arrays; light_end: light[s - 1] is a connection end (D);
+// false for vertex merging, where the merge point is cam[t - 1] and
+// light[s - 1] .. light[1] are walk vertices (filed by their lobes).
+int classify_vertices(const PathVertex* cam, int t, const PathVertex* light, int s, bool light_end);
 
 }  // namespace rm
