@@ -186,6 +186,27 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
         "test hook: bdpt's MIS weights (linear-time), brute-force ones and the linear-time weights' sum over "
         "each path's strategies, for the strategies of n sample pairs");
 
+    m.def(
+        "vcm_mis_check",
+        [](const Scene& scene, const IntegratorDesc& idesc, uint64_t seed, int n, int iteration, int mutation) {
+            if (!scene.committed()) throw py::value_error("vcm_mis_check: scene is not committed");
+            std::unique_ptr<Integrator> vcm = make_integrator(idesc, all_effects());
+            std::vector<float> fast, brute, sums, own_fast, own_brute;
+            std::vector<int> technique;
+            {
+                py::gil_scoped_release nogil;
+                vcm_mis_check(scene, *vcm, seed, n, iteration, mutation, fast, brute, technique, sums, own_fast,
+                              own_brute);
+            }
+            auto arr = [](const std::vector<float>& v) { return py::array_t<float>(v.size(), v.data()); };
+            return py::make_tuple(arr(fast), arr(brute), py::array_t<int>(technique.size(), technique.data()),
+                                  arr(sums), arr(own_fast), arr(own_brute));
+        },
+        py::arg("scene"), py::arg("integrator"), py::arg("seed"), py::arg("n"), py::arg("iteration") = 0,
+        py::arg("mutation") = 0,
+        "test hook: vcm's recursive MIS weights of every technique of each sampled path, the brute-force ones, "
+        "technique codes, per-path sums and the pairs' own weights");
+
     // The unused-parameter check of a factory that reads only `reads`:
     // resolves `params` for estimator `type` against its declaration, reads
     // the parameters named in `reads` through a ParamReader and reports

@@ -123,12 +123,15 @@ double VcmWeights::emission(const Scene& scene, const PathVertex* cam, const Vcm
     const PathVertex& zm = cam[t - 2];
     PathVertex e = z;
     e.type = VType::Light;
-    const double p_nee = light_origin_pdf(scene, e, zm);
+    // p_NEE and p_LE of the emitter vertex; where one is 0, the other
+    // (as nee_over_emission's ratio of 1).
+    double p_nee = light_origin_pdf(scene, e, zm);
     double p_le = p_nee;
     if (!e.infinite) {
         double a = double(emitter_pick_prob(scene)) * e.emitter->pdf_emission_a(e.it.p);
         if (a > 0.0) p_le = a;
     }
+    if (!(p_nee > 0.0)) p_nee = p_le;
     const double qm = h(remap0(emitter_pdf_to(scene, e, zm)));
     // Partial camera weight (eq. (43)); the light side has none (eq. (42)).
     const double wc = h(p_nee) * crec[t - 1].dvcm + h(p_le) * qm * crec[t - 1].dvc;
@@ -142,7 +145,7 @@ double VcmWeights::nee(const Scene& scene, const PathVertex* cam, const VcmMis* 
     const double p_nee = y0.pdf_fwd;
     // eq. (44): the camera subpath hitting the emitter instead.
     double wl = 0.0;
-    if (!y0.emitter->is_delta() && p_nee > 0.0) wl = h(double(pdf_to(scene, z, &zm, y0)) / p_nee);
+    if (!y0.emitter->is_delta() && p_nee > 0.0) wl = h(remap0(pdf_to(scene, z, &zm, y0)) / p_nee);
     // eq. (45): the techniques with more light vertices, whose y_0 has the
     // light walk's density p_LE (1 / m each).
     const double m = h(double(nee_over_emission(scene, y0, z)));

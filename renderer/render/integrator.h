@@ -207,6 +207,17 @@ std::unique_ptr<Integrator> make_integrator(const IntegratorDesc& desc, const Ef
 void bdpt_mis_check(const Scene& scene, const Integrator& bdpt, uint64_t seed, int n, std::vector<float>& fast,
                     std::vector<float>& brute, std::vector<float>& sums, std::vector<int>& strategy);
 
+// Test hook of vcm and bpm (estimators/vcm_mis_check.cpp): for the full
+// paths of n random sample pairs, every technique's weight as the renderer
+// computes it (fast) and from full-path densities (brute), its code
+// (connection: 1000 s + t; merge at x_i: 500000 + 1000 i + t), each path's
+// sum of fast weights, and the renderer's weight of the pair's own
+// connection on its walked subpaths beside the brute one; `mutation` > 0
+// breaks one quantity (the test's power check).
+void vcm_mis_check(const Scene& scene, const Integrator& vcm, uint64_t seed, int n, int iteration, int mutation,
+                   std::vector<float>& fast, std::vector<float>& brute, std::vector<int>& technique,
+                   std::vector<float>& sums, std::vector<float>& own_fast, std::vector<float>& own_brute);
+
 // Power heuristic with beta = 2 (Veach 1997, eq. 9.13), for one sample per strategy.
 inline float mis_power(float pdf_a, float pdf_b) {
     float a = pdf_a * pdf_a, b = pdf_b * pdf_b;
