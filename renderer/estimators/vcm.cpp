@@ -24,11 +24,13 @@
 //      with the light vertices within r (vcm, bpm; ppm at its first
 //      non-delta vertex only, weight 1).
 // Radius: r_i = r_1 i^((alpha - 1) / 2) for iteration i = 1, 2, .. (the
-// VCM paper's sec. 5.1 schedule; SmallVCM's RunIteration), r_1 = radius
-// times the scene's bounding-sphere radius; alpha in (0, 1) makes the
-// variance and bias of the merges vanish together (Knaus and Zwicker 2011,
-// sec. 4; with alpha = 2/3 their optimal rate). The image is the mean of
-// the iterations' estimates.
+// schedule of Georgiev et al. 2012, as SmallVCM's RunIteration computes it:
+// radius / (iteration + 1)^(0.5 (1 - alpha))); Knaus and Zwicker 2011
+// derive the same decay from r_{i+1}^2 / r_i^2 = (i + alpha) / (i + 1),
+// whose product behaves as i^(alpha - 1); r_1 = radius times the scene's
+// bounding-sphere radius. With alpha in (0, 1) the variance and the bias
+// of the merges vanish together. The image is the mean of the iterations'
+// estimates.
 //
 // The camera vertex: SmallVCM initialises the camera subpath's d^VCM to
 // n_L / p_cam (the light-path count over the camera's per-pixel density),
@@ -72,8 +74,9 @@ void VcmWeights::light_update(const Scene& scene, const PathVertex* path, int n,
     const PathVertex& y = path[n];
     VcmMis& r = rec[n];
     if (n == 0) {
-        // y_0 (tech. rep. eqs. (31)-(33)): d^VCM = 1 / p->_0 when the camera
-        // can hit the emitter (s = 0), no technique before it.
+        // y_0 (tech. rep. eqs. (31)-(33); delta lights, which the camera
+        // cannot hit, eqs. (48)-(50)): d^VCM = 1 / p->_0 when the camera can
+        // hit the emitter (s = 0), no technique before it.
         r.dvcm = (vc && !y.emitter->is_delta()) ? 1.0 / h(remap0(y.pdf_fwd)) : 0.0;
         r.dvc = r.dvm = 0.0;
         return;
@@ -81,7 +84,10 @@ void VcmWeights::light_update(const Scene& scene, const PathVertex* path, int n,
     const PathVertex& prev = path[n - 1];
     const double pf = h(remap0(y.pdf_fwd));
     // The technique that connects y_{n-2} y_{n-1} (its d^VCM) needs y_{n-1}
-    // non-delta; merging at y_{n-1} too.
+    // non-delta; merging at y_{n-1} too. After a delta lobe at y_{n-1} only
+    // the d^VC, d^VM chains carry on (eqs. (53)-(55)): its two densities
+    // from y_{n-1} (pdf_fwd of y_n, pdf_rev of y_{n-2}) are the delta's,
+    // stored as 0 by the walk and counted 1 (remap0, as bdpt).
     const double vcm_prev = prev.delta ? 0.0 : rec[n - 1].dvcm;
     const double rev = n >= 2 ? h(remap0(path[n - 2].pdf_rev)) : 0.0;
     const bool merge_prev = vm && n >= 2 && vcm_mergeable(prev);
@@ -112,9 +118,9 @@ void VcmWeights::camera_update(const PathVertex* cam, int j, VcmMis* rec) const 
     const double vcm_prev = prev.delta ? 0.0 : rec[j - 1].dvcm;
     const double rev = j >= 3 ? h(remap0(cam[j - 2].pdf_rev)) : 0.0;
     const bool merge_prev = vm && vcm_mergeable(prev);
-    r.dvcm = (vc && !prev.delta) ? 1.0 / pf : 0.0;                                          // eq. (34)
-    r.dvc = (vcm_prev + rev * rec[j - 1].dvc + (merge_prev ? h(eta) : 0.0)) / pf;          // eq. (35)
-    r.dvm = (vcm_prev / h(eta) + rev * rec[j - 1].dvm + (merge_prev ? 1.0 : 0.0)) / pf;    // eq. (36)
+    r.dvcm = (vc && !prev.delta) ? 1.0 / pf : 0.0;                                       // eq. (34)
+    r.dvc = (vcm_prev + rev * rec[j - 1].dvc + (merge_prev ? h(eta) : 0.0)) / pf;        // eq. (35)
+    r.dvm = (vcm_prev / h(eta) + rev * rec[j - 1].dvm + (merge_prev ? 1.0 : 0.0)) / pf;  // eq. (36)
 }
 
 double VcmWeights::emission(const Scene& scene, const PathVertex* cam, const VcmMis* crec, int t) const {
@@ -163,9 +169,9 @@ double VcmWeights::connect(const Scene& scene, const PathVertex* cam, const VcmM
     const PathVertex& ym = light[s - 2];
     const PathVertex& z = cam[t - 1];
     const PathVertex& zm = cam[t - 2];
-    const double pr1 = remap0(pdf_to(scene, z, &zm, y));   // p<-_{s-1}
-    const double pr2 = remap0(pdf_to(scene, y, &z, ym));   // p<-_{s-2}
-    const double qf1 = remap0(pdf_to(scene, y, &ym, z));   // q->_{t-1}
+    const double pr1 = remap0(pdf_to(scene, z, &zm, y));  // p<-_{s-1}
+    const double pr2 = remap0(pdf_to(scene, y, &z, ym));  // p<-_{s-2}
+    const double qf1 = remap0(pdf_to(scene, y, &ym, z));  // q->_{t-1}
     // eq. (40)
     const double wl = h(pr1) * (lrec[s - 1].dvcm + h(pr2) * lrec[s - 1].dvc + (vm ? h(eta) : 0.0));
     // eq. (41)
@@ -181,13 +187,13 @@ double VcmWeights::light_trace(const Scene& scene, const PathVertex& z0, const P
     const PathVertex& ym = light[s - 2];
     const double pr1 = remap0(film_pixels * camera_pdf_a(scene, z0, y));  // the camera's per-pixel density of y
     const double pr2 = remap0(pdf_to(scene, y, &z0, ym));
-    // SmallVCM's ConnectToCamera: Mis(cameraPdfA / n_L) times the eq. (40) bracket.
+    // eq. (46): h(p_cam / n_L), light tracing's n_L samples; the camera side is 0 (eq. (47)).
     const double wl = h(pr1 / n_light) * (lrec[s - 1].dvcm + h(pr2) * lrec[s - 1].dvc + (vm ? h(eta) : 0.0));
     return 1.0 / (1.0 + wl);
 }
 
-double VcmWeights::merge(const Scene& scene, const PathVertex* cam, const VcmMis* crec, int t,
-                         const PathVertex* light, const VcmMis* lrec, int i) const {
+double VcmWeights::merge(const Scene& scene, const PathVertex* cam, const VcmMis* crec, int t, const PathVertex* light,
+                         const VcmMis* lrec, int i) const {
     const PathVertex& ym = light[i - 1];
     const PathVertex& z = cam[t - 1];
     const PathVertex& zm = cam[t - 2];
@@ -225,8 +231,7 @@ std::vector<ParamSpec> shared_params(bool mis) {
         ParamSpec::integer("light_paths", 0, "light subpaths per iteration")
             .at_least(1)
             .with_special(int64_t(0), "the pixel count"),
-        ParamSpec::string("range_search", "hash_grid", "the merge queries' structure")
-            .one_of({"hash_grid", "kd_tree"}),
+        ParamSpec::string("range_search", "hash_grid", "the merge queries' structure").one_of({"hash_grid", "kd_tree"}),
     };
     if (mis) {
         v.push_back(ParamSpec::string("mis", "power", "MIS weights: the power or balance heuristic")

@@ -29,7 +29,7 @@ namespace rm {
 namespace {
 
 struct Full {
-    std::vector<PathVertex> x;  // x_0 (light) .. x_k (camera)
+    std::vector<PathVertex> x;   // x_0 (light) .. x_k (camera)
     std::vector<double> pl, pc;  // densities from the light side, from the camera side
     double p_le = 1, p_nee = 1;
     int k = 0;
@@ -58,8 +58,8 @@ Full full_path(const Scene& scene, const VcmWeights& w, const std::vector<PathVe
     }
     for (int i = 0; i < k; ++i) {
         if (x[i + 1].delta) continue;
-        double p = i == k - 1 ? w.film_pixels * camera_pdf_a(scene, x[k], x[k - 1])
-                              : pdf_to(scene, x[i + 1], &x[i + 2], x[i]);
+        double p =
+            i == k - 1 ? w.film_pixels * camera_pdf_a(scene, x[k], x[k - 1]) : pdf_to(scene, x[i + 1], &x[i + 2], x[i]);
         f.pc[i] = p != 0.0 ? p : 1.0;
     }
     const float pick = emitter_pick_prob(scene);
