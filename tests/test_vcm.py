@@ -45,7 +45,7 @@ CONFIGS = {"vcm": {"type": "vcm", "radius": 0.2}, "vcm-default": {"type": "vcm"}
            "bpm": {"type": "bpm", "radius": 0.2}, "vcm-no-merging": {"type": "vcm", "merging": False}}
 
 
-@pytest.mark.parametrize("mis", ["power", "balance"])
+@pytest.mark.parametrize("mis", ["power", "balance", "uniform"])
 @pytest.mark.parametrize("config", list(CONFIGS))
 @pytest.mark.parametrize("which", list(SCENES))
 def test_mis_weights_match_brute_force(which, config, mis):

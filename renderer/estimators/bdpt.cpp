@@ -111,9 +111,8 @@ std::unique_ptr<Integrator> make_bdpt(ParamReader& p);
         max_depth_param().described("longest path in segments (s + t - 1)"),
         rr_depth_param().described("subpath depth (segments) from which Russian roulette may stop a subpath"),
         hide_emitters_param(),
-        ParamSpec::string("mis", "power", "MIS weights: the power or balance heuristic, or uniform weights")
-            .one_of({"power", "balance", "uniform"}),
-        ParamSpec::real("beta", 2.0, "the power heuristic's exponent (Veach 1997, eq. 9.13)").greater_than(0),
+        mis_param(),
+        mis_beta_param(),
         strategy_images_param(),
     };
     e.caps.media = true;

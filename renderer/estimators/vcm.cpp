@@ -234,10 +234,8 @@ std::vector<ParamSpec> shared_params(bool mis) {
         ParamSpec::string("range_search", "hash_grid", "the merge queries' structure").one_of({"hash_grid", "kd_tree"}),
     };
     if (mis) {
-        v.push_back(ParamSpec::string("mis", "power", "MIS weights: the power or balance heuristic")
-                        .one_of({"power", "balance"}));
-        v.push_back(
-            ParamSpec::real("beta", 2.0, "the power heuristic's exponent (Veach 1997, eq. 9.13)").greater_than(0));
+        v.push_back(mis_param());
+        v.push_back(mis_beta_param());
     }
     return v;
 }
@@ -374,8 +372,10 @@ public:
           light_paths_(p.get_int("light_paths")),
           range_(p.get_string("range_search") == "kd_tree" ? RangeSearch::KdTree : RangeSearch::HashGrid) {
         if (mode != Mode::Ppm) {
-            balance_ = p.get_string("mis") == "balance";
-            beta_ = p.get_float("beta");
+            const std::string mis = p.get_string("mis");
+            balance_ = mis == "balance";
+            const float beta = p.get_float("beta");
+            beta_ = mis == "uniform" ? 0.f : beta;  // h(x) = x^0: uniform weights
         }
         vc_ = mode == Mode::Vcm;
         vm_ = true;
@@ -494,10 +494,8 @@ public:
         sum_.assign(px * kNumEffects * 3, 0.0);
         tot_.assign(px * 3, 0.0);
         tot_sq_.assign(px * 3, 0.0);
-        norm_x_.resize(W_);
-        norm_y_.resize(H_);
-        for (int x = 0; x < W_; ++x) norm_x_[x] = filter_.integral(-float(x) - 0.5f, float(W_ - x) - 0.5f);
-        for (int y = 0; y < H_; ++y) norm_y_[y] = filter_.integral(-float(y) - 0.5f, float(H_ - y) - 0.5f);
+        norm_x_ = splat_norms(filter_, W_);
+        norm_y_ = splat_norms(filter_, H_);
         pms_.name = v.type;
         pms_.bytes_per_photon = double(sizeof(PathVertex) + sizeof(VcmMis));
     }
@@ -658,24 +656,12 @@ private:
         }
     }
 
-    // A light-tracing splat over the pixels whose filter covers it (the
-    // weights of light_render.cpp's SplatFilm).
+    // A light-tracing splat over the pixels whose filter covers it (film.h).
     void splat(const LtSplat& sp, double scale) {
-        const float rad = filter_.radius();
-        float x = sp.film.x, y = sp.film.y;
-        int py0 = std::max(0, int(std::ceil(y - 0.5f - rad))), py1 = std::min(H_ - 1, int(std::floor(y - 0.5f + rad)));
-        int px0 = std::max(0, int(std::ceil(x - 0.5f - rad))), px1 = std::min(W_ - 1, int(std::floor(x - 0.5f + rad)));
-        for (int py = py0; py <= py1; ++py) {
-            double wy = filter_.eval(y - float(py) - 0.5f) / norm_y_[py];
-            if (!(wy > 0)) continue;
-            for (int px = px0; px <= px1; ++px) {
-                double wx = filter_.eval(x - float(px) - 0.5f) / norm_x_[px];
-                if (!(wx > 0)) continue;
-                size_t p = size_t(py) * size_t(W_) + size_t(px);
-                double* e = &iter_[(p * kNumEffects + sp.effect) * 3];
-                for (int c = 0; c < 3; ++c) e[c] += wx * wy * scale * double(sp.value[c]);
-            }
-        }
+        for_each_splat_pixel(filter_, norm_x_, norm_y_, W_, 0, H_, sp.film.x, sp.film.y, [&](size_t p, double wgt) {
+            double* e = &iter_[(p * kNumEffects + sp.effect) * 3];
+            for (int c = 0; c < 3; ++c) e[c] += wgt * scale * double(sp.value[c]);
+        });
     }
 
     void camera_row(PassLoop& loop, int it, int y, const VcmWeights& w, int nl, float r2, ThreadStats& stats) {

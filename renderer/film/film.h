@@ -4,6 +4,8 @@
 // variance is the plain sample variance of independent samples
 // (Ernst et al. 2006, "Filter Importance Sampling").
 #pragma once
+#include <algorithm>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -48,6 +50,38 @@ private:
     int find_bin(double target) const;
     double cdf_at(double x) const;
 };
+
+// Splatting a sample at a continuous film position (light tracing): each
+// pixel (px, py) whose filter footprint covers (x, y) gets the weight
+// f(x - cx) f(y - cy) / (N_x N_y), (cx, cy) its centre and N the filter's
+// integral over the footprint's part inside the film (splat_norms), so
+// that the expectation is the estimate of the camera-side estimators,
+// whose filter importance sampling draws film positions with density f / N,
+// borders included. for_each_splat_pixel calls fn(pixel, weight) for the
+// pixels of rows [y0, y1) of a w-wide film. Shared by the light driver
+// (light_render.cpp) and vcm's light tracing.
+inline std::vector<double> splat_norms(const FilterSampler& filter, int n) {
+    std::vector<double> norm(static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i) norm[size_t(i)] = filter.integral(-float(i) - 0.5f, float(n - i) - 0.5f);
+    return norm;
+}
+template <class Fn>
+void for_each_splat_pixel(const FilterSampler& filter, const std::vector<double>& norm_x,
+                          const std::vector<double>& norm_y, int w, int y0, int y1, float x, float y, Fn fn) {
+    const float r = filter.radius();
+    int py0 = std::max(y0, int(std::ceil(y - 0.5f - r))), py1 = std::min(y1 - 1, int(std::floor(y - 0.5f + r)));
+    if (py0 > py1) return;
+    int px0 = std::max(0, int(std::ceil(x - 0.5f - r))), px1 = std::min(w - 1, int(std::floor(x - 0.5f + r)));
+    for (int py = py0; py <= py1; ++py) {
+        double wy = filter.eval(y - float(py) - 0.5f) / norm_y[size_t(py)];
+        if (!(wy > 0)) continue;
+        for (int px = px0; px <= px1; ++px) {
+            double wx = filter.eval(x - float(px) - 0.5f) / norm_x[size_t(px)];
+            if (!(wx > 0)) continue;
+            fn(size_t(py) * size_t(w) + size_t(px), wx * wy);
+        }
+    }
+}
 
 class Film {
 public:

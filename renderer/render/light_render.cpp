@@ -80,15 +80,12 @@ public:
         effects_.assign(n * kNumEffects * 3, 0.0);
         strat_.assign(n * size_t(n_strat_) * 6, 0.0);
         batches_.assign(n * kBatches * 3, 0.0);
-        norm_x_.resize(w);
-        norm_y_.resize(h);
-        for (int x = 0; x < w; ++x) norm_x_[x] = filter_.integral(-float(x) - 0.5f, float(w - x) - 0.5f);
-        for (int y = 0; y < h; ++y) norm_y_[y] = filter_.integral(-float(y) - 0.5f, float(h - y) - 0.5f);
+        norm_x_ = splat_norms(filter_, w);
+        norm_y_ = splat_norms(filter_, h);
     }
 
     // Adds the items' splats, in item order, to the rows [y0, y1).
     void merge(const std::vector<std::vector<ItemSplat>>& items, size_t n_items, int y0, int y1) {
-        const float r = filter_.radius();
         for (size_t i = 0; i < n_items; ++i)
             for (const ItemSplat& is : items[i]) {
                 if (is.s.pixel >= 0) {  // a camera sample: its own pixel only (integrator.h)
@@ -104,30 +101,17 @@ public:
                     add_strategy(p, is.s, 1.0);
                     continue;
                 }
-                float x = is.s.film.x, y = is.s.film.y;
-                int py0 = std::max(y0, int(std::ceil(y - 0.5f - r))),
-                    py1 = std::min(y1 - 1, int(std::floor(y - 0.5f + r)));
-                if (py0 > py1) continue;
-                int px0 = std::max(0, int(std::ceil(x - 0.5f - r))),
-                    px1 = std::min(w_ - 1, int(std::floor(x - 0.5f + r)));
-                for (int py = py0; py <= py1; ++py) {
-                    double wy = filter_.eval(y - float(py) - 0.5f) / norm_y_[py];
-                    if (!(wy > 0)) continue;
-                    for (int px = px0; px <= px1; ++px) {
-                        double wx = filter_.eval(x - float(px) - 0.5f) / norm_x_[px];
-                        if (!(wx > 0)) continue;
-                        double wgt = wx * wy;
-                        size_t p = size_t(py) * size_t(w_) + size_t(px);
-                        double* e = &effects_[(p * kNumEffects + is.s.effect) * 3];
-                        double* b = &batches_[(p * kBatches + is.batch) * 3];
-                        for (int c = 0; c < 3; ++c) {
-                            double v = wgt * double(is.s.value[c]);
-                            e[c] += v;
-                            b[c] += v;
-                        }
-                        add_strategy(p, is.s, wgt);
-                    }
-                }
+                for_each_splat_pixel(filter_, norm_x_, norm_y_, w_, y0, y1, is.s.film.x, is.s.film.y,
+                                     [&](size_t p, double wgt) {
+                                         double* e = &effects_[(p * kNumEffects + is.s.effect) * 3];
+                                         double* b = &batches_[(p * kBatches + is.batch) * 3];
+                                         for (int c = 0; c < 3; ++c) {
+                                             double v = wgt * double(is.s.value[c]);
+                                             e[c] += v;
+                                             b[c] += v;
+                                         }
+                                         add_strategy(p, is.s, wgt);
+                                     });
             }
     }
 

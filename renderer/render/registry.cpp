@@ -198,6 +198,15 @@ ParamSpec hide_emitters_param() {
     return ParamSpec::boolean("hide_emitters", false, "directly visible emitters appear black");
 }
 
+ParamSpec mis_param() {
+    return ParamSpec::string("mis", "power", "MIS weights: the power or balance heuristic, or uniform weights")
+        .one_of({"power", "balance", "uniform"});
+}
+
+ParamSpec mis_beta_param() {
+    return ParamSpec::real("beta", 2.0, "the power heuristic's exponent (Veach 1997, eq. 9.13)").greater_than(0);
+}
+
 ParamSpec strategy_images_param() {
     return ParamSpec::integer("strategy_images", 0,
                               "keep one image per strategy (s, t) of path depth s + t - 1 up to this "

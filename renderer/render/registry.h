@@ -106,6 +106,10 @@ ParamSpec max_depth_param();
 ParamSpec rr_depth_param();
 ParamSpec hide_emitters_param();
 ParamSpec strategy_images_param();
+// The MIS heuristic of the bidirectional estimators (bdpt, vcm, bpm) and
+// the power heuristic's exponent.
+ParamSpec mis_param();
+ParamSpec mis_beta_param();
 
 struct EstimatorInfo;
 
