@@ -177,16 +177,18 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
                           seconds=r["seconds"], stats=stats, checkpoints=list(r["checkpoints"]), integrator=spec,
                           seed=int(seed), strategies=dict(r["strategies"]),
                           strategies_unweighted=dict(r["strategies_unweighted"]))
-    if spec["type"] == "sppm":
+    if spec["type"] in ("sppm", "ppm"):
         mixed = _mixed_bsdfs(scene.desc)
         if mixed:
-            # A known limit (renderer/estimators/sppm.cpp): the visible point is
-            # the first vertex with a smooth lobe, so a BSDF that also has a
-            # delta lobe (plastic's coat) never passes the camera path on: its
-            # reflections (the `specular` class there) are missing at any budget.
-            msg = (f"sppm: BSDF(s) {', '.join(mixed)} have a delta and a smooth lobe; sppm stops camera paths at "
+            # A known limit (renderer/estimators/sppm.cpp, vcm.cpp's ppm): the
+            # visible point is the first vertex with a smooth lobe, so a BSDF
+            # that also has a delta lobe (plastic's coat) never passes the
+            # camera path on: its reflections (the `specular` class there) are
+            # missing at any budget.
+            est = spec["type"]
+            msg = (f"{est}: BSDF(s) {', '.join(mixed)} have a delta and a smooth lobe; {est} stops camera paths at "
                    "them, so what their delta lobe reflects is missing (not consistent there); use photonmapper, "
-                   "bdpt or path for these")
+                   "bdpt, vcm or path for these")
             stats.setdefault("warnings", []).append(msg)
             import warnings
 
