@@ -149,6 +149,33 @@ def test_merging_bias_shrinks_with_iterations():
         assert b2[0.999, 16] / b2[0.999, 256] < 1.2, f"{est}: power: radius kept, squared bias {b2}"
 
 
+def test_vcm_caustic_bias_shrinks_with_iterations():
+    """vcm on glass_sphere_caustic (its Mitsuba reference; the caustic under
+    the sphere is made by merges), radius 0.02, 8192 light paths per
+    iteration: the squared bias (as above, against the reference with its
+    variance) at 8 and 128 iterations. Measured (seeds 3, 4): ratio 3.7 and
+    2.3 at alpha 0.75 (|bias| ~ N^-0.24 over 8, 32, 128: the O(r^2) bias of
+    a smooth caustic, mean r_i^2 ~ N^-0.25), 1.07 and 0.92 with the radius
+    kept (alpha 0.999). Asked: above 1.5, and below 1.3 with the radius
+    kept (power)."""
+    from radiometer.reference_scenes import references, registry
+
+    from test_estimator_matrix import _config
+
+    spec, cfg = _config("glass_sphere_caustic")
+    scene = rm.load_file(spec.xml, **cfg["params"])
+    ref = references.reference("glass_sphere_caustic", cfg["params"])
+    md = registry.max_depth(spec, cfg["params"])
+    b2 = {}
+    for alpha, n in ((0.75, 8), (0.75, 128), (0.999, 8), (0.999, 128)):
+        integ = {"type": "vcm", "radius": 0.02, "alpha": alpha, "light_paths": 8192, "max_depth": md}
+        r = rm.render(scene, integrator=integ, spp=n, seed=3)
+        b2[alpha, n] = float(np.mean((r.image - ref.image) ** 2 - r.variance - ref.variance))
+    assert b2[0.75, 128] > 0, b2
+    assert b2[0.75, 8] / b2[0.75, 128] > 1.5, f"squared bias at 8 and 128 iterations: {b2}"
+    assert b2[0.999, 8] / b2[0.999, 128] < 1.3, f"power: radius kept, squared bias {b2}"
+
+
 @pytest.mark.parametrize("est", ["vcm", "bpm", "ppm"])
 def test_same_bytes_whatever_threads_and_effects_sum(est):
     scene = small_scene(AREA, res=16, extra=GLOSSY)
