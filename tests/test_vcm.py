@@ -215,7 +215,8 @@ def test_effects_subset_renders_its_classes():
 
 @pytest.mark.parametrize("param,value", [("radius", 0.0), ("radius", -0.1), ("radius", math.inf),
                                          ("radius", math.nan), ("radius", 5.0), ("alpha", 0.0), ("alpha", 1.0),
-                                         ("alpha", 1.5), ("light_paths", -3)])
+                                         ("alpha", 1.5), ("light_paths", -3),
+                                         ("light_paths", 1 << 30)])
 @pytest.mark.parametrize("est", ["vcm", "bpm", "ppm"])
 def test_bad_parameters_refused(est, param, value):
     scene = small_scene(AREA, res=8)

@@ -228,8 +228,12 @@ std::vector<ParamSpec> shared_params(bool mis) {
         ParamSpec::real("alpha", 0.75, "radius reduction: r_i = r_1 i^((alpha - 1) / 2) (Georgiev et al. 2012)")
             .greater_than(0)
             .less_than(1),
+        // at most 2^24: every vertex of an iteration's light paths is kept
+        // (192 bytes each with its quantities, 4 to 5 per path on the
+        // Cornell box, measured: about 15 GiB at the limit)
         ParamSpec::integer("light_paths", 0, "light subpaths per iteration")
             .at_least(1)
+            .at_most(1 << 24)
             .with_special(int64_t(0), "the pixel count"),
         ParamSpec::string("range_search", "hash_grid", "the merge queries' structure").one_of({"hash_grid", "kd_tree"}),
     };
