@@ -20,6 +20,8 @@ def strategy_pyramid(result, path, weighted: bool = False, exposure: float = 0.0
     from ..tonemap import to_srgb
 
     images = result.strategies if weighted else result.strategies_unweighted
+    # the connections (s, t); vcm's merges, keyed ("merge", i, t), are not in the pyramid
+    images = {k: v for k, v in images.items() if len(k) == 2}
     if not images:
         raise ValueError("strategy_pyramid: the result has no per-strategy images; render with the integrator "
                          "parameter strategy_images = D (bdpt or ptracer)")

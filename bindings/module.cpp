@@ -587,6 +587,12 @@ PYBIND11_MODULE(_core, m) {
                     strat[key] = to_numpy(std::move(out.strategies[k]), {H, W, 3});
                     strat_u[key] = to_numpy(std::move(out.strategies_unweighted[k]), {H, W, 3});
                 }
+            // vcm's merges, keyed ("merge", i, t), in the same dicts: all sum to the image.
+            for (size_t k = 0; k < out.merges.size(); ++k) {
+                py::tuple key = py::make_tuple("merge", out.merge_keys[k][0], out.merge_keys[k][1]);
+                strat[key] = to_numpy(std::move(out.merges[k]), {H, W, 3});
+                strat_u[key] = to_numpy(std::move(out.merges_unweighted[k]), {H, W, 3});
+            }
             r["strategies"] = strat;
             r["strategies_unweighted"] = strat_u;
             r["spp"] = out.spp;

@@ -202,6 +202,28 @@ def test_effect_classes_against_the_mirror_caustic(est):
     check_mirror_caustic(est, 256)
 
 
+@pytest.mark.parametrize("est", ["vcm", "bpm", "ppm"])
+def test_technique_images_sum_to_the_image(est, tmp_path):
+    """strategy_images = D (D = max_depth): one image per technique, the
+    connections (s, t) and the merges ("merge", i, t) of light vertex y_i at
+    camera vertex z_{t-1}; they sum to the image, each has its depth's keys
+    only, asking for them changes no byte of the image, and the strategy
+    pyramid draws the connections."""
+    from radiometer.analysis.strategies import strategy_pyramid
+
+    scene = small_scene(AREA, res=16, extra=GLOSSY)
+    integ = {"type": est, "max_depth": 4, "radius": 0.05}
+    r = rm.render(scene, integrator={**integ, "strategy_images": 4}, spp=4, seed=1)
+    merges = sorted(k for k in r.strategies if k[0] == "merge")
+    assert merges == sorted(("merge", i, d + 1 - i) for d in range(2, 5) for i in range(1, d))
+    assert len(r.strategies) == 14 + 6 and set(r.strategies) == set(r.strategies_unweighted)
+    np.testing.assert_allclose(sum(r.strategies.values()), r.image, rtol=1e-5, atol=1e-6)
+    assert sum(float(r.strategies[k].sum()) for k in merges) > 0
+    plain = rm.render(scene, integrator=integ, spp=4, seed=1)
+    assert plain.image.tobytes() == r.image.tobytes()
+    assert strategy_pyramid(r, tmp_path / "p.png").exists()
+
+
 def test_effects_subset_renders_its_classes():
     """An effects subset renders the classes it keeps: vcm's caustic alone
     equals the caustic class of the full render (same seed: the same paths;

@@ -236,6 +236,9 @@ std::vector<ParamSpec> shared_params(bool mis) {
             .at_most(1 << 24)
             .with_special(int64_t(0), "the pixel count"),
         ParamSpec::string("range_search", "hash_grid", "the merge queries' structure").one_of({"hash_grid", "kd_tree"}),
+        strategy_images_param().described(
+            "keep one image per technique up to this path depth: connections (s, t) and merges (i, t) of light "
+            "vertex y_i at camera vertex z_{t-1}"),
     };
     if (mis) {
         v.push_back(mis_param());
@@ -358,7 +361,17 @@ struct LtSplat {
     Vec2 film;
     int effect;
     Color value;
+    int tech;      // its technique image (-1: none)
+    float weight;  // its MIS weight
 };
+
+// The technique images of depth <= D: the connections in strategy_index
+// order, then the merges (i, t) of depth d = i + t - 1, i = 1 .. d - 1.
+inline int merge_index(int i, int t, int D) {
+    int d = i + t - 1;
+    return num_strategies(D) + (d - 1) * (d - 2) / 2 + (i - 1);
+}
+inline int num_techniques(int D) { return D > 0 ? num_strategies(D) + D * (D - 1) / 2 : 0; }
 
 }  // namespace
 
@@ -374,7 +387,8 @@ public:
           radius_(p.get_float("radius")),
           alpha_(p.get_float("alpha")),
           light_paths_(p.get_int("light_paths")),
-          range_(p.get_string("range_search") == "kd_tree" ? RangeSearch::KdTree : RangeSearch::HashGrid) {
+          range_(p.get_string("range_search") == "kd_tree" ? RangeSearch::KdTree : RangeSearch::HashGrid),
+          tech_depth_(p.get_int("strategy_images")) {
         if (mode != Mode::Ppm) {
             const std::string mis = p.get_string("mis");
             balance_ = mis == "balance";
@@ -479,6 +493,7 @@ private:
     float radius_, alpha_;
     int light_paths_;
     RangeSearch range_;
+    int tech_depth_;  // technique images up to this depth (0: none)
     bool balance_ = false;
     float beta_ = 2.f;
     bool vc_ = true, vm_ = true;
@@ -500,6 +515,9 @@ public:
         tot_sq_.assign(px * 3, 0.0);
         norm_x_ = splat_norms(filter_, W_);
         norm_y_ = splat_norms(filter_, H_);
+        n_tech_ = num_techniques(v.tech_depth_);
+        tech_iter_.assign(px * size_t(n_tech_) * 6, 0.0);
+        tech_sum_.assign(px * size_t(n_tech_) * 6, 0.0);
         pms_.name = v.type;
         pms_.bytes_per_photon = double(sizeof(PathVertex) + sizeof(VcmMis));
     }
@@ -536,6 +554,29 @@ public:
 
     void finish(RenderOutput& out) const override {
         if (v_.vm_) out.photon_maps.push_back(pms_);
+        if (n_tech_ == 0) return;
+        // The technique images (weighted, unweighted) over the iterations kept.
+        const size_t px = size_t(W_) * size_t(H_);
+        const int D = v_.tech_depth_;
+        auto image = [&](int k, int off) {
+            std::vector<float> img(3 * px, 0.f);
+            if (iterations_ > 0)
+                for (size_t p = 0; p < px; ++p)
+                    for (int c = 0; c < 3; ++c)
+                        img[3 * p + c] = float(tech_sum_[(p * n_tech_ + k) * 6 + off + c] / iterations_);
+            return img;
+        };
+        for (int k = 0; k < num_strategies(D); ++k) {
+            out.strategies.push_back(image(k, 0));
+            out.strategies_unweighted.push_back(image(k, 3));
+        }
+        for (int d = 2; d <= D; ++d)
+            for (int i = 1; i < d; ++i) {
+                int k = merge_index(i, d + 1 - i, D);
+                out.merge_keys.push_back({i, d + 1 - i});
+                out.merges.push_back(image(k, 0));
+                out.merges_unweighted.push_back(image(k, 3));
+            }
     }
 
 private:
@@ -615,6 +656,7 @@ private:
         pms_.build_seconds += std::chrono::duration<double>(Clock::now() - tb).count();
         // 3. Camera subpaths, row by row, into this iteration's buffer.
         std::fill(iter_.begin(), iter_.end(), 0.0);
+        std::fill(tech_iter_.begin(), tech_iter_.end(), 0.0);
         auto row = [&](size_t y, int th) { camera_row(loop, it, int(y), w, nl, r2, loop.stats(th)); };
         if (!loop.parallel_for(size_t(H_), row)) return false;
         // 4. Light tracing's splats, in item order, and the commit.
@@ -633,6 +675,8 @@ private:
                 tot_[3 * p + c] += t;
                 tot_sq_[3 * p + c] += t * t;
             }
+        for (size_t k = 0; k < tech_iter_.size(); ++k) tech_sum_[k] += tech_iter_[k];
+        ++iterations_;
         return true;
     }
 
@@ -656,7 +700,8 @@ private:
             double wgt = w.light_trace(scene_, z0, light.data(), rec.data(), s);
             Color value = L * float(wgt);
             if (!keep_finite(stats, value)) continue;
-            out.push_back({is.film, effect, value});
+            int tech = s <= v_.tech_depth_ ? strategy_index(s, 1) : -1;
+            out.push_back({is.film, effect, value, tech, float(wgt)});
         }
     }
 
@@ -665,6 +710,7 @@ private:
         for_each_splat_pixel(filter_, norm_x_, norm_y_, W_, 0, H_, sp.film.x, sp.film.y, [&](size_t p, double wgt) {
             double* e = &iter_[(p * kNumEffects + sp.effect) * 3];
             for (int c = 0; c < 3; ++c) e[c] += wgt * scale * double(sp.value[c]);
+            if (sp.tech >= 0) add_tech(p, sp.tech, sp.value * float(wgt * scale), sp.weight);
         });
     }
 
@@ -676,11 +722,20 @@ private:
         const EffectMask& mask = v_.mask;
         const int md = v_.max_depth_;
         const double vm_norm = 1.0 / (double(r2) * double(kPi) * double(nl));
+        const int D = v_.tech_depth_;
+        thread_local std::vector<std::pair<int, std::pair<Color, float>>> techs;
         for (int x = 0; x < W_; ++x) {
             const int p = y * W_ + x;
             Sampler sampler(loop.seed(), uint64_t(p), uint64_t(it));
             v_.camera_path(scene, w, filter_, sampler, p, cam, crec, stats);
             EffectRadiance er;
+            techs.clear();
+            // Adds a weighted contribution of technique k (-1: no image kept) to class cls.
+            auto add = [&](int cls, const Color& value, int k, double wgt) {
+                er.add(cls, value);
+                if (k >= 0) techs.push_back({k, {value, float(wgt)}});
+            };
+            auto tech_of = [&](int s, int t) { return s + t - 1 <= D ? strategy_index(s, t) : -1; };
             const uint32_t lp = uint32_t(p % nl);
             const PathVertex* light = lv_.data() + start_[lp];
             const VcmMis* lrec = lm_.data() + start_[lp];
@@ -703,7 +758,7 @@ private:
                         }
                         if (!is_black(L)) {
                             double wgt = w.vc ? w.emission(scene, cam.data(), crec.data(), t) : 1.0;
-                            er.add(cls, L * float(wgt));
+                            add(cls, L * float(wgt), tech_of(0, t), wgt);
                         }
                     }
                 }
@@ -719,7 +774,10 @@ private:
                         if (mask[cls]) {
                             PathVertex y0;
                             Color L = connect_emitter_sample(scene, z, u_pick, u_l, u_extra, sampler, stats, y0);
-                            if (!is_black(L)) er.add(cls, L * float(w.nee(scene, cam.data(), crec.data(), t, y0)));
+                            if (!is_black(L)) {
+                                double wgt = w.nee(scene, cam.data(), crec.data(), t, y0);
+                                add(cls, L * float(wgt), tech_of(1, t), wgt);
+                            }
                         }
                     }
                     // s >= 2: connections to the light path of this pixel.
@@ -731,7 +789,8 @@ private:
                         if (!mask[cls]) continue;
                         Color L = connect_vertices(z, yv, sampler, stats);
                         if (is_black(L)) continue;
-                        er.add(cls, L * float(w.connect(scene, cam.data(), crec.data(), t, light, lrec, s)));
+                        double wgt = w.connect(scene, cam.data(), crec.data(), t, light, lrec, s);
+                        add(cls, L * float(wgt), tech_of(s, t), wgt);
                     }
                 }
                 // Merging with the light vertices within r.
@@ -755,7 +814,8 @@ private:
                         double wgt = v_.mode_ == Mode::Ppm
                                          ? 1.0
                                          : w.merge(scene, cam.data(), crec.data(), t, lpath, lm_.data() + start_[g], i);
-                        er.add(cls, z.beta * f * yv.beta * float(wgt * vm_norm));
+                        add(cls, z.beta * f * yv.beta * float(wgt * vm_norm),
+                            i + t - 1 <= D ? merge_index(i, t, D) : -1, wgt);
                     };
                     if (v_.range_ == RangeSearch::HashGrid) {
                         grid_.query(z.it.p, r2, process);
@@ -772,11 +832,22 @@ private:
             double* e = &iter_[size_t(p) * kNumEffects * 3];
             for (int k = 0; k < kNumEffects; ++k)
                 for (int c = 0; c < 3; ++c) e[k * 3 + c] += double(er.by_effect[k][c]);
+            for (const auto& tc : techs) add_tech(size_t(p), tc.first, tc.second.first, tc.second.second);
         }
         loop.add_done(uint64_t(W_));
     }
 
     bool hide_at(int t) const { return v_.hide_ && t == 2; }
+
+    // A contribution `value` (MIS weight `w` in it) to technique image k of pixel p.
+    void add_tech(size_t p, int k, const Color& value, float w) {
+        double* d = &tech_iter_[(p * size_t(n_tech_) + size_t(k)) * 6];
+        double inv = w > 0.f ? 1.0 / double(w) : 0.0;
+        for (int c = 0; c < 3; ++c) {
+            d[c] += double(value[c]);
+            d[3 + c] += double(value[c]) * inv;
+        }
+    }
 
     // y_{s-1} and z_{t-1} connected: f_L f_E / d^2 with visibility (Veach
     // 1997, eq. 10.8), as bdpt's.
@@ -807,6 +878,9 @@ private:
     int W_, H_;
     std::vector<double> norm_x_, norm_y_;
     std::vector<double> iter_, sum_, tot_, tot_sq_;
+    int n_tech_ = 0;
+    std::vector<double> tech_iter_, tech_sum_;  // [pixel][technique][weighted rgb, unweighted rgb]
+    int iterations_ = 0;                        // iterations committed
     std::vector<Item> items_;
     std::vector<PathVertex> lv_;
     std::vector<VcmMis> lm_;

@@ -6,6 +6,7 @@
 // cancellation. Results are identical for a given seed whatever the thread
 // count.
 #pragma once
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -49,6 +50,10 @@ struct RenderOutput {
     // MIS-weighted contributions (they sum to the image over all strategies)
     // and the unweighted ones (each alone an estimate of its depth's light).
     std::vector<std::vector<float>> strategies, strategies_unweighted;
+    // vcm's merge techniques beside them, keyed (i, t): the merge of light
+    // vertex y_i at camera vertex z_{t-1} (merge_keys[k] for images k).
+    std::vector<std::array<int, 2>> merge_keys;
+    std::vector<std::vector<float>> merges, merges_unweighted;
     std::vector<Checkpoint> checkpoints;
     ThreadStats stats;
     std::vector<PhotonMapStats> photon_maps;
