@@ -160,12 +160,11 @@ def test_vcm_caustic_bias_shrinks_with_iterations():
     kept (power)."""
     from radiometer.reference_scenes import references, registry
 
-    from test_estimator_matrix import _config
-
-    spec, cfg = _config("glass_sphere_caustic")
-    scene = rm.load_file(spec.xml, **cfg["params"])
-    ref = references.reference("glass_sphere_caustic", cfg["params"])
-    md = registry.max_depth(spec, cfg["params"])
+    spec = registry.get("glass_sphere_caustic")
+    params = dict(spec.fixed_params)  # the reference's
+    scene = rm.load_file(spec.xml, **params)
+    ref = references.reference("glass_sphere_caustic", params)
+    md = registry.max_depth(spec, params)
     b2 = {}
     for alpha, n in ((0.75, 8), (0.75, 128), (0.999, 8), (0.999, 128)):
         integ = {"type": "vcm", "radius": 0.02, "alpha": alpha, "light_paths": 8192, "max_depth": md}

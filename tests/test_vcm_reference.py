@@ -16,7 +16,7 @@ import radiometer as rm
 from radiometer.reference_scenes import references, registry
 
 from refcompare import blocked_z_test, reference_variance_floor
-from test_estimator_matrix import _box_filtered, _config
+from test_estimator_matrix import _box_filtered
 
 ALPHA = 0.01
 CELLS = {
@@ -33,11 +33,12 @@ CELLS = {
 @pytest.mark.parametrize("est,name", list(CELLS), ids=lambda v: str(v))
 def test_converges_to_mitsuba_reference(est, name):
     spp, extra, power = CELLS[est, name]
-    spec, cfg = _config(name)
-    scene = rm.load_file(spec.xml, **cfg["params"])
-    ref = references.reference(name, cfg["params"])
+    spec = registry.get(name)
+    params = dict(spec.fixed_params)  # the reference's
+    scene = rm.load_file(spec.xml, **params)
+    ref = references.reference(name, params)
     integ = {"type": est, **extra}
-    md = registry.max_depth(spec, cfg["params"])
+    md = registry.max_depth(spec, params)
     if md is not None:
         integ["max_depth"] = md
     res = rm.render(scene, integrator=integ, spp=spp, seed=7)
