@@ -101,7 +101,7 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("shape", &SensorDesc::shape)
         .def_readwrite("medium", &SensorDesc::medium);
 
-    // Measurement (benchmarks/majorant_grid.py): sigma_t lookups by delta and
+    // Measurement (benchmarks/studies/majorant_grid.py): sigma_t lookups by delta and
     // ratio tracking in grid media since the last reset, all threads.
     m.def("medium_tracking_lookups", &Medium::tracking_lookups);
     m.def("reset_medium_tracking_lookups", &Medium::reset_tracking_lookups);
@@ -429,7 +429,7 @@ PYBIND11_MODULE(_core, m) {
     }();
 
     // The photon map's kd-tree on bare points, for the brute-force query
-    // tests and benchmarks/photon_kdtree.py. Indices returned are the input
+    // tests and benchmarks/studies/photon_kdtree.py. Indices returned are the input
     // rows; knn pads with -1 / inf where fewer than k lie within r_max.
     py::class_<PhotonMap>(m, "PhotonMap")
         .def(py::init([](py::object points, int threads) {

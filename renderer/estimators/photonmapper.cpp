@@ -47,7 +47,7 @@
 // itself overestimates a Poisson density by n / (n - 1) (the n-th photon
 // sits on the disc's rim); it vanishes as the photon count grows with
 // n -> inf, n / N -> 0 (Jensen 2001, sec. 7.2). Measured per scene and effect
-// in benchmarks/photon_bias.py; sppm is the consistent form.
+// in benchmarks/studies/photon_bias.py; sppm is the consistent form.
 #include <chrono>
 #include <limits>
 #include <stdexcept>
@@ -406,15 +406,10 @@ private:
 //
 // Bias of the volume estimate: the sphere of radius r blurs the in-scattered
 // radiance, n / r_n^3 over-estimates a Poisson density by n / (n - 1), and a
-// sphere that pokes out of the medium (near its boundary: the top of a
-// translucent slab, where a camera ray enters) holds photons in only part
-// of its volume, so the estimate there is low, by up to half at a flat
-// boundary for r much smaller than the medium (translucent_slab's lit half:
-// -7 / -5.6 % at 80 000 / 320 000 photons; van de Hulst's slab, two mean
-// free paths thick: -19 % at 400 000). volume_boundary_rays > 0 measures
-// the sphere's part inside the medium instead (volume_estimate): +5.8 /
-// +2.8 % and -4.3 % there. Measured in tests/test_volume_photon.py and
-// benchmarks/volume_photon.py.
+// sphere that pokes out of the medium holds photons in only part of its
+// volume, so the estimate is low near a boundary (up to half at a flat one);
+// volume_boundary_rays > 0 measures the sphere's part inside the medium
+// instead (volume_estimate). Figures: docs/measurements.md.
 // ---------------------------------------------------------------------------
 
 namespace {
@@ -872,12 +867,8 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
     // path of the medium's densest channel (its majorant in a grid), at
     // most 1/16 of the scene's radius. The step moves the variance and the
     // time, not the expectation (jittered steps, exact or ratio-tracked
-    // transmittance). Measured on translucent_slab (32 x 32, 8 spp, 320 000
-    // photons; the slab's mean free path is 0.05): steps 0.005 / 0.025 /
-    // 0.05 / 0.2 took 4.7 / 1.3 / 0.4 / 0.1 s of camera pass for a per-pixel
-    // relative deviation of 9.2 / 9.5 / 10.7 / 29 %; one mean free path is
-    // the most efficient of these (1 / (variance x time) 3 times half a
-    // mean free path's, 6 times a tenth's; timings on 2 shared cores, +-50 %).
+    // transmittance); one mean free path was the most efficient step measured
+    // (docs/measurements.md).
     if (f.has_media) {
         maps.step.resize(scene.media.size());
         for (size_t m = 0; m < scene.media.size(); ++m) {

@@ -30,9 +30,8 @@ inline const Emitter* pick_emitter(const Scene& s, float u) {
 //               In a medium the analog walk already ends paths by
 //               absorption, and a 5 % kill per event on top multiplies the
 //               weight of a long walk (hundreds of events in a dense, bright
-//               medium) by 1 / 0.95^n, a heavy tail that made every 512 spp
-//               render of translucent_slab fail the block test's mean z (-4
-//               to -6; -1 without it). The cap beyond kLongWalk ends a walk
+//               medium) by 1 / 0.95^n, a heavy tail (measured on
+//               translucent_slab: docs/measurements.md). The cap beyond kLongWalk ends a walk
 //               in a white medium (albedo 1, which never absorbs) with
 //               max_depth -1 in about 20 more events instead of
 //               (size * sigma_t)^2.
