@@ -188,55 +188,42 @@ public:
                   ThreadStats& stats) const {
         if (scene.features.has_media) return radiance_media(scene, maps, sampler, camera_ray, out, stats);
         thread_local std::vector<Neighbour> nb;
-        Ray ray = camera_ray;
-        Color beta(1.f);
-        PathClass pc;
-        BsdfContext ctx;
-        for (int depth = 0;; ++depth) {
-            // 1. The next vertex, and emission it shows (reached from the camera
-            //    directly or through specular vertices only).
-            Interaction it;
-            int cls = pc.classify();
-            if (!trace_counting_emission(scene, ray, it, beta, cls, !(depth == 0 && hide_) && mask[cls], out, stats))
-                break;
-            const Shape& shape = *scene.shapes[it.shape];
-            if (max_depth_ >= 0 && depth + 1 >= max_depth_) break;
-            const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
-            Vec3 wi = it.to_local(it.wi);
-            const int c = depth + 1;  // segments from the camera to x
-            const bool via_specular = pc.scatter_vertices > 0;
-
-            if (bsdf.has_smooth()) {
-                // 2. Direct light by ray tracing: light samples only (nothing
-                //    else finds emitters from x, so no MIS weight: bsdf_frac 0).
-                // 3. Caustics from the caustic map.
-                direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb,
-                                    [&] { return estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f); });
-                // 4. Indirect light from the global map: final gathering, or the
-                //    map read at x itself.
-                int cls_i = via_specular ? kSpecular : kIndirect;
-                if (maps.has_global && mask[cls_i]) {
-                    Color li = final_gather_ ? gather(scene, maps, sampler, it, bsdf, wi, c, nb, stats)
-                                             : estimate(maps.global, maps.r2_global, it, bsdf, wi,
-                                                        photon_budget(max_depth_, c), nb);
-                    out.add(cls_i, beta * li);
-                }
-            }
-
-            // 5. Specular reflection by Monte Carlo ray tracing: follow a delta
-            //    lobe; a sampled smooth lobe ends the path (its light came from
-            //    steps 2-4, and the lobe-selection weight keeps this unbiased).
-            if (!(bsdf.flags() & kDelta)) break;
-            if (!mask[kSpecular] && !(bsdf.flags() == kNull && !via_specular)) break;
-            BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
-            if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || !bs.is_delta) break;
-            beta *= bs.weight;
-            if (bsdf.flags() != kNull) pc.push(true);
-            ray = it.spawn(it.to_world(bs.wo));
-            if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta), sampler.next_1d(),
-                                   beta))
-                break;
-        }
+        SpecularChain chain;
+        chain.max_depth = max_depth_;
+        chain.rr_depth = rr_depth_;
+        chain.hide = hide_;
+        // 1. Each vertex of the chain, with the emission it shows (reached
+        //    from the camera directly or through specular vertices only).
+        walk_specular_chain(scene, sampler, camera_ray, chain, mask, out, stats,
+                            [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta,
+                                const PathClass& pc, int depth) {
+                                const int c = depth + 1;  // segments from the camera to x
+                                const bool via_specular = pc.scatter_vertices > 0;
+                                if (bsdf.has_smooth()) {
+                                    // 2. Direct light by ray tracing: light samples only (nothing
+                                    //    else finds emitters from x, so no MIS weight: bsdf_frac 0).
+                                    // 3. Caustics from the caustic map.
+                                    direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb, [&] {
+                                        return estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f);
+                                    });
+                                    // 4. Indirect light from the global map: final gathering, or the
+                                    //    map read at x itself.
+                                    int cls_i = via_specular ? kSpecular : kIndirect;
+                                    if (maps.has_global && mask[cls_i]) {
+                                        Color li = final_gather_
+                                                       ? gather(scene, maps, sampler, it, bsdf, wi, c, nb, stats)
+                                                       : estimate(maps.global, maps.r2_global, it, bsdf, wi,
+                                                                  photon_budget(max_depth_, c), nb);
+                                        out.add(cls_i, beta * li);
+                                    }
+                                }
+                                // 5. Specular reflection by Monte Carlo ray tracing: follow a delta
+                                //    lobe (the chain samples it); a sampled smooth lobe ends the path
+                                //    (its light came from steps 2-4, and the lobe-selection weight
+                                //    keeps this unbiased).
+                                if (!(bsdf.flags() & kDelta)) return false;
+                                return mask[kSpecular] || (bsdf.flags() == kNull && !via_specular);
+                            });
     }
 
 private:

@@ -125,41 +125,28 @@ private:
     // along the way go to `out`.
     void camera_path(const Scene& scene, Sampler& sampler, Ray ray, EffectRadiance& out, VisiblePoint& vp,
                      ThreadStats& stats) const {
-        Color beta(1.f);
-        PathClass pc;
-        BsdfContext ctx;
-        for (int depth = 0;; ++depth) {
-            Interaction it;
-            int cls = pc.classify();
-            if (!trace_counting_emission(scene, ray, it, beta, cls, !(depth == 0 && hide_) && mask[cls], out, stats))
-                return;
-            const Shape& shape = *scene.shapes[it.shape];
-            if (max_depth_ >= 0 && depth + 1 >= max_depth_) return;
-            const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
-            Vec3 wi = it.to_local(it.wi);
-            bool via_specular = pc.scatter_vertices > 0;
-            if (bsdf.has_smooth()) {
-                // Direct light by one light sample (no MIS partner: bsdf_frac 0).
-                int cls_d = via_specular ? kSpecular : kDirect;
-                if (mask[cls_d] && !scene.emitters.empty())
-                    out.add(cls_d, beta * estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f));
-                vp.it = it;
-                vp.bsdf = &bsdf;
-                vp.wi = wi;
-                vp.beta = beta;
-                vp.via_specular = via_specular;
-                vp.c = depth + 1;
-                return;
-            }
-            BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
-            if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) return;
-            beta *= bs.weight;
-            if (bsdf.flags() != kNull) pc.push(true);
-            ray = it.spawn(it.to_world(bs.wo));
-            if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta), sampler.next_1d(),
-                                   beta))
-                return;
-        }
+        SpecularChain chain;
+        chain.max_depth = max_depth_;
+        chain.rr_depth = rr_depth_;
+        chain.hide = hide_;
+        walk_specular_chain(scene, sampler, ray, chain, mask, out, stats,
+                            [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta,
+                                const PathClass& pc, int depth) {
+                                if (!bsdf.has_smooth()) return true;
+                                bool via_specular = pc.scatter_vertices > 0;
+                                // Direct light by one light sample (no MIS partner: bsdf_frac 0).
+                                int cls_d = via_specular ? kSpecular : kDirect;
+                                if (mask[cls_d] && !scene.emitters.empty())
+                                    out.add(cls_d,
+                                            beta * estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f));
+                                vp.it = it;
+                                vp.bsdf = &bsdf;
+                                vp.wi = wi;
+                                vp.beta = beta;
+                                vp.via_specular = via_specular;
+                                vp.c = depth + 1;
+                                return false;
+                            });
     }
 
     int max_depth_, rr_depth_;

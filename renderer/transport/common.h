@@ -87,12 +87,58 @@ void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* 
                          int depth, bool prev_delta, const Vec3& prev_p, float prev_pdf_w, EffectRadiance& out);
 
 // One step of a camera path for estimators that take emission found along
-// it without an MIS weight (photonmapper, sppm: their only other route to
+// it without an MIS weight (photonmapper, sppm, whitted: their only other route to
 // the emitters is light sampling at non-specular vertices): intersects
 // `ray`, and when `count` adds what the emitters it reaches show, times
 // `beta`, under class `cls`. Returns false when the ray left the scene.
 bool trace_counting_emission(const Scene& scene, const Ray& ray, Interaction& it, const Color& beta, int cls,
                              bool count, EffectRadiance& out, ThreadStats& stats);
+
+// A camera path through delta lobes only (the specular chain L ... S* E of
+// photonmapper, sppm and whitted, whose light at non-specular vertices comes
+// from elsewhere: light sampling, photon maps): each segment counts the
+// emission it reaches (trace_counting_emission, hidden at depth 0 when
+// `hide`), the path stops after `max_depth` segments (< 0: no limit), and at
+// every vertex `visit(it, bsdf, wi, beta, pc, depth)` does the estimator's
+// work and returns whether to go on. Going on samples the BSDF: a delta
+// sample continues the chain (beta times its weight, a non-null vertex
+// counted as specular in `pc`), anything else ends it (a smooth lobe's light
+// is the visitor's to estimate; the lobe-selection weight keeps the sum
+// unbiased). With rr_depth >= 0 the chain plays Russian roulette after
+// each vertex (RouletteRule::Capped).
+struct SpecularChain {
+    int max_depth = -1;
+    int rr_depth = -1;
+    bool hide = false;
+};
+
+template <class Visit>
+void walk_specular_chain(const Scene& scene, Sampler& sampler, Ray ray, const SpecularChain& chain,
+                         const EffectMask& mask, EffectRadiance& out, ThreadStats& stats, Visit&& visit) {
+    Color beta(1.f);
+    PathClass pc;
+    BsdfContext ctx;
+    for (int depth = 0;; ++depth) {
+        Interaction it;
+        int cls = pc.classify();
+        if (!trace_counting_emission(scene, ray, it, beta, cls, !(depth == 0 && chain.hide) && mask[cls], out, stats))
+            return;
+        if (chain.max_depth >= 0 && depth + 1 >= chain.max_depth) return;
+        const Bsdf& bsdf = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
+        Vec3 wi = it.to_local(it.wi);
+        if (!visit(static_cast<const Interaction&>(it), bsdf, wi, static_cast<const Color&>(beta),
+                   static_cast<const PathClass&>(pc), depth))
+            return;
+        BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+        if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || !bs.is_delta) return;
+        beta *= bs.weight;
+        if (bsdf.flags() != kNull) pc.push(true);
+        ray = it.spawn(it.to_world(bs.wo));
+        if (chain.rr_depth >= 0 && !survives_roulette(RouletteRule::Capped, depth + 1, chain.rr_depth,
+                                                      max_component(beta), sampler.next_1d(), beta))
+            return;
+    }
+}
 
 // Adjoint BSDF with shading normals (Veach 1997, eq. 5.16; pbrt-v3's
 // CorrectShadingNormal): in importance transport a vertex that scatters
