@@ -188,13 +188,9 @@ public:
                   ThreadStats& stats) const {
         if (scene.features.has_media) return radiance_media(scene, maps, sampler, camera_ray, out, stats);
         thread_local std::vector<Neighbour> nb;
-        SpecularChain chain;
-        chain.max_depth = max_depth_;
-        chain.rr_depth = rr_depth_;
-        chain.hide = hide_;
         // 1. Each vertex of the chain, with the emission it shows (reached
         //    from the camera directly or through specular vertices only).
-        walk_specular_chain(scene, sampler, camera_ray, chain, mask, out, stats,
+        walk_specular_chain(scene, sampler, camera_ray, SpecularChain{max_depth_, rr_depth_, hide_}, mask, out, stats,
                             [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta,
                                 const PathClass& pc, int depth) {
                                 const int c = depth + 1;  // segments from the camera to x

@@ -125,11 +125,7 @@ private:
     // along the way go to `out`.
     void camera_path(const Scene& scene, Sampler& sampler, Ray ray, EffectRadiance& out, VisiblePoint& vp,
                      ThreadStats& stats) const {
-        SpecularChain chain;
-        chain.max_depth = max_depth_;
-        chain.rr_depth = rr_depth_;
-        chain.hide = hide_;
-        walk_specular_chain(scene, sampler, ray, chain, mask, out, stats,
+        walk_specular_chain(scene, sampler, ray, SpecularChain{max_depth_, rr_depth_, hide_}, mask, out, stats,
                             [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta,
                                 const PathClass& pc, int depth) {
                                 if (!bsdf.has_smooth()) return true;

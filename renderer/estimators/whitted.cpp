@@ -29,11 +29,8 @@ public:
         // Emission is counted along the chain without an MIS weight: seen
         // directly or through delta lobes only, no other technique reaches
         // emitters from there. A sampled smooth lobe ends the path.
-        SpecularChain chain;
-        chain.max_depth = max_depth_;
-        chain.hide = hide_;
         walk_specular_chain(
-            scene, sampler, camera_ray, chain, mask, out, stats,
+            scene, sampler, camera_ray, SpecularChain{max_depth_, -1, hide_}, mask, out, stats,
             [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta, const PathClass& pc, int) {
                 if (!pc.can_reach(mask)) return false;
                 // A smooth lobe: direct light by light sampling alone

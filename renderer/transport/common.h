@@ -106,7 +106,7 @@ bool trace_counting_emission(const Scene& scene, const Ray& ray, Interaction& it
 // is the visitor's to estimate; the lobe-selection weight keeps the sum
 // unbiased). With rr_depth >= 0 the chain plays Russian roulette after
 // each vertex (RouletteRule::Capped).
-struct SpecularChain {
+struct SpecularChain {  // SpecularChain{max_depth, rr_depth, hide}
     int max_depth = -1;
     int rr_depth = -1;
     bool hide = false;
