@@ -823,7 +823,8 @@ void PhotonMapper::check_memory_for(const Scene& scene, const RenderOptions& opt
     map(need.caustic, "caustic", "caustic_photons", caustic_photons_);
     map(need.global, "global", "global_photons", global_photons_);
     map(need.volume, "volume", "volume_photons", volume_photons_);
-    if (largest > 0) parts.push_back({"its tree's build", photon_map_build_bytes(largest) - per * largest, largest_param});
+    if (largest > 0)
+        parts.push_back({"building the largest map's tree", photon_map_build_bytes(largest) - per * largest, largest_param});
     check_memory(type, W, H, parts);
 }
 

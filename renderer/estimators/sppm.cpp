@@ -294,11 +294,12 @@ private:
         PhotonPass pp = trace_photon_paths(scene_, spec_, loop.seed(), uint64_t(s), uint64_t(sppm_.photon_count_),
                                            loop.threads(), loop.poll_once(), pstats_, max_photons_);
         if (pp.over_memory)
-            throw std::invalid_argument("render: integrator 'sppm': a pass's " +
-                                        std::to_string(sppm_.photon_count_) + " photon paths stored over " +
-                                        std::to_string(pp.photons.size()) +
-                                        " photons, more than this machine's memory holds beside the film; "
-                                        "lower photon_count");
+            throw std::invalid_argument(
+                "render: integrator 'sppm': a pass's " + std::to_string(sppm_.photon_count_) +
+                " photon paths stored more than " + std::to_string(max_photons_) + " photons (" +
+                format_bytes(photon_map_build_bytes(double(pp.photons.size()))) + " with their tree), more than " +
+                "this machine's " + format_bytes(memory_limit_bytes()) + " of memory holds beside the film; lower " +
+                "photon_count");
         if (pp.cancelled) return false;
         pms_.photons += pp.photons.size();
         pms_.paths += pp.paths;
@@ -378,7 +379,7 @@ RenderOutput Sppm::drive(const Scene& scene, const RenderOptions& opts, const Po
                  {{"visible points", pixels * sizeof(VisiblePoint), "the resolution (film width, height)"},
                   {"pixel statistics", pixels * sizeof(PixelStats), "the resolution (film width, height)"},
                   output_memory(opts, W, H),
-                  {"a pass's photon map (" + std::to_string(photon_count_) + " paths)",
+                  {"a pass's photon map (" + std::to_string(photon_count_) + " paths, one photon each)",
                    photon_map_build_bytes(double(photon_count_)), "photon_count"}});
     PassLoop loop(scene, opts, poll);
     Passes passes(*this, scene);

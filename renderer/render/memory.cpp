@@ -34,13 +34,18 @@ double cgroup_bytes() {
     }
 }
 
-std::string gib(double bytes) {
+}  // namespace
+
+std::string format_bytes(double bytes) {
     char buf[32];
-    std::snprintf(buf, sizeof buf, "%.1f GiB", bytes / double(1ull << 30));
+    if (bytes >= double(1ull << 30))
+        std::snprintf(buf, sizeof buf, "%.1f GiB", bytes / double(1ull << 30));
+    else if (bytes >= double(1ull << 20))
+        std::snprintf(buf, sizeof buf, "%.1f MiB", bytes / double(1ull << 20));
+    else
+        std::snprintf(buf, sizeof buf, "%.1f KiB", bytes / 1024.0);
     return buf;
 }
-
-}  // namespace
 
 double memory_limit_bytes() {
     double o = g_override.load();
@@ -61,12 +66,12 @@ void check_memory(const std::string& integrator, int width, int height, const st
     for (const MemoryPart& p : parts) {
         if (!(p.bytes > 0)) continue;
         if (!list.empty()) list += ", ";
-        list += p.what + " " + gib(p.bytes);
+        list += p.what + " " + format_bytes(p.bytes);
         if (!largest || p.bytes > largest->bytes) largest = &p;
     }
     throw std::invalid_argument("render: integrator '" + integrator + "' on a " + std::to_string(width) + "x" +
-                                std::to_string(height) + " film needs " + gib(total) + " (" + list +
-                                "), more than this machine's " + gib(limit) + " of memory; lower " +
+                                std::to_string(height) + " film needs " + format_bytes(total) + " (" + list +
+                                "), more than this machine's " + format_bytes(limit) + " of memory; lower " +
                                 (largest ? largest->param : std::string("the resolution")));
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <climits>
 
 #include "render/parallel.h"
@@ -22,16 +23,27 @@ constexpr uint64_t kChunkItems = 64;   // items per chunk (a fixed number: the c
 // v1's rule (Pharr & Humphreys 2004, sec. 16.5: give up after 500 000 paths
 // if fewer than 1 in 1024 stored one) bounds only the rate, so a rate just
 // above 1/1024 costs 1024 paths per photon (a minute for a 16 x 16 image at
-// 1 spp). Bounding the paths at kPathsPerPhoton per requested photon bounds
-// the time to a fixed multiple of a map that stores one photon per path; a
-// map cut short keeps its photons, their power divided by the paths traced
-// (fewer photons: a noisier, blurrier estimate, reported, not a wrong one).
-// 64 is 8 times below the lowest storage rate of the canonical scenes'
-// maps (docs/photon_give_up.md), whose renders are unchanged by it.
-constexpr uint64_t kPathsPerPhoton = 64;
-// Paths traced before giving up in any case (a chunk's multiple, about
-// pbrt's 500 000): a map of a few photons is not cut short by chance.
+// 1 spp). Here the paths are bounded, at kPathsPerPhoton per requested
+// photon, and tracing gives up early, from kMinPaths on, once even an upper
+// confidence bound on the rate (Poisson counts, 6 sigma on the square-root
+// scale: a false give-up about 1e-9 per check) is below 1 / kPathsPerPhoton,
+// so that a map that cannot reach its target costs about kMinPaths paths,
+// not the bound. A map cut short keeps its photons, their power divided by
+// the paths traced: fewer photons, a noisier and blurrier estimate
+// (reported), not a wrong one. 512 is twice the paths per photon of the
+// canonical scenes' sparsest map (translucent_object's caustic map, 1 in
+// 258; docs/photon_give_up.md), whose renders are unchanged by the rule.
+constexpr uint64_t kPathsPerPhoton = 512;
+// Paths traced before giving up in any case (about pbrt's 500 000, a whole
+// number of chunks): a small map is not cut short by chance.
 constexpr uint64_t kMinPaths = 8 * kChunkItems * kItemPaths;
+
+// Whether `stored` photons in `paths` paths show, beyond chance, a rate
+// below 1 / kPathsPerPhoton.
+bool rate_too_low(uint64_t stored, uint64_t paths) {
+    const double hi = std::sqrt(double(stored)) + 3.0;  // sqrt of a Poisson count: sd 1/2, so 6 sd
+    return hi * hi * double(kPathsPerPhoton) < double(paths);
+}
 
 struct Item {
     std::vector<Photon> photons;
@@ -199,7 +211,7 @@ PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, 
             }
         }
         if (done) break;
-        if (r.paths >= r.max_paths || (r.paths >= kMinPaths && r.photons.empty())) {
+        if (r.paths >= r.max_paths || (r.paths >= kMinPaths && rate_too_low(r.photons.size(), r.paths))) {
             r.target_reached = false;
             break;
         }

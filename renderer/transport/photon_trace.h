@@ -77,7 +77,8 @@ uint64_t photon_path_bound(uint64_t target);
 // the paths after the one that stored the target-th photon are dropped, so
 // the count of paths traced is a function of the seed. Gives up (the map
 // keeps what was stored, target_reached false) after photon_path_bound(target)
-// paths, or once 2^19 paths stored nothing.
+// paths, or from 2^19 paths on once the storage rate is clearly too low to
+// reach the target within that bound (photon_trace.cpp).
 PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t target,
                                int threads, const std::function<bool()>& poll, ThreadStats& stats);
 
