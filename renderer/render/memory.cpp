@@ -39,11 +39,11 @@ double cgroup_bytes() {
 std::string format_bytes(double bytes) {
     char buf[32];
     if (bytes >= double(1ull << 30))
-        std::snprintf(buf, sizeof buf, "%.1f GiB", bytes / double(1ull << 30));
+        std::snprintf(buf, sizeof buf, "%.3g GiB", bytes / double(1ull << 30));
     else if (bytes >= double(1ull << 20))
-        std::snprintf(buf, sizeof buf, "%.1f MiB", bytes / double(1ull << 20));
+        std::snprintf(buf, sizeof buf, "%.3g MiB", bytes / double(1ull << 20));
     else
-        std::snprintf(buf, sizeof buf, "%.1f KiB", bytes / 1024.0);
+        std::snprintf(buf, sizeof buf, "%.3g KiB", bytes / 1024.0);
     return buf;
 }
 

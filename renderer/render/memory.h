@@ -36,7 +36,7 @@ void set_memory_limit_override(double bytes);
 // lower <param of the largest part>".
 void check_memory(const std::string& integrator, int width, int height, const std::vector<MemoryPart>& parts);
 
-// Bytes as "12.3 GiB" (MiB, KiB below a GiB).
+// Bytes as "12.3 GiB" (three digits; MiB, KiB below a GiB).
 std::string format_bytes(double bytes);
 
 // The output every driver develops (pass_loop.h): image, variance and the
