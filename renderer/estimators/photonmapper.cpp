@@ -814,7 +814,8 @@ void PhotonMapper::check_memory_for(const Scene& scene, const RenderOptions& opt
     std::string largest_param;
     auto map = [&](bool needed, const char* name, const char* param, int count) {
         if (!needed) return;
-        parts.push_back({std::string(name) + " photon map (" + std::to_string(count) + " photons)", per * count, param});
+        parts.push_back(
+            {std::string(name) + " photon map (" + std::to_string(count) + " photons)", per * count, param});
         if (count > largest) {
             largest = count;
             largest_param = param;
@@ -824,7 +825,8 @@ void PhotonMapper::check_memory_for(const Scene& scene, const RenderOptions& opt
     map(need.global, "global", "global_photons", global_photons_);
     map(need.volume, "volume", "volume_photons", volume_photons_);
     if (largest > 0)
-        parts.push_back({"building the largest map's tree", photon_map_build_bytes(largest) - per * largest, largest_param});
+        parts.push_back(
+            {"building the largest map's tree", photon_map_build_bytes(largest) - per * largest, largest_param});
     check_memory(type, W, H, parts);
 }
 
@@ -833,6 +835,7 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
     const Scene& scene = loop.scene();
     const RenderOptions& opts = loop.options();
     int threads = loop.threads();
+    const SceneFeatures& f = scene.features;
     const MapNeeds need = needs(scene);
     Vec3 center;
     float radius;
@@ -919,7 +922,7 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
     // relative deviation of 9.2 / 9.5 / 10.7 / 29 %; one mean free path is
     // the most efficient of these (1 / (variance x time) 3 times half a
     // mean free path's, 6 times a tenth's; timings on 2 shared cores, +-50 %).
-    if (scene.features.has_media) {
+    if (f.has_media) {
         maps.step.resize(scene.media.size());
         for (size_t m = 0; m < scene.media.size(); ++m) {
             const Medium& med = *scene.media[m];

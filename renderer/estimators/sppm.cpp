@@ -196,8 +196,7 @@ public:
         pms_.bytes_per_photon = double(PhotonMap::bytes_per_photon());
         // What the memory left beside the per-pixel buffers holds (memory.h).
         const double left = memory_limit_bytes() - double(pixels) * (sizeof(PixelStats) + sizeof(VisiblePoint));
-        if (memory_limit_bytes() > 0)
-            max_photons_ = left > 0 ? uint64_t(left / photon_map_build_bytes(1.0)) : 0;
+        if (memory_limit_bytes() > 0) max_photons_ = left > 0 ? uint64_t(left / photon_map_build_bytes(1.0)) : 0;
     }
 
     int pass(PassLoop& loop, int s0, int s1) override {
@@ -294,12 +293,12 @@ private:
         PhotonPass pp = trace_photon_paths(scene_, spec_, loop.seed(), uint64_t(s), uint64_t(sppm_.photon_count_),
                                            loop.threads(), loop.poll_once(), pstats_, max_photons_);
         if (pp.over_memory)
-            throw std::invalid_argument(
-                "render: integrator 'sppm': a pass's " + std::to_string(sppm_.photon_count_) +
-                " photon paths stored more than " + std::to_string(max_photons_) + " photons (" +
-                format_bytes(photon_map_build_bytes(double(pp.photons.size()))) + " with their tree), more than " +
-                "this machine's " + format_bytes(memory_limit_bytes()) + " of memory holds beside the film; lower " +
-                "photon_count");
+            throw std::invalid_argument("render: integrator 'sppm': a pass's " + std::to_string(sppm_.photon_count_) +
+                                        " photon paths stored more than " + std::to_string(max_photons_) +
+                                        " photons (" + format_bytes(photon_map_build_bytes(double(pp.photons.size()))) +
+                                        " with their tree), more than " + "this machine's " +
+                                        format_bytes(memory_limit_bytes()) +
+                                        " of memory holds beside the film; lower " + "photon_count");
         if (pp.cancelled) return false;
         pms_.photons += pp.photons.size();
         pms_.paths += pp.paths;
@@ -364,7 +363,7 @@ private:
     bool photons_needed_ = false;
     PhotonTraceSpec spec_;
     PhotonMapStats pms_;
-    ThreadStats pstats_;                   // photon tracing's counters
+    ThreadStats pstats_;                 // photon tracing's counters
     uint64_t max_photons_ = UINT64_MAX;  // a pass's photons beyond this do not fit in memory
 };
 

@@ -2,8 +2,8 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <climits>
+#include <cmath>
 
 #include "render/parallel.h"
 #include "transport/subpath.h"
