@@ -611,6 +611,8 @@ PYBIND11_MODULE(_core, m) {
                 d["trace_seconds"] = pm.trace_seconds;
                 d["build_seconds"] = pm.build_seconds;
                 d["target_reached"] = pm.target_reached;
+                d["target"] = pm.target;
+                d["max_paths"] = pm.max_paths;
                 maps[py::str(pm.name)] = d;
             }
             st["photon_maps"] = maps;

@@ -6,6 +6,7 @@
 
 #include "bindings.h"
 #include "convert.h"
+#include "render/memory.h"
 #include "render/registry.h"
 #include "scene/scene.h"
 #include "transport/common.h"
@@ -219,6 +220,13 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
             return from_param_set(resolved);
         },
         py::arg("type"), py::arg("params"), py::arg("reads"));
+
+    // The memory a render may use (render/memory.h), in bytes: the machine's,
+    // or `bytes` when the tests set it (0 restores the machine's), so that
+    // the limit tests do not depend on the machine they run on.
+    m.def("memory_limit", &memory_limit_bytes, "bytes of memory a render may use (render/memory.h)");
+    m.def("set_memory_limit_for_tests", &set_memory_limit_override, py::arg("bytes"),
+          "test hook: the memory limit of render/memory.h (0: the machine's)");
 }
 
 }  // namespace rm::bind

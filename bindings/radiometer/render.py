@@ -191,6 +191,16 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
             import warnings
 
             warnings.warn(msg, stacklevel=2)
+    for name, pm in stats.get("photon_maps", {}).items():
+        if not pm["target_reached"] and not r["cancelled"]:
+            # The give-up bound of photon tracing (renderer/transport/photon_trace.cpp).
+            msg = (f"{spec['type']}: the {name} photon map stored {pm['photons']} of the {pm['target']} photons "
+                   f"asked for: tracing gave up after {pm['paths']} light paths (at most {pm['max_paths']}), as "
+                   f"few of this scene's light paths store one; its estimate is noisier and blurrier than asked")
+            stats.setdefault("warnings", []).append(msg)
+            import warnings
+
+            warnings.warn(msg, stacklevel=2)
     if spec["type"] == "ptracer":  # light tracing makes only the t = 1 strategies
         for d in (result.strategies, result.strategies_unweighted):
             for k in [k for k in d if k[1] != 1]:

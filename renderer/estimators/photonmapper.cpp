@@ -54,6 +54,7 @@
 #include <thread>
 
 #include "core/warp.h"
+#include "render/memory.h"
 #include "render/pass_loop.h"
 #include "render/registry.h"
 #include "transport/common.h"
@@ -179,6 +180,13 @@ public:
     }
 
     RenderOutput drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const override;
+    // The photon maps the scene calls for (DESIGN section 3).
+    struct MapNeeds {
+        bool caustic = false, global = false, volume = false;
+    };
+    MapNeeds needs(const Scene& scene) const;
+    // The films, the output and the maps against the machine's memory (memory.h).
+    void check_memory_for(const Scene& scene, const RenderOptions& opts) const;
     // Pass 1: the photon maps the scene calls for, and the ray-marching
     // steps; false when cancelled.
     bool photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMapStats>& info, ThreadStats& pstats) const;
@@ -739,6 +747,7 @@ private:
 RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
     // 1. Pass 1, the photon maps: the loop's setup, whose time counts
     //    against a time budget (and in the checkpoints' seconds).
+    check_memory_for(scene, opts);
     PassLoop loop(scene, opts, poll);
     Maps maps;
     std::vector<PhotonMapStats> info;
@@ -755,19 +764,57 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     return out;
 }
 
+PhotonMapper::MapNeeds PhotonMapper::needs(const Scene& scene) const {
+    const SceneFeatures& f = scene.features;
+    bool lights = !scene.emitters.empty();
+    bool long_paths = max_depth_ < 0 || max_depth_ >= 3;  // L S D E and L D D E have 3 segments
+    bool specular_chain = f.has_delta_bsdf && mask[kSpecular];
+    MapNeeds n;
+    n.caustic = lights && long_paths && caustic_photons_ > 0 && f.has_smooth_bsdf && f.has_delta_bsdf &&
+                (mask[kCaustic] || specular_chain);
+    n.global = lights && long_paths && global_photons_ > 0 && f.has_smooth_bsdf && (mask[kIndirect] || specular_chain);
+    // Purely absorbing media (homogeneous with sigma_s = 0) never store one.
+    bool scattering_media = false;
+    for (const auto& med : scene.media) scattering_media |= !med->homogeneous || !is_black(med->sigma_s);
+    n.volume = lights && f.has_media && scattering_media && volume_photons_ > 0 && long_paths &&
+               (mask[kVolume] || mask[kSubsurface]);
+    return n;
+}
+
+void PhotonMapper::check_memory_for(const Scene& scene, const RenderOptions& opts) const {
+    const int W = scene.sensor->width, H = scene.sensor->height;
+    const MapNeeds need = needs(scene);
+    std::vector<MemoryPart> parts = {camera_film_memory(W, H), output_memory(opts, W, H)};
+    // Each map's photons stay for the camera passes; the one being built
+    // has its tree's copy besides (the largest is the worst case).
+    const double per = double(PhotonMap::bytes_per_photon());
+    double largest = 0;
+    std::string largest_param;
+    auto map = [&](bool needed, const char* name, const char* param, int count) {
+        if (!needed) return;
+        parts.push_back(
+            {std::string(name) + " photon map (" + std::to_string(count) + " photons)", per * count, param});
+        if (count > largest) {
+            largest = count;
+            largest_param = param;
+        }
+    };
+    map(need.caustic, "caustic", "caustic_photons", caustic_photons_);
+    map(need.global, "global", "global_photons", global_photons_);
+    map(need.volume, "volume", "volume_photons", volume_photons_);
+    if (largest > 0)
+        parts.push_back(
+            {"building the largest map's tree", photon_map_build_bytes(largest) - per * largest, largest_param});
+    check_memory(type, W, H, parts);
+}
+
 bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMapStats>& info,
                                ThreadStats& pstats) const {
     const Scene& scene = loop.scene();
     const RenderOptions& opts = loop.options();
     int threads = loop.threads();
     const SceneFeatures& f = scene.features;
-    bool lights = !scene.emitters.empty();
-    bool long_paths = max_depth_ < 0 || max_depth_ >= 3;  // L S D E and L D D E have 3 segments
-    bool specular_chain = f.has_delta_bsdf && mask[kSpecular];
-    bool need_caustic = lights && long_paths && caustic_photons_ > 0 && f.has_smooth_bsdf && f.has_delta_bsdf &&
-                        (mask[kCaustic] || specular_chain);
-    bool need_global =
-        lights && long_paths && global_photons_ > 0 && f.has_smooth_bsdf && (mask[kIndirect] || specular_chain);
+    const MapNeeds need = needs(scene);
     Vec3 center;
     float radius;
     scene.bounding_sphere(center, radius);
@@ -783,6 +830,8 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
         s.paths = pass.paths;
         s.trace_seconds = pass.seconds;
         s.target_reached = pass.target_reached;
+        s.target = target;
+        s.max_paths = pass.max_paths;
         auto tb = Clock::now();
         make(std::move(pass.photons));
         s.build_seconds = since(tb);
@@ -803,14 +852,14 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
         spec.stream = stream;
         return spec;
     };
-    if (need_caustic) {
+    if (need.caustic) {
         PhotonTraceSpec spec = spec_for(1, 1);
         spec.caustic_only = true;
         if (!build("caustic", spec, uint64_t(caustic_photons_), maps.caustic)) return false;
         maps.has_caustic = true;
         maps.r2_caustic = sqr(caustic_radius_ * radius);
     }
-    if (need_global) {
+    if (need.global) {
         PhotonTraceSpec spec = spec_for(2, final_gather_ ? 2 : 1);
         spec.indirect_only = !final_gather_;
         if (!build("global", spec, uint64_t(global_photons_), maps.global)) return false;
@@ -822,12 +871,7 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
     // light segment, one more vertex and the camera segment.
     maps.center = center;
     maps.radius = radius;
-    // Purely absorbing media (homogeneous with sigma_s = 0) never store one.
-    bool scattering_media = false;
-    for (const auto& med : scene.media) scattering_media |= !med->homogeneous || !is_black(med->sigma_s);
-    bool need_volume = lights && f.has_media && scattering_media && volume_photons_ > 0 && long_paths &&
-                       (mask[kVolume] || mask[kSubsurface]);
-    if (need_volume) {
+    if (need.volume) {
         PhotonTraceSpec spec = spec_for(3, 1);
         spec.volume = true;
         // One tree per medium (the photons are in path order, so each

@@ -39,6 +39,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "render/memory.h"
 #include "render/pass_loop.h"
 #include "render/registry.h"
 #include "transport/camera_sample.h"
@@ -176,6 +177,9 @@ public:
         spec_.stream = 3;
         pms_.name = "sppm";
         pms_.bytes_per_photon = double(PhotonMap::bytes_per_photon());
+        // What the memory left beside the per-pixel buffers holds (memory.h).
+        const double left = memory_limit_bytes() - double(pixels) * (sizeof(PixelStats) + sizeof(VisiblePoint));
+        if (memory_limit_bytes() > 0) max_photons_ = left > 0 ? uint64_t(left / photon_map_build_bytes(1.0)) : 0;
     }
 
     int pass(PassLoop& loop, int s0, int s1) override {
@@ -270,7 +274,14 @@ private:
     // Step 2: pass s's photon paths into `map`; false when cancelled.
     bool photon_pass(PassLoop& loop, int s, PhotonMap& map) {
         PhotonPass pp = trace_photon_paths(scene_, spec_, loop.seed(), uint64_t(s), uint64_t(sppm_.photon_count_),
-                                           loop.threads(), loop.poll_once(), pstats_);
+                                           loop.threads(), loop.poll_once(), pstats_, max_photons_);
+        if (pp.over_memory)
+            throw std::invalid_argument("render: integrator 'sppm': a pass's " + std::to_string(sppm_.photon_count_) +
+                                        " photon paths stored more than " + std::to_string(max_photons_) +
+                                        " photons (" + format_bytes(photon_map_build_bytes(double(pp.photons.size()))) +
+                                        " with their tree), more than " + "this machine's " +
+                                        format_bytes(memory_limit_bytes()) +
+                                        " of memory holds beside the film; lower " + "photon_count");
         if (pp.cancelled) return false;
         pms_.photons += pp.photons.size();
         pms_.paths += pp.paths;
@@ -335,10 +346,23 @@ private:
     bool photons_needed_ = false;
     PhotonTraceSpec spec_;
     PhotonMapStats pms_;
-    ThreadStats pstats_;  // photon tracing's counters
+    ThreadStats pstats_;                 // photon tracing's counters
+    uint64_t max_photons_ = UINT64_MAX;  // a pass's photons beyond this do not fit in memory
 };
 
 RenderOutput Sppm::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
+    // Said up front (memory.h): the per-pixel visible points and statistics,
+    // the output, and a pass's photon map (the photons a path stores are
+    // known only once traced; counted here as one per path, and
+    // trace_photon_paths refuses a pass whose photons outgrow the memory).
+    const int W = scene.sensor->width, H = scene.sensor->height;
+    const double pixels = double(W) * double(H);
+    check_memory(type, W, H,
+                 {{"visible points", pixels * sizeof(VisiblePoint), "the resolution (film width, height)"},
+                  {"pixel statistics", pixels * sizeof(PixelStats), "the resolution (film width, height)"},
+                  output_memory(opts, W, H),
+                  {"a pass's photon map (" + std::to_string(photon_count_) + " paths, one photon each)",
+                   photon_map_build_bytes(double(photon_count_)), "photon_count"}});
     PassLoop loop(scene, opts, poll);
     Passes passes(*this, scene);
     return loop.run(passes);

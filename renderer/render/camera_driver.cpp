@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "render/memory.h"
 #include "render/pass_loop.h"
 #include "transport/camera_sample.h"
 
@@ -86,13 +87,8 @@ private:
 RenderOutput render_camera_paths(PassLoop& loop, const Integrator& integrator) {
     const Scene& scene = loop.scene();
     int W = scene.sensor->width, H = scene.sensor->height;
-    // Two films of 27 doubles per pixel (estimate, squares, 7 effects): say
-    // so up front rather than fail inside an allocation.
-    double film_bytes = 2.0 * double(W) * double(H) * (3 + 3 + 3 * kNumEffects) * sizeof(double);
-    if (film_bytes > 16.0 * (1ull << 30))
-        throw std::invalid_argument("render: a " + std::to_string(W) + "x" + std::to_string(H) + " film needs " +
-                                    std::to_string(int(film_bytes / (1ull << 30))) +
-                                    " GiB of accumulation buffers (limit 16 GiB); lower the resolution");
+    // Said up front rather than failing inside an allocation (memory.h).
+    check_memory(integrator.type, W, H, {camera_film_memory(W, H), output_memory(loop.options(), W, H)});
     CameraStep step(scene, integrator);
     return loop.run(step);
 }

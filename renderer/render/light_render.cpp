@@ -36,6 +36,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "render/memory.h"
 #include "render/pass_loop.h"
 
 namespace rm {
@@ -289,12 +290,15 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
     int W = scene.sensor->width, H = scene.sensor->height;
     FilterSampler filter(sd.rfilter, sd.filter_radius, sd.filter_stddev);
     const int n_strat = integrator.strategy_depth() > 0 ? num_strategies(integrator.strategy_depth()) : 0;
-    double film_bytes = double(W) * double(H) * 3.0 * (kNumEffects + kBatches + 2 * n_strat) * sizeof(double);
-    if (film_bytes > 16.0 * (1ull << 30))
-        throw std::invalid_argument(
-            "render: a " + std::to_string(W) + "x" + std::to_string(H) + " film needs " +
-            std::to_string(int(film_bytes / (1ull << 30))) +
-            " GiB of light-tracing buffers (limit 16 GiB); lower the resolution or strategy_images");
+    // The splat film's sums (effects, batches) and the strategy images'
+    // sums and outputs, said up front (memory.h).
+    const double pixels = double(W) * double(H);
+    std::vector<MemoryPart> parts = {
+        {"light-tracing films", pixels * 3.0 * (kNumEffects + kBatches) * sizeof(double),
+         "the resolution (film width, height)"},
+        {"strategy images", pixels * 3.0 * 2.0 * n_strat * (sizeof(double) + sizeof(float)), "strategy_images"},
+        output_memory(opts, W, H)};
+    check_memory(integrator.type, W, H, parts);
     PassLoop loop(scene, opts, poll);
     LightStep step(scene, integrator, filter, n_strat, loop.threads());
     return loop.run(step);

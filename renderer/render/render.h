@@ -37,6 +37,8 @@ struct PhotonMapStats {
     double bytes_per_photon = 0;  // memory of the map per photon
     double trace_seconds = 0, build_seconds = 0;
     bool target_reached = true;  // false: tracing gave up before storing the requested count
+    uint64_t target = 0;         // photons requested (photonmapper's maps; 0 for sppm's)
+    uint64_t max_paths = 0;      // the give-up bound on paths (photon_trace.h; 0 for sppm's)
 };
 
 struct RenderOutput {
