@@ -25,6 +25,7 @@ import uuid
 from pathlib import Path
 from typing import Optional
 
+from radiometer.analysis import verdict as _verdict
 from radiometer.reference_scenes import references as _references
 from radiometer.reference_scenes import registry as _scenes
 
@@ -125,6 +126,7 @@ def _run_job(job, rec, root: Path, run_id: str):
             rec.setdefault("metric_errors", {})[name] = f"{type(e).__name__}: {e}"
     if ref.variance is not None:
         m["relmse_floor"] = M.relmse_floor(ref.image, ref.variance)
+    m["relmse_noise"] = _verdict.noise_relmse(res.variance, ref.image)
     # Convergence: relMSE at each checkpoint against the same reference.
     curve = M.error_curve(res.checkpoints, ref.image, "relmse") if res.checkpoints else []
     rec["curve"] = curve
@@ -133,6 +135,7 @@ def _run_job(job, rec, root: Path, run_id: str):
     m["time_to_target"] = M.time_to_error(curve, target) if target else None
     m["efficiency"] = M.efficiency(m.get("relmse"), rec["seconds"])
     rec["metrics"] = m
+    rec["verdict"] = _verdict.verdict(rec, target or _matrix.DEFAULT_TARGET_RELMSE)
     # Per effect class, against the per-effect reference (where there is one).
     em = {}
     if ref.effects is not None:
