@@ -210,7 +210,9 @@ def _ratio_colour(ratio, resolved) -> str:
     return "#%02x%02x%02x" % g
 
 
-def _ratio_text(ratio) -> str:
+def _ratio_text(ratio, resolved=None) -> str:
+    if resolved == "exact":
+        return "exact"
     if ratio is None:
         return "alone"
     return "x" + (T.fmt(ratio, 2) if ratio < 1e6 else "&gt;1e6")
@@ -236,12 +238,13 @@ def winner_matrix_html(wins) -> str:
             if w is None:
                 row.append("<td></td>")
                 continue
-            tie = {"yes": "", "no": " ~", "n<2": " (n&lt;2)"}[w["resolved"]]
+            tie = {"yes": "", "no": " ~", "n<2": " (n&lt;2)", "exact": ""}[w["resolved"]]
             title = (f"{w['winner']} over {w['runner_up']}: efficiency ratio {w['ratio']:.3g}" if w["ratio"]
+                     else f"{w['winner']} and {w['runner_up']}: both exact to rounding" if w["resolved"] == "exact"
                      else f"{w['winner']}: the only estimator measured")
             row.append(f"<td style='background:{_ratio_colour(w['ratio'], w['resolved'])}' title='{esc(title)}'>"
                        f"<a href='#ev-{esc(sc)}-{esc(e)}'>{esc(w['winner'])}</a> "
-                       f"<span class='ratio'>{_ratio_text(w['ratio'])}{tie}</span></td>")
+                       f"<span class='ratio'>{_ratio_text(w['ratio'], w['resolved'])}{tie}</span></td>")
         out.append("<tr>" + "".join(row) + "</tr>")
     out.append("</tbody></table>")
     return "\n".join(out)
@@ -261,7 +264,7 @@ def evidence_html(scene, wins) -> str:
                           for c in w["candidates"])
         link = f"viewer.html#scene={esc(scene)}&amp;layer={esc(w['effect'])}&amp;src={esc(w['winner'])}"
         out.append(f"<tr id='ev-{esc(scene)}-{esc(w['effect'])}'><td>{esc(w['effect'])}</td><td>{esc(w['winner'])}"
-                   f"</td><td>{_ratio_text(w['ratio'])}</td><td>{esc(w['resolved'])}</td>"
+                   f"</td><td>{_ratio_text(w['ratio'], w['resolved'])}</td><td>{esc(w['resolved'])}</td>"
                    f"<td class='why'>{cands}</td><td><a href='{link}'>view</a></td></tr>")
     out.append("</tbody></table>")
     return "\n".join(out)

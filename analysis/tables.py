@@ -202,7 +202,9 @@ def effect_table_text(rows, metric: str = "relmse", winners=None, width: int = T
             words = []
             for w in wl:
                 what = "total" if w["effect"] == "total" else EFFECT_SHORT.get(w["effect"], w["effect"])
-                if w["ratio"] is None:
+                if w["resolved"] == "exact":
+                    words.append(f"{what} {w['winner']} (exact, as {w['runner_up']})")
+                elif w["ratio"] is None:
                     words.append(f"{what} {w['winner']} (alone)")
                 else:
                     tie = "" if w["resolved"] == "yes" else " ~" if w["resolved"] == "no" else " n<2"

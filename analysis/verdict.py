@@ -46,6 +46,9 @@ TERM_HOW = {
 # Efficiency of a render with zero error (an exact furnace): the error is
 # floored here so ratios stay finite.
 ERROR_FLOOR = 1e-30
+# Below this relMSE a render is exact to float32 rounding (an exact furnace
+# measures about 1e-13): two such renders tie, whatever their efficiency ratio.
+EXACT_RELMSE = 1e-10
 
 
 def noise_relmse(variance, ref, eps: float | None = None) -> float:
@@ -138,8 +141,9 @@ def effect_error(rec: dict, effect: str):
 def winners(recs: list) -> list:
     """One dict per (scene, effect) with at least one estimator measured:
     scene, effect, budget (label), equal_time, winner, runner_up, ratio
-    (winner's efficiency over the runner-up's; None without a runner-up),
-    resolved ("yes", "no" or "n<2"), candidates [(estimator, efficiency
+    (winner's efficiency over the runner-up's; None without a runner-up or
+    when both are exact to rounding), resolved ("yes", "no", "n<2", or
+    "exact": both exact), candidates [(estimator, efficiency
     geometric mean, lo, hi, seeds, mean relMSE)], best first."""
     from radiometer.benchmarks.compare import log_ci
 
@@ -174,7 +178,9 @@ def winners(recs: list) -> list:
             if len(cands) > 1:
                 runner = cands[1]
                 ratio = w[1] / runner[1] if runner[1] > 0 else math.inf
-                if w[4] >= 2 and runner[4] >= 2:
+                if w[5] < EXACT_RELMSE and runner[5] < EXACT_RELMSE:
+                    ratio, resolved = None, "exact"
+                elif w[4] >= 2 and runner[4] >= 2:
                     resolved = "yes" if w[2] > runner[3] else "no"
             out.append({"scene": scene, "effect": eff, "budget": budget_label(b), "equal_time": equal_time,
                         "winner": w[0], "runner_up": runner[0] if runner else None, "ratio": ratio,
