@@ -548,7 +548,15 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, 
              "rare paths in every seed and underestimates its variance there (tests/test_canonical_mitsuba.py measures "
              "this), so a moderate |z| is a hint; a large one with a large bias is a finding (direct lighting's "
              "truncation, light tracing's missing L...S E paths). A zero-variance render's z measures float32 "
-             "rounding.</p>", _bias_table(recs, root)]
+             "rounding.</p>", _bias_table(recs, root),
+             "<h2>Error budget per effect over seeds</h2>",
+             "<p class='note'>For each effect class against its per-effect reference, from the seeds of each "
+             "configuration (renders keep one variance, of the whole image, so a per-effect noise comes from the "
+             "spread over seeds): noise = mean(s<sup>2</sup> / (ref<sup>2</sup> + 0.01)), s<sup>2</sup> the "
+             "per-pixel variance across seeds, the expected relMSE of one render from noise; bias = "
+             "mean(((mean - ref)<sup>2</sup> - s<sup>2</sup> / k) / (ref<sup>2</sup> + 0.01)), clamped at 0, the "
+             "squared bias less the seed mean's own variance. The larger is bold. With few seeds both are rough "
+             "(the variance over k seeds has k - 1 degrees of freedom).</p>", _effect_budget_table(recs, root)]
     scenes = sorted({r["scene"] for r in recs})
     views_note = None
     viewer_scenes = []
@@ -679,6 +687,58 @@ def _bias_table(recs, root: Path) -> str:
     out.append("</tbody></table>")
     if n == 0:
         return "<p class='note'>no configuration has two finished seeds with their images here</p>"
+    return "\n".join(out)
+
+
+def _effect_budget_table(recs, root: Path) -> str:
+    """Per configuration with two seeds or more and its EXRs here: each
+    effect's noise and bias over seeds (verdict.effect_budget_over_seeds),
+    the larger one in bold."""
+    from radiometer.reference_scenes import references as R
+
+    from .verdict import effect_budget_over_seeds
+
+    groups = {}
+    for r in recs:
+        if r["status"] == "ok":
+            groups.setdefault((r["scene"], r["estimator"], T.budget_label(r["budget"])), []).append(r)
+    lines, effs_all = [], set()
+    for (scene, est, bl), rs in sorted(groups.items()):
+        ims = [im for im in (_load_exr(root, r) for r in rs) if im is not None]
+        if len(ims) < 2:
+            continue
+        try:
+            ref = R.reference(scene, rs[0]["scene_params"], rs[0].get("effect_ref"))
+        except Exception:
+            continue
+        if ref.effects is None:
+            continue
+        cells = {}
+        for eff, theirs in ref.effects.items():
+            theirs = np.asarray(theirs, np.float64)
+            mine = [np.asarray(im.effects.get(eff, np.zeros_like(theirs)), np.float64) for im in ims]
+            if not (np.any(theirs != 0) or any(np.any(m != 0) for m in mine)):
+                continue
+            cells[eff] = effect_budget_over_seeds(mine, theirs)
+            effs_all.add(eff)
+        if cells:
+            lines.append((scene, est, bl, len(ims), cells))
+    if not lines:
+        return "<p class='note'>no configuration has two finished seeds, its images and a per-effect reference here</p>"
+    effs = T.effect_columns([{"effects": {e: 1 for e in effs_all}}])
+    out = ["<table><thead><tr><th>scene</th><th>estimator</th><th>budget</th><th>seeds</th>" +
+           "".join(f"<th>{esc(e)}: noise / bias</th>" for e in effs) + "</tr></thead><tbody>"]
+    for scene, est, bl, k, cells in lines:
+        row = [esc(scene), esc(est), esc(bl), str(k)]
+        for e in effs:
+            c = cells.get(e)
+            if c is None:
+                row.append("")
+                continue
+            n, b = T.fmt(c["noise"]), T.fmt(c["bias"])
+            row.append(f"<b>{n}</b> / {b}" if c["noise"] >= c["bias"] else f"{n} / <b>{b}</b>")
+        out.append("<tr>" + "".join(f"<td>{x}</td>" for x in row) + "</tr>")
+    out.append("</tbody></table>")
     return "\n".join(out)
 
 

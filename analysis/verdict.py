@@ -192,3 +192,23 @@ def _effect_key(e):
     from .tables import EFFECT_ORDER
 
     return (EFFECT_ORDER.index(e) if e in EFFECT_ORDER else len(EFFECT_ORDER), e)
+
+
+def effect_budget_over_seeds(layers: list, ref, eps: float | None = None) -> dict:
+    """The noise and bias terms of one effect layer of a configuration, from
+    its seeds (k >= 2 renders of one configuration with independent seeds,
+    `layers`) against that effect's reference `ref`, in relMSE units:
+    noise = mean(s^2 / (ref^2 + eps)) with s^2 the per-pixel variance across
+    seeds (one render's variance), bias = mean((mean - ref)^2 - s^2 / k) /
+    (ref^2 + eps)), clamped at 0 (the squared bias, less the seeds' mean's
+    own variance, which would otherwise count as bias). The reference's own
+    noise is not included (a per-effect reference keeps no variance)."""
+    from .metrics import RELMSE_EPS
+    from .stats import bias_variance
+
+    bv = bias_variance(layers, ref)
+    k = len(layers)
+    d = np.asarray(ref, np.float64) ** 2 + (RELMSE_EPS if eps is None else eps)
+    noise = float(np.mean(bv["variance"] / d))
+    bias = float(np.mean((bv["bias"] ** 2 - bv["variance"] / k) / d))
+    return {"noise": noise, "bias": max(0.0, bias), "seeds": k}
