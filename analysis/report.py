@@ -556,7 +556,9 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, 
              "per-pixel variance across seeds, the expected relMSE of one render from noise; bias = "
              "mean(((mean - ref)<sup>2</sup> - s<sup>2</sup> / k) / (ref<sup>2</sup> + 0.01)), clamped at 0, the "
              "squared bias less the seed mean's own variance. The larger is bold. With few seeds both are rough "
-             "(the variance over k seeds has k - 1 degrees of freedom).</p>", _effect_budget_table(recs, root)]
+             "(the variance over k seeds has k - 1 degrees of freedom). In brackets: the noise from each render's own "
+             "per-effect variance (res.effect_variance: the films of camera estimators keep it), mean over seeds; "
+             "the two noise estimates should agree within the seeds' spread.</p>", _effect_budget_table(recs, root)]
     scenes = sorted({r["scene"] for r in recs})
     views_note = None
     viewer_scenes = []
@@ -720,6 +722,9 @@ def _effect_budget_table(recs, root: Path) -> str:
             if not (np.any(theirs != 0) or any(np.any(m != 0) for m in mine)):
                 continue
             cells[eff] = effect_budget_over_seeds(mine, theirs)
+            own = [((r.get("effect_metrics") or {}).get(eff) or {}).get("noise") for r in rs]
+            own = [x for x in own if x is not None]
+            cells[eff]["render_noise"] = float(np.mean(own)) if own else None
             effs_all.add(eff)
         if cells:
             lines.append((scene, est, bl, len(ims), cells))
@@ -736,7 +741,10 @@ def _effect_budget_table(recs, root: Path) -> str:
                 row.append("")
                 continue
             n, b = T.fmt(c["noise"]), T.fmt(c["bias"])
-            row.append(f"<b>{n}</b> / {b}" if c["noise"] >= c["bias"] else f"{n} / <b>{b}</b>")
+            txt = f"<b>{n}</b> / {b}" if c["noise"] >= c["bias"] else f"{n} / <b>{b}</b>"
+            if c["render_noise"] is not None:
+                txt += f" <span class='note'>(render: {T.fmt(c['render_noise'])})</span>"
+            row.append(txt)
         out.append("<tr>" + "".join(f"<td>{x}</td>" for x in row) + "</tr>")
     out.append("</tbody></table>")
     return "\n".join(out)

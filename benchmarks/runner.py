@@ -109,7 +109,7 @@ def _run_job(job, rec, root: Path, run_id: str):
     b = job["budget"]
     res = rm.render(scene, integrator=job["integrator"], spp=b.get("spp"), seconds=b.get("seconds"),
                     seed=job["seed"], threads=job["threads"],
-                    checkpoints=True if job.get("checkpoints", True) else None)
+                    checkpoints=True if job.get("checkpoints", True) else None, effect_variance=True)
     rec["_stage"] = "metrics"
     rec["spp"], rec["seconds"] = int(res.spp), float(res.seconds)
     rec["stats"] = {k: v for k, v in res.stats.items() if isinstance(v, (int, float, str, bool))}
@@ -156,13 +156,19 @@ def _run_job(job, rec, root: Path, run_id: str):
                     d[name] = None
             d["reference_mean"] = float(theirs.mean())
             d["mean"] = float(mine.mean())
+            # The effect's noise term, from its own per-pixel variance (camera estimators' films keep it).
+            ev = (res.effect_variance or {}).get(eff)
+            d["noise"] = None if ev is None else _verdict.noise_relmse(ev, theirs)
             em[eff] = d
     rec["effect_metrics"] = em
     # The render itself, with every effect layer.
     rel = Path("runs") / run_id / job["scene"] / f"{job['estimator']}-{_budget_label(b)}-s{job['seed']}.exr"
     out = root / rel
     out.parent.mkdir(parents=True, exist_ok=True)
-    rm.write_exr(out, res, scene=job["scene"], run_id=run_id, job_key=job["key"])
+    budget = {"target_relmse": rec["verdict"]["target"] if rec["verdict"] else None,
+              "terms": rec["verdict"]["terms"] if rec["verdict"] else None, "how": _verdict.TERM_HOW,
+              "effect_noise": {e: d.get("noise") for e, d in em.items()}}
+    rm.write_exr(out, res, scene=job["scene"], run_id=run_id, job_key=job["key"], error_budget=budget)
     rec["exr"] = str(rel)
 
 

@@ -18,14 +18,14 @@ constexpr int kTile = 16;
 
 class CameraStep final : public PassStep {
 public:
-    CameraStep(const Scene& scene, const Integrator& integrator)
+    CameraStep(const Scene& scene, const Integrator& integrator, bool effect_variance)
         : scene_(scene),
           integrator_(integrator),
           W_(scene.sensor->width),
           H_(scene.sensor->height),
           filter_(scene.sensor_desc.rfilter, scene.sensor_desc.filter_radius, scene.sensor_desc.filter_stddev),
-          film_(W_, H_),
-          pass_film_(W_, H_),
+          film_(W_, H_, effect_variance),
+          pass_film_(W_, H_, effect_variance),
           tiles_x_((W_ + kTile - 1) / kTile),
           tiles_y_((H_ + kTile - 1) / kTile) {}
 
@@ -41,6 +41,10 @@ public:
     void develop(int spp, std::vector<float>& image, std::vector<float>& variance,
                  std::vector<std::vector<float>>* effects) const override {
         film_.develop(spp, image, variance, effects);
+    }
+
+    void develop_effect_variance(int spp, std::vector<std::vector<float>>& variance) const override {
+        film_.develop_effect_variance(spp, variance);
     }
 
 private:
@@ -86,14 +90,15 @@ private:
 RenderOutput render_camera_paths(PassLoop& loop, const Integrator& integrator) {
     const Scene& scene = loop.scene();
     int W = scene.sensor->width, H = scene.sensor->height;
-    // Two films of 27 doubles per pixel (estimate, squares, 7 effects): say
-    // so up front rather than fail inside an allocation.
-    double film_bytes = 2.0 * double(W) * double(H) * (3 + 3 + 3 * kNumEffects) * sizeof(double);
+    // Two films of 27 doubles per pixel (estimate, squares, 7 effects; 48 with
+    // the effects' squares): say so up front rather than fail inside an allocation.
+    const bool effvar = loop.options().effect_variance;
+    double film_bytes = 2.0 * double(W) * double(H) * (3 + 3 + 3 * kNumEffects * (effvar ? 2 : 1)) * sizeof(double);
     if (film_bytes > 16.0 * (1ull << 30))
         throw std::invalid_argument("render: a " + std::to_string(W) + "x" + std::to_string(H) + " film needs " +
                                     std::to_string(int(film_bytes / (1ull << 30))) +
                                     " GiB of accumulation buffers (limit 16 GiB); lower the resolution");
-    CameraStep step(scene, integrator);
+    CameraStep step(scene, integrator, effvar);
     return loop.run(step);
 }
 
