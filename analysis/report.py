@@ -156,7 +156,11 @@ def history_plot(scene, hist, budget, out: Path):
     """Error and time of each estimator of `scene` at `budget` across the
     runs of the store (oldest first, each labelled by its commit): the
     geometric mean over seeds and its 95 % band, the way asv draws its
-    graphs. Returns None, or why there is no plot (fewer than two runs)."""
+    graphs. Returns None, or why there is no plot (fewer than two runs).
+    A matplotlib PNG rather than inline SVG: it looks like the page's other
+    plots, the page's load check counts it as it counts them, and its size
+    does not grow with the number of runs in the store (an SVG of every run
+    and seed would, inside index.html)."""
     rows = [h for h in hist if h["scene"] == scene and h["budget"] == budget and h["status"] == "ok"]
     runs = []
     for h in rows:
