@@ -212,3 +212,25 @@ def effect_budget_over_seeds(layers: list, ref, eps: float | None = None) -> dic
     noise = float(np.mean(bv["variance"] / d))
     bias = float(np.mean((bv["bias"] ** 2 - bv["variance"] / k) / d))
     return {"noise": noise, "bias": max(0.0, bias), "seeds": k}
+
+
+def render_error_budget(res) -> dict:
+    """The error terms one render knows about itself, without a reference
+    (res.error_budget): the standard error of the image mean per channel,
+    sqrt(sum of the pixels' variances) / pixels (pixels are independent
+    samples), of the whole image and, where the render kept per-effect
+    variances, of each effect. Terms that need a reference or the matrix
+    (bias, the reference's noise) are the benchmark's (error_terms)."""
+
+    def se(var):
+        v = np.asarray(var, np.float64).reshape(-1, 3)
+        if not np.all(np.isfinite(v)):  # one sample per pixel: no variance estimate
+            return None
+        return [float(x) for x in np.sqrt(v.sum(axis=0)) / v.shape[0]]
+
+    effects = None
+    if getattr(res, "effect_variance", None) is not None:
+        effects = {e: se(v) for e, v in res.effect_variance.items() if np.any(np.asarray(res.effects[e]) != 0)}
+    return {"noise": {"image_mean_se": se(res.variance), "effects_mean_se": effects},
+            "how": {"noise": "standard error of the image mean per channel, sqrt(sum of per-pixel variances) / "
+                             "pixels; per effect from the film's per-effect variances (render(effect_variance=True))"}}

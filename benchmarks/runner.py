@@ -165,9 +165,10 @@ def _run_job(job, rec, root: Path, run_id: str):
     rel = Path("runs") / run_id / job["scene"] / f"{job['estimator']}-{_budget_label(b)}-s{job['seed']}.exr"
     out = root / rel
     out.parent.mkdir(parents=True, exist_ok=True)
-    budget = {"target_relmse": rec["verdict"]["target"] if rec["verdict"] else None,
-              "terms": rec["verdict"]["terms"] if rec["verdict"] else None, "how": _verdict.TERM_HOW,
-              "effect_noise": {e: d.get("noise") for e, d in em.items()}}
+    budget = dict(res.error_budget, target_relmse=rec["verdict"]["target"] if rec["verdict"] else None,
+                  terms=rec["verdict"]["terms"] if rec["verdict"] else None, terms_how=_verdict.TERM_HOW,
+                  effect_noise_relmse={e: d.get("noise") for e, d in em.items()})
+    rec["error_budget"] = budget
     rm.write_exr(out, res, scene=job["scene"], run_id=run_id, job_key=job["key"], error_budget=budget)
     rec["exr"] = str(rel)
 

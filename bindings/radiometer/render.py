@@ -56,6 +56,10 @@ class RenderResult:
     # render(effect_variance=True) asked and the estimator's film keeps it
     # (camera estimators); None otherwise.
     effect_variance: Optional[dict] = None
+    # What the render knows of its own error (analysis/verdict.py
+    # render_error_budget): the standard error of the image mean, and per
+    # effect where effect_variance was kept.
+    error_budget: dict = field(default_factory=dict)
 
     def write_exr(self, path, **metadata):
         from .exr import write_exr
@@ -187,6 +191,9 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
                           seed=int(seed), strategies=dict(r["strategies"]),
                           strategies_unweighted=dict(r["strategies_unweighted"]),
                           effect_variance=None if r["effect_variance"] is None else dict(r["effect_variance"]))
+    from .analysis.verdict import render_error_budget
+
+    result.error_budget = render_error_budget(result)
     if spec["type"] == "sppm":
         mixed = _mixed_bsdfs(scene.desc)
         if mixed:
