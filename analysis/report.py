@@ -1,12 +1,19 @@
 """`radiometer report RUN`: a static HTML report of one benchmark run.
 
-One folder, index.html plus PNGs, no scripts from elsewhere:
+One folder, index.html, viewer.html (analysis/viewer.py) plus PNGs and the
+viewer's data, no scripts from elsewhere:
   * machine, commit, matrix and job counts;
+  * the scene x effect matrix of winners by efficiency at the compared
+    budget, each cell linking to its evidence (analysis/verdict.py);
+  * each configuration's verdict against the target relMSE, with its error
+    terms, and each effect's noise and bias over seeds;
   * the per-effect error table (scene x estimator x effect, relMSE, mean
     over seeds) and a table of every metric;
-  * per scene: a log-log plot of relMSE against time from each render's
-    checkpoints, every seed drawn, each estimator's fitted slope in the
-    legend (-1 is the Monte Carlo rate of an unbiased estimator);
+  * per scene: a log-log plot of relMSE against time from the renders'
+    checkpoints, the geometric mean over seeds with its 95 % band, each
+    estimator's fitted slope in the legend where its curves have enough
+    checkpoints (-1 is the Monte Carlo rate of an unbiased estimator); the
+    history of error and time across the store's runs of the matrix;
     an equal-budget image comparison (reference and each estimator's seed-0
     image, tone-mapped with the reference's exposure; a 4x crop around the
     region where the estimators err most; the per-pixel relative squared
