@@ -527,7 +527,7 @@ PYBIND11_MODULE(_core, m) {
     m.def(
         "render",
         [](const Scene& scene, const IntegratorDesc& idesc, std::vector<bool> effects, int spp, double seconds,
-           uint64_t seed, int threads, std::vector<int> checkpoints, py::object progress) {
+           uint64_t seed, int threads, std::vector<int> checkpoints, py::object progress, bool effect_variance) {
             if (!scene.committed()) throw py::value_error("render: scene is not committed");
             EffectMask mask;
             if (effects.size() != size_t(kNumEffects)) throw py::value_error("render: effects mask needs 7 entries");
@@ -539,6 +539,7 @@ PYBIND11_MODULE(_core, m) {
             opts.seed = seed;
             opts.threads = threads;
             opts.checkpoints = std::move(checkpoints);
+            opts.effect_variance = effect_variance;
             bool interrupted = false;
             std::unique_ptr<py::error_already_set> callback_error;
             // Runs on the calling thread with the GIL re-acquired: checks for
@@ -579,6 +580,14 @@ PYBIND11_MODULE(_core, m) {
             py::dict eff;
             for (int k = 0; k < kNumEffects; ++k) eff[effect_name(k)] = to_numpy(std::move(out.effects[k]), {H, W, 3});
             r["effects"] = eff;
+            if (out.effect_variance.empty()) {
+                r["effect_variance"] = py::none();
+            } else {
+                py::dict ev;
+                for (int k = 0; k < kNumEffects; ++k)
+                    ev[effect_name(k)] = to_numpy(std::move(out.effect_variance[k]), {H, W, 3});
+                r["effect_variance"] = ev;
+            }
             // Per-strategy images, keyed (s, t) (strategy_index order, integrator.h).
             py::dict strat, strat_u;
             for (int d = 1, k = 0; k < int(out.strategies.size()); ++d)
@@ -625,5 +634,6 @@ PYBIND11_MODULE(_core, m) {
             return r;
         },
         py::arg("scene"), py::arg("integrator"), py::arg("effects"), py::arg("spp"), py::arg("seconds"),
-        py::arg("seed"), py::arg("threads"), py::arg("checkpoints"), py::arg("progress"));
+        py::arg("seed"), py::arg("threads"), py::arg("checkpoints"), py::arg("progress"),
+        py::arg("effect_variance") = false);
 }

@@ -51,7 +51,9 @@ private:
 
 class Film {
 public:
-    Film(int width, int height);
+    // effect_squares: also sum each effect's squares, for per-effect
+    // variances (develop_effect_variance); 21 more doubles per pixel.
+    Film(int width, int height, bool effect_squares = false);
     int width() const { return w_; }
     int height() const { return h_; }
     void add(int pixel, const EffectRadiance& v);
@@ -60,10 +62,13 @@ public:
     // Mean, variance of the mean (per channel), and effect means after `spp` samples per pixel.
     void develop(int spp, std::vector<float>& image, std::vector<float>& variance,
                  std::vector<std::vector<float>>* effects) const;
+    // Variance of each effect's mean (kNumEffects images), as develop's
+    // variance of the total; empty when the film keeps no effect squares.
+    void develop_effect_variance(int spp, std::vector<std::vector<float>>& variance) const;
 
 private:
     int w_, h_;
-    std::vector<double> sum_, sum_sq_, effects_;
+    std::vector<double> sum_, sum_sq_, effects_, effects_sq_;
 };
 
 }  // namespace rm

@@ -19,14 +19,14 @@ constexpr int kTile = 16;
 
 class CameraStep final : public PassStep {
 public:
-    CameraStep(const Scene& scene, const Integrator& integrator)
+    CameraStep(const Scene& scene, const Integrator& integrator, bool effect_variance)
         : scene_(scene),
           integrator_(integrator),
           W_(scene.sensor->width),
           H_(scene.sensor->height),
           filter_(scene.sensor_desc.rfilter, scene.sensor_desc.filter_radius, scene.sensor_desc.filter_stddev),
-          film_(W_, H_),
-          pass_film_(W_, H_),
+          film_(W_, H_, effect_variance),
+          pass_film_(W_, H_, effect_variance),
           tiles_x_((W_ + kTile - 1) / kTile),
           tiles_y_((H_ + kTile - 1) / kTile) {}
 
@@ -42,6 +42,10 @@ public:
     void develop(int spp, std::vector<float>& image, std::vector<float>& variance,
                  std::vector<std::vector<float>>* effects) const override {
         film_.develop(spp, image, variance, effects);
+    }
+
+    void develop_effect_variance(int spp, std::vector<std::vector<float>>& variance) const override {
+        film_.develop_effect_variance(spp, variance);
     }
 
 private:
@@ -88,8 +92,9 @@ RenderOutput render_camera_paths(PassLoop& loop, const Integrator& integrator) {
     const Scene& scene = loop.scene();
     int W = scene.sensor->width, H = scene.sensor->height;
     // Said up front rather than failing inside an allocation (memory.h).
-    check_memory(integrator.type, W, H, {camera_film_memory(W, H), output_memory(loop.options(), W, H)});
-    CameraStep step(scene, integrator);
+    const bool effvar = loop.options().effect_variance;
+    check_memory(integrator.type, W, H, {camera_film_memory(W, H, effvar), output_memory(loop.options(), W, H)});
+    CameraStep step(scene, integrator, effvar);
     return loop.run(step);
 }
 

@@ -84,10 +84,12 @@ MemoryPart output_memory(const RenderOptions& opts, int width, int height) {
                                      : "the resolution (film width, height) or the number of checkpoints"};
 }
 
-MemoryPart camera_film_memory(int width, int height) {
-    // Two films (film.h) of sums, squares and kNumEffects effect sums, 3 doubles each.
+MemoryPart camera_film_memory(int width, int height, bool effect_variance) {
+    // Two films (film.h) of sums, squares and kNumEffects effect sums (and
+    // their squares with effect_variance), 3 doubles each.
     const double pixels = double(width) * double(height);
-    return {"accumulation films", 2.0 * pixels * 3.0 * (2 + kNumEffects) * sizeof(double),
+    const double per_pixel = 2 + kNumEffects * (effect_variance ? 2 : 1);
+    return {"accumulation films", 2.0 * pixels * 3.0 * per_pixel * sizeof(double),
             "the resolution (film width, height)"};
 }
 

@@ -44,7 +44,7 @@ std::string format_bytes(double bytes);
 MemoryPart output_memory(const RenderOptions& opts, int width, int height);
 
 // The camera driver's two films (finished passes, the pass in flight).
-MemoryPart camera_film_memory(int width, int height);
+MemoryPart camera_film_memory(int width, int height, bool effect_variance = false);
 
 // Peak bytes of a photon map of n photons while it is traced and built
 // (photon_map.h: the traced vector, the tree's copy, its index and axes).

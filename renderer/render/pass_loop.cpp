@@ -122,6 +122,7 @@ RenderOutput PassLoop::run(PassStep& step) {
     out.seconds = elapsed();
     for (const PaddedStats& t : stats_) out.stats.merge(t.s);
     step.develop(spp, out.image, out.variance, &out.effects);
+    if (opts_.effect_variance) step.develop_effect_variance(spp, out.effect_variance);
     step.finish(out);
     return out;
 }
