@@ -90,7 +90,7 @@ PARAMS = {
     # The estimators' declarations in the core's registry, Mitsuba 0.6 names included.
     "integrator": {n: {name: {"int": "int", "float": "float", "bool": "bool", "string": "string"}[p["type"]]
                        for k, p in e["params"].items() for name in [k, *p["aliases"]]}
-                   for e in estimators().values() for n in [e["name"], *e["aliases"]]},
+                   for e in estimators().values() for n in [e["name"], *e["aliases"]]} | {"moment": {}},
 }
 assert {c: set(t) for c, t in PARAMS.items()} == {c: set(t) for c, t in PLUGINS.items()}, \
     "the fuzzer's schema must cover the loader's plugin table"

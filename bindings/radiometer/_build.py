@@ -129,6 +129,9 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
     c.far_clip = float(sd.far_clip)
     c.width = int(sd.width)
     c.height = int(sd.height)
+    crop = (int(sd.crop_x), int(sd.crop_y), int(sd.crop_width), int(sd.crop_height))
+    if crop[2] > 0 and crop != (0, 0, int(sd.width), int(sd.height)):  # else the full film (0: its default)
+        c.crop_x, c.crop_y, c.crop_width, c.crop_height = crop
     c.rfilter = sd.rfilter
     c.filter_radius = float(sd.filter_radius)
     c.filter_stddev = float(sd.filter_stddev)

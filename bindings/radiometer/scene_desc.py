@@ -127,6 +127,13 @@ class SensorDesc:
     filter_radius: float = 2.0
     filter_stddev: float = 0.5
     spp: int = 4  # from the sampler's sample_count
+    # The film's crop window (Mitsuba's crop_offset_x/y, crop_width/height):
+    # the pixels rendered and returned; width/height keep the full film's
+    # geometry. crop_width/height 0: the full film.
+    crop_x: int = 0
+    crop_y: int = 0
+    crop_width: int = 0
+    crop_height: int = 0
     medium: Optional[MediumDesc] = None  # the medium the sensor sits in
 
 

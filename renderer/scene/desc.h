@@ -48,6 +48,10 @@ struct SensorDesc {
     float fov_x = 39.3077f;  // horizontal field of view in degrees (fov_axis resolved in Python)
     float near_clip = 1e-2f, far_clip = 1e4f;
     int width = 256, height = 256;
+    // The crop window (Mitsuba's film crop_offset_x/y, crop_width/height):
+    // the pixels rendered and returned; width/height keep the geometry.
+    // crop_width/height 0: the full film.
+    int crop_x = 0, crop_y = 0, crop_width = 0, crop_height = 0;
     std::string rfilter = "gaussian";  // box tent gaussian
     float filter_radius = 2.f;         // box: 0.5, tent: 1, gaussian: 4 * stddev
     float filter_stddev = 0.5f;        // gaussian

@@ -13,7 +13,8 @@ PLUGINS = {
     "film": ("hdrfilm",),
     "rfilter": ("box", "tent", "gaussian"),
     "sampler": ("independent",),
-    "integrator": estimator_names(),  # the core's registry
+    # the core's registry, and Mitsuba's `moment` around one of them
+    "integrator": estimator_names() + ("moment",),
     "medium": ("homogeneous", "heterogeneous"),
     "phase": ("isotropic", "hg"),
     "volume": ("gridvolume", "constvolume"),
