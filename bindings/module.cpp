@@ -82,7 +82,12 @@ PYBIND11_MODULE(_core, m) {
             "to_world", [](const EmitterDesc& d) { return d.to_world; },
             [](EmitterDesc& d, py::object v) { d.to_world = to_matrix(v); })
         .def_readwrite("cutoff_angle", &EmitterDesc::cutoff_angle)
-        .def_readwrite("beam_width", &EmitterDesc::beam_width);
+        .def_readwrite("beam_width", &EmitterDesc::beam_width)
+        .def_readwrite("env_width", &EmitterDesc::env_width)
+        .def_readwrite("env_height", &EmitterDesc::env_height)
+        .def_property(
+            "env_data", [](const EmitterDesc& d) { return d.env_data; },
+            [](EmitterDesc& d, py::object v) { d.env_data = flat<float>(v, 1, "environment map data"); });
 
     py::class_<SensorDesc>(m, "SensorDesc")
         .def(py::init<>())

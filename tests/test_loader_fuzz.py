@@ -65,6 +65,7 @@ PARAMS = {
     "emitter": {
         "area": {"radiance": "rgb"}, "constant": {"radiance": "rgb"},
         "point": {"intensity": "rgb", "position": "point", "to_world": "transform"},
+        "envmap": {"scale": "float", "to_world": "transform"},
         "spot": {"intensity": "rgb", "cutoff_angle": "angle", "beam_width": "angle", "to_world": "transform"},
         "directional": {"irradiance": "rgb", "direction": "vector", "to_world": "transform"},
     },

@@ -58,6 +58,10 @@ class EmitterDesc:
     to_world: np.ndarray = field(default_factory=_eye)  # point/spot position+frame; directional: +z is the direction
     cutoff_angle: float = 20.0
     beam_width: float = -1.0
+    # envmap: (rows, columns, 3) float32 linear RGB radiance, scale applied;
+    # to_world above maps its local frame (Mitsuba's latitude-longitude
+    # convention, +y up) to the world.
+    env: Optional[np.ndarray] = None
 
 
 @dataclass

@@ -40,6 +40,11 @@ struct EmitterDesc {
     Matrix4 to_world = identity4();  // point/spot: position + frame (spot looks along +z)
     float cutoff_angle = 20.f;       // spot, degrees
     float beam_width = -1.f;         // spot, degrees; < 0: 3/4 of cutoff_angle (Mitsuba default)
+    // envmap: a latitude-longitude image, env_height rows of env_width RGB
+    // pixels (row 0 looks along local +y), radiance with `scale` applied;
+    // to_world maps its local frame to the world.
+    int env_width = 0, env_height = 0;
+    std::vector<float> env_data;
 };
 
 struct SensorDesc {

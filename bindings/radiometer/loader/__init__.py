@@ -61,8 +61,14 @@ emitter    area (nested in a shape): radiance [1]
                to_world (shines along +z)
            directional: irradiance [1], direction or to_world
            constant: radiance [1]
-           Mitsuba 3 emitters take no 'scale' parameter (3.9.1 rejects it as
-           unreferenced), so neither do we: scale the radiance itself.
+           envmap: filename (a latitude-longitude image: .exr through the
+               OpenEXR package, .png/.jpg through Pillow, sRGB to linear;
+               at least 2x3 pixels, finite, non-negative), scale [1],
+               to_world, mis_compensation [false] (only false). Mitsuba's
+               lat-long convention and bilinear lookup; importance-sampled
+               (renderer/scene/emitter.cpp).
+           The other Mitsuba 3 emitters take no 'scale' parameter (3.9.1
+           rejects it as unreferenced), so neither do we: scale the radiance.
 sensor     perspective: fov + fov_axis ['x'|'y'|'diagonal'|'smaller'|
                'larger'] or focal_length ['50mm', a string as in Mitsuba],
                near_clip [1e-2], far_clip [1e4], to_world (no scale); accepted

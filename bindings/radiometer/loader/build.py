@@ -22,6 +22,7 @@ from ..scene_desc import (
     SensorDesc,
     ShapeDesc,
 )
+from .images import read_rgb
 from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _rectangle_mesh
 from .nodes import _Node, _Prop, _Ref
 from .parameters import INT32_RANGE, _Params, _parse_float
@@ -245,7 +246,7 @@ class _Builder:
 
     def _emitter(self, node):
         p, t = _Params(node), node.type
-        if p.has("scale"):
+        if p.has("scale") and t != "envmap":
             raise p.error("Mitsuba 3 emitters take no 'scale' parameter; multiply the "
                           "radiance/intensity/irradiance instead",
                           node.props["scale"].place)
@@ -280,6 +281,21 @@ class _Builder:
             if d is None:
                 raise p.error("the direction has zero length")
             e.to_world = _frame_along(d)
+        elif t == "envmap":
+            path = self.file(p, "environment map")
+            img = read_rgb(path, f"{node.place}: {node.label()}: '{p.string('filename')}'", quote=not self.confine)
+            if img.shape[0] < 3 or img.shape[1] < 2:
+                raise p.error(f"the environment map must be at least 2x3 pixels (Mitsuba's minimum), got "
+                              f"{img.shape[1]}x{img.shape[0]}")
+            scale = p.float("scale", 1.0, check="nonneg")
+            with np.errstate(over="ignore"):
+                e.env = np.ascontiguousarray(img * np.float32(scale), dtype=np.float32)
+            if not np.all(np.isfinite(e.env)):
+                raise p.error(f"the image times scale {scale} overflows float32", node.props["scale"].place)
+            m = p.transform("to_world")
+            e.to_world = np.eye(4) if m is None else m
+            if p.bool("mis_compensation", False):
+                raise p.error("mis_compensation = true is not supported", node.props["mis_compensation"].place)
         p.done()
         return e
 

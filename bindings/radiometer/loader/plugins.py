@@ -8,7 +8,7 @@ PLUGINS = {
     "shape": ("obj", "ply", "rectangle", "cube", "disk", "sphere"),
     "bsdf": ("diffuse", "conductor", "roughconductor", "dielectric", "roughdielectric",
              "thindielectric", "plastic", "twosided", "null"),
-    "emitter": ("area", "point", "spot", "directional", "constant"),
+    "emitter": ("area", "point", "spot", "directional", "constant", "envmap"),
     "sensor": ("perspective", "orthographic", "radiancemeter", "irradiancemeter"),
     "film": ("hdrfilm",),
     "rfilter": ("box", "tent", "gaussian"),
