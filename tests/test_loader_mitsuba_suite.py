@@ -138,6 +138,16 @@ def test_include_splices_the_included_scene(tmp_path):
     assert desc.shapes[0].bsdf.reflectance == (0.25, 0.25, 0.25)
     # The caller's value overrides the included <default>.
     assert load_file(tmp_path / "s.xml", res=8).sensor.width == 8
+    # A <scene> included inside a plugin gives that plugin its children; a
+    # <path> there is not at the top level.
+    _write(tmp_path / "inc" / "parts.xml", _scene("2.0.0", '<float name="radius" value="3"/><bsdf type="null"/>'))
+    desc = load_file(_write(tmp_path / "s2.xml", _scene("3.0.0", '<shape type="sphere">'
+                                                                  '<include filename="inc/parts.xml"/></shape>')))
+    assert desc.shapes[0].radius == 3.0 and desc.shapes[0].bsdf.type == "null"
+    _write(tmp_path / "inc" / "path.xml", _scene("2.0.0", '<path value="."/>'))
+    with pytest.raises(SceneError, match=r"path.xml:2: <path> is allowed only at the top level"):
+        load_file(_write(tmp_path / "s3.xml", _scene("3.0.0", '<shape type="sphere">'
+                                                              '<include filename="inc/path.xml"/></shape>')))
 
 
 def test_errors_inside_included_files_name_that_file_and_line(tmp_path):

@@ -238,7 +238,7 @@ class _XmlReader:
             raise SceneError(f"{self.place(elem)}: <path>: folder '{value}' not found (looked for {path})")
         self.search.insert(0, os.path.abspath(path))
 
-    def include(self, elem, chain):
+    def include(self, elem, chain, top):
         """<include filename="..."/> -> the included file's elements: a
         <scene> root's children, else the root itself (Mitsuba 3's
         Tag::Include). `chain`: the includes that led here, [(real path,
@@ -265,7 +265,7 @@ class _XmlReader:
         chain = chain + [(real, place)]
         if root.tag == "scene":
             self.check_root(root)
-            return self.expand(root.children, chain, top=True)
+            return self.expand(root.children, chain, top=top)
         return self.expand([root], chain, top=False)
 
     def expand(self, elems, chain, top):
@@ -274,7 +274,7 @@ class _XmlReader:
         out = []
         for elem in elems:
             if elem.tag == "include":
-                out.extend(self.include(elem, chain))
+                out.extend(self.include(elem, chain, top))
                 continue
             if elem.tag == "path":
                 if not top:
