@@ -82,7 +82,12 @@ PYBIND11_MODULE(_core, m) {
             "to_world", [](const EmitterDesc& d) { return d.to_world; },
             [](EmitterDesc& d, py::object v) { d.to_world = to_matrix(v); })
         .def_readwrite("cutoff_angle", &EmitterDesc::cutoff_angle)
-        .def_readwrite("beam_width", &EmitterDesc::beam_width);
+        .def_readwrite("beam_width", &EmitterDesc::beam_width)
+        .def_readwrite("env_width", &EmitterDesc::env_width)
+        .def_readwrite("env_height", &EmitterDesc::env_height)
+        .def_property(
+            "env_data", [](const EmitterDesc& d) { return d.env_data; },
+            [](EmitterDesc& d, py::object v) { d.env_data = flat<float>(v, 1, "environment map data"); });
 
     py::class_<SensorDesc>(m, "SensorDesc")
         .def(py::init<>())
@@ -95,6 +100,10 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("far_clip", &SensorDesc::far_clip)
         .def_readwrite("width", &SensorDesc::width)
         .def_readwrite("height", &SensorDesc::height)
+        .def_readwrite("crop_x", &SensorDesc::crop_x)
+        .def_readwrite("crop_y", &SensorDesc::crop_y)
+        .def_readwrite("crop_width", &SensorDesc::crop_width)
+        .def_readwrite("crop_height", &SensorDesc::crop_height)
         .def_readwrite("rfilter", &SensorDesc::rfilter)
         .def_readwrite("filter_radius", &SensorDesc::filter_radius)
         .def_readwrite("filter_stddev", &SensorDesc::filter_stddev)

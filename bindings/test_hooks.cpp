@@ -158,9 +158,10 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                         Interaction it;
                         if (s.intersect(ray, it)) {
                             int e = s.shapes[it.shape]->emitter;
-                            if (e >= 0) out[i] = light_pdf_w(s, *s.emitters[e], ray.o, &it);
+                            if (e >= 0) out[i] = light_pdf_w(s, *s.emitters[e], ray.o, &it, ray.d);
                         } else {
-                            for (const Emitter* env : s.environment) out[i] += light_pdf_w(s, *env, ray.o, nullptr);
+                            for (const Emitter* env : s.environment)
+                                out[i] += light_pdf_w(s, *env, ray.o, nullptr, ray.d);
                         }
                     }
                 }

@@ -25,10 +25,14 @@ public:
           W_(scene.sensor->width),
           H_(scene.sensor->height),
           filter_(scene.sensor_desc.rfilter, scene.sensor_desc.filter_radius, scene.sensor_desc.filter_stddev),
+          cx_(scene.sensor->crop_x),
+          cy_(scene.sensor->crop_y),
+          cw_(scene.sensor->crop_w),
+          ch_(scene.sensor->crop_h),
           film_(W_, H_, effect_variance),
           pass_film_(W_, H_, effect_variance),
-          tiles_x_((W_ + kTile - 1) / kTile),
-          tiles_y_((H_ + kTile - 1) / kTile) {}
+          tiles_x_((cw_ + kTile - 1) / kTile),
+          tiles_y_((ch_ + kTile - 1) / kTile) {}
 
     int pass(PassLoop& loop, int s0, int s1) override {
         // 1. Tiles over threads, into the film of the pass in flight.
@@ -50,8 +54,10 @@ public:
 
 private:
     void render_tile(PassLoop& loop, int tile, int s0, int s1, ThreadStats& stats) {
-        int x0 = (tile % tiles_x_) * kTile, y0 = (tile / tiles_x_) * kTile;
-        int x1 = std::min(x0 + kTile, W_), y1 = std::min(y0 + kTile, H_);
+        // Tiles cover the crop window (by default the film); a pixel keeps
+        // its film index, and with it its random streams.
+        int x0 = cx_ + (tile % tiles_x_) * kTile, y0 = cy_ + (tile / tiles_x_) * kTile;
+        int x1 = std::min(x0 + kTile, cx_ + cw_), y1 = std::min(y0 + kTile, cy_ + ch_);
         for (int y = y0; y < y1; ++y)
             for (int x = x0; x < x1; ++x) {
                 if (loop.cancelled()) return;
@@ -80,6 +86,7 @@ private:
     const Scene& scene_;
     const Integrator& integrator_;
     const int W_, H_;
+    const int cx_, cy_, cw_, ch_;  // the crop window
     FilterSampler filter_;
     Film film_;       // finished passes
     Film pass_film_;  // the pass in flight; merged only when complete
@@ -95,6 +102,7 @@ RenderOutput render_camera_paths(PassLoop& loop, const Integrator& integrator) {
     const bool effvar = loop.options().effect_variance;
     check_memory(integrator.type, W, H, {camera_film_memory(W, H, effvar), output_memory(loop.options(), W, H)});
     CameraStep step(scene, integrator, effvar);
+    loop.set_pixels(uint64_t(scene.sensor->crop_w) * uint64_t(scene.sensor->crop_h));  // the window's, for progress
     return loop.run(step);
 }
 

@@ -75,16 +75,26 @@ struct ItemSplat {
 
 class SplatFilm {
 public:
-    SplatFilm(int w, int h, const FilterSampler& f, int n_strategies)
-        : w_(w), h_(h), n_strat_(n_strategies), filter_(f) {
+    // The crop window (sensor.h) bounds the film positions splatted, as it
+    // bounds the camera side's samples (camera_sample.cpp).
+    SplatFilm(const Sensor& s, const FilterSampler& f, int n_strategies)
+        : w_(s.width),
+          h_(s.height),
+          n_strat_(n_strategies),
+          filter_(f),
+          cx0_(s.crop_x),
+          cy0_(s.crop_y),
+          cx1_(s.crop_x + s.crop_w),
+          cy1_(s.crop_y + s.crop_h) {
+        const int w = w_, h = h_;
         size_t n = size_t(w) * size_t(h);
         effects_.assign(n * kNumEffects * 3, 0.0);
         strat_.assign(n * size_t(n_strat_) * 6, 0.0);
         batches_.assign(n * kBatches * 3, 0.0);
         norm_x_.resize(w);
         norm_y_.resize(h);
-        for (int x = 0; x < w; ++x) norm_x_[x] = filter_.integral(-float(x) - 0.5f, float(w - x) - 0.5f);
-        for (int y = 0; y < h; ++y) norm_y_[y] = filter_.integral(-float(y) - 0.5f, float(h - y) - 0.5f);
+        for (int x = 0; x < w; ++x) norm_x_[x] = filter_.integral(float(cx0_ - x) - 0.5f, float(cx1_ - x) - 0.5f);
+        for (int y = 0; y < h; ++y) norm_y_[y] = filter_.integral(float(cy0_ - y) - 0.5f, float(cy1_ - y) - 0.5f);
     }
 
     // Adds the items' splats, in item order, to the rows [y0, y1).
@@ -106,6 +116,7 @@ public:
                     continue;
                 }
                 float x = is.s.film.x, y = is.s.film.y;
+                if (x < float(cx0_) || x > float(cx1_) || y < float(cy0_) || y > float(cy1_)) continue;
                 int py0 = std::max(y0, int(std::ceil(y - 0.5f - r))),
                     py1 = std::min(y1 - 1, int(std::floor(y - 0.5f + r)));
                 if (py0 > py1) continue;
@@ -199,6 +210,7 @@ public:
 private:
     int w_, h_, n_strat_;
     const FilterSampler& filter_;
+    int cx0_, cy0_, cx1_, cy1_;    // the crop window
     std::vector<double> strat_;    // [pixel][strategy][weighted rgb, unweighted rgb] sums
     std::vector<double> effects_;  // [pixel][effect][channel] sums
     std::vector<double> batches_;  // [pixel][batch][channel] sums
@@ -214,7 +226,7 @@ public:
           integrator_(integrator),
           pixels_(uint64_t(scene.sensor->width) * uint64_t(scene.sensor->height)),
           n_strat_(n_strat),
-          film_(scene.sensor->width, scene.sensor->height, filter, n_strat),
+          film_(*scene.sensor, filter, n_strat),
           stripes_(std::min(scene.sensor->height, threads * 4)),
           items_(kChunkItems) {}
 

@@ -72,8 +72,12 @@ public:
     int threads() const { return threads_; }
     double elapsed() const;
 
-    // Runs the passes that the budget allows and develops the estimate.
+    // Runs the passes that the budget allows and develops the estimate,
+    // returned for the sensor's crop window (by default the film).
     RenderOutput run(PassStep& step);
+    // The pixels whose samples a step counts with add_done (default: the
+    // film's), for the progress total.
+    void set_pixels(uint64_t pixels);
     // The output of a render cancelled during its setup: zero image, NaN
     // variance, no samples.
     RenderOutput cancelled_output() const;

@@ -1,4 +1,4 @@
-// Emitters: area (on any shape), point, spot, directional, constant. Names and
+// Emitters: area (on any shape), point, spot, directional, constant, envmap. Names and
 // parameter meanings follow Mitsuba 3's plugins of the same names.
 #pragma once
 #include <algorithm>
@@ -43,6 +43,10 @@ struct EmissionSample {
 
 class Emitter {
 public:
+    // Environment emitters: the solid-angle density with which sample_direct
+    // picks the unit direction d (towards the emitter). For them pdf_direct's
+    // p is a point along that direction from ref.
+    virtual float pdf_environment(const Vec3& d) const { return 0.f; }
     virtual ~Emitter() = default;
     std::string id;
     // u: 2D sample on the emitter, u_extra: picks a triangle on meshes.
@@ -96,7 +100,7 @@ inline float infinite_disk_radius(float scene_radius) {
 
 // Area light on `shape`, radiance on the side its normal points to (one-sided, like Mitsuba).
 std::unique_ptr<Emitter> make_area_emitter(const EmitterDesc& desc, const Shape* shape);
-// point, spot, directional, constant. scene_radius bounds the scene (constant).
+// point, spot, directional, constant, envmap.
 std::unique_ptr<Emitter> make_emitter(const EmitterDesc& desc);
 
 }  // namespace rm

@@ -62,8 +62,8 @@ bool sample_light(const Scene& scene, const Vec3& p, float u_pick, Vec2 u, float
 
 // Solid-angle density with which sample_light from `prev_p` reaches emitter
 // `e` at `it` (an area emitter's point), or along a direction to the
-// environment (`it` null), the emitter's pick included.
-float light_pdf_w(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it);
+// environment (`it` null) along the unit direction d, the emitter's pick included.
+float light_pdf_w(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it, const Vec3& d);
 
 // Next event estimation at `it` (Veach 1997, sec. 9.2: light sample weighted by
 // the power heuristic against BSDF sampling). Returns the contribution before
@@ -73,8 +73,8 @@ Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsd
                       Sampler& sampler, ThreadStats& stats, float light_frac = 1.f, float bsdf_frac = 1.f);
 
 // MIS weight of emission reached by a BSDF sample of density bsdf_pdf_w from
-// `prev`, landing on `it` (an area emitter) or escaping along d.
-float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
+// `prev`, landing on `it` (an area emitter) or escaping along the unit direction d.
+float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it, const Vec3& d,
                        float bsdf_pdf_w, float light_frac = 1.f, float bsdf_frac = 1.f);
 
 // Emission a camera path's last sample reached (path.cpp, volpath.cpp):
