@@ -27,7 +27,9 @@ the reference, not the estimate, limits the number.
 Convergence: `error_curve` evaluates a metric at each checkpoint of one
 render, (spp, seconds, error); `loglog_slope` fits log error against log
 time by least squares (-1 for an unbiased Monte Carlo estimator of relMSE,
-flattening where bias dominates); `time_to_error` interpolates the curve in
+flattening where bias dominates), only to a curve of >= 4 checkpoints
+spanning >= 4x in time (`curves_slope`: over several seeds' curves);
+`time_to_error` interpolates the curve in
 log-log for the time a target error is first reached; `efficiency` is
 1 / (error x seconds) (Veach 1997, section 2.4: the inverse of the
 variance-time product).
@@ -175,15 +177,50 @@ def error_curve(checkpoints, ref, name: str = "relmse") -> list:
     return out
 
 
-def loglog_slope(times, errors, min_points: int = 3):
-    """Least-squares slope of log(error) against log(time); None with fewer
-    than `min_points` usable points (positive time and error)."""
+# A log-log slope is fitted only to a curve of at least this many
+# checkpoints spanning at least this factor in time: two checkpoints of a
+# photon-map render a few per cent apart in time gave a "slope" of -160.
+SLOPE_MIN_CHECKPOINTS = 4
+SLOPE_MIN_SPAN = 4.0
+TOO_FEW_CHECKPOINTS = (f"too few checkpoints (a slope needs >= {SLOPE_MIN_CHECKPOINTS} spanning a factor >= "
+                       f"{SLOPE_MIN_SPAN:g} in time)")
+
+
+def _usable(times, errors):
     t = np.asarray(times, np.float64)
     e = np.asarray(errors, np.float64)
     ok = (t > 0) & (e > 0) & np.isfinite(t) & np.isfinite(e)
-    if np.count_nonzero(ok) < min_points or np.ptp(np.log(t[ok])) == 0:
+    return t[ok], e[ok]
+
+
+def slope_fits(times, errors, min_points: int = SLOPE_MIN_CHECKPOINTS, min_span: float = SLOPE_MIN_SPAN) -> bool:
+    """True when one curve's usable points (positive time and error) are
+    enough for a slope: `min_points` of them, max time / min time >= `min_span`."""
+    t, _ = _usable(times, errors)
+    return t.size >= min_points and t.size > 0 and float(t.max()) >= min_span * float(t.min())
+
+
+def loglog_slope(times, errors, min_points: int = SLOPE_MIN_CHECKPOINTS, min_span: float = SLOPE_MIN_SPAN):
+    """Least-squares slope of log(error) against log(time) of one curve;
+    None unless `slope_fits` (too few points, or too short a span in time)."""
+    if not slope_fits(times, errors, min_points, min_span):
         return None
-    slope, _ = np.polyfit(np.log(t[ok]), np.log(e[ok]), 1)
+    t, e = _usable(times, errors)
+    slope, _ = np.polyfit(np.log(t), np.log(e), 1)
+    return float(slope)
+
+
+def curves_slope(curves, min_points: int = SLOPE_MIN_CHECKPOINTS, min_span: float = SLOPE_MIN_SPAN):
+    """One slope over several renders' curves [(spp, seconds, error)] (the
+    seeds of a configuration): fitted to the pooled points of the curves
+    that each `slope_fits`; None when none does."""
+    keep = [c for c in curves if c and slope_fits([p[1] for p in c], [p[2] for p in c], min_points, min_span)]
+    if not keep:
+        return None
+    t, e = _usable([p[1] for c in keep for p in c], [p[2] for c in keep for p in c])
+    if np.ptp(np.log(t)) == 0:
+        return None
+    slope, _ = np.polyfit(np.log(t), np.log(e), 1)
     return float(slope)
 
 

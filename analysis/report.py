@@ -1,12 +1,19 @@
 """`radiometer report RUN`: a static HTML report of one benchmark run.
 
-One folder, index.html plus PNGs, no scripts from elsewhere:
+One folder, index.html, viewer.html (analysis/viewer.py) plus PNGs and the
+viewer's data, no scripts from elsewhere:
   * machine, commit, matrix and job counts;
+  * the scene x effect matrix of winners by efficiency at the compared
+    budget, each cell linking to its evidence (analysis/verdict.py);
+  * each configuration's verdict against the target relMSE, with its error
+    terms, and each effect's noise and bias over seeds;
   * the per-effect error table (scene x estimator x effect, relMSE, mean
     over seeds) and a table of every metric;
-  * per scene: a log-log plot of relMSE against time from each render's
-    checkpoints, every seed drawn, each estimator's fitted slope in the
-    legend (-1 is the Monte Carlo rate of an unbiased estimator);
+  * per scene: a log-log plot of relMSE against time from the renders'
+    checkpoints, the geometric mean over seeds with its 95 % band, each
+    estimator's fitted slope in the legend where its curves have enough
+    checkpoints (-1 is the Monte Carlo rate of an unbiased estimator); the
+    history of error and time across the store's runs of the matrix;
     an equal-budget image comparison (reference and each estimator's seed-0
     image, tone-mapped with the reference's exposure; a 4x crop around the
     region where the estimators err most; the per-pixel relative squared
@@ -22,7 +29,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import html
-import json
 import math
 import os
 from pathlib import Path
@@ -46,6 +52,10 @@ th { background: #f3f3f3; } td:nth-child(-n+3) { text-align: left; }
 .figs { display: flex; flex-wrap: wrap; gap: 1em; align-items: flex-start; }
 .figs img { border: 1px solid #ddd; }
 #selfcheck { font-size: 0.8em; color: #666; }
+table.winners td { text-align: left; } table.winners a { color: #123; font-weight: 600; text-decoration: none; }
+table.winners .ratio { color: #345; font-size: 0.9em; }
+.usable { color: #060; font-weight: bold; } .unusable { color: #b00; font-weight: bold; } .cannot { color: #886; }
+table.evidence td.why { max-width: 60em; }
 """
 
 SELF_CHECK = """
@@ -80,9 +90,23 @@ def _load_exr(root: Path, rec):
     return read_exr(p) if p.exists() else None
 
 
+def _band(values):
+    """(geometric mean, lo, hi, n) over seeds: the 95 % Student-t interval of
+    the mean log (benchmarks/compare.log_ci, the interval compare judges)."""
+    from radiometer.benchmarks.compare import log_ci
+
+    return log_ci(values)
+
+
 def convergence_plot(scene, recs, out: Path) -> bool:
+    """relMSE against time per estimator: at each checkpoint (spp) the
+    geometric mean over seeds at the seeds' median time, a band of its 95 %
+    interval over seeds, and the log-log slope where the curves have enough
+    checkpoints (metrics.curves_slope), "too few checkpoints" else."""
+    from .metrics import SLOPE_MIN_CHECKPOINTS, curves_slope, slope_fits
+
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(5.2, 3.8), dpi=100)
+    fig, ax = plt.subplots(figsize=(5.6, 3.9), dpi=100)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     by_est = {}
     for r in recs:
@@ -93,35 +117,188 @@ def convergence_plot(scene, recs, out: Path) -> bool:
         return False
     for i, (est, rs) in enumerate(sorted(by_est.items())):
         c = colours[i % len(colours)]
-        ts, es = [], []
+        levels = {}
         for r in rs:
-            t = [p[1] for p in r["curve"]]
-            e = [p[2] for p in r["curve"]]
-            ax.plot(t, e, "-", color=c, alpha=0.35, lw=1)
-            ts += t
-            es += e
-        from .metrics import loglog_slope
-
-        s = loglog_slope(ts, es)
-        ok = [(t, e) for t, e in zip(ts, es) if t > 0 and e > 0]
-        if s is not None and ok:
-            lt, le = np.log([p[0] for p in ok]), np.log([p[1] for p in ok])
-            b = float(np.mean(le - s * lt))
-            xs = np.array([min(p[0] for p in ok), max(p[0] for p in ok)])
-            ax.plot(xs, np.exp(b) * xs ** s, "--", color=c, lw=1.5, label=f"{est}: slope {s:.2f}")
-        else:
-            ax.plot([], [], color=c, label=f"{est}: slope n/a")
+            for spp, t, e in r["curve"]:
+                levels.setdefault(spp, []).append((t, e))
+        xs, ms, los, his = [], [], [], []
+        for spp in sorted(levels):
+            pts = levels[spp]
+            b = _band([e for _, e in pts])
+            if b is None:
+                continue
+            xs.append(float(np.median([t for t, _ in pts])))
+            ms.append(b[0])
+            los.append(b[1])
+            his.append(b[2])
+        curves = [r["curve"] for r in rs]
+        s = curves_slope(curves)
+        label = f"{est}: slope {s:.2f}" if s is not None else f"{est}: too few checkpoints"
+        ax.plot(xs, ms, "-o", color=c, lw=1.4, ms=2.5, label=label)
+        if len(rs) > 1:
+            ax.fill_between(xs, los, his, color=c, alpha=0.2, lw=0)
+        if s is not None:
+            keep = [p for cv in curves if slope_fits([q[1] for q in cv], [q[2] for q in cv]) for p in cv
+                    if p[1] > 0 and p[2] > 0]
+            lt, le = np.log([p[1] for p in keep]), np.log([p[2] for p in keep])
+            b0 = float(np.mean(le - s * lt))
+            tx = np.array([min(p[1] for p in keep), max(p[1] for p in keep)])
+            ax.plot(tx, np.exp(b0) * tx ** s, "--", color=c, lw=1)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("seconds")
     ax.set_ylabel("relMSE")
-    ax.set_title(f"{scene}: error against time")
+    n = max(len(rs) for rs in by_est.values())
+    ax.set_title(f"{scene}: error against time ({n} seeds, 95 % band)", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7, title=f"slope: >= {SLOPE_MIN_CHECKPOINTS} checkpoints over >= 4x time",
+              title_fontsize=6)
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
     return True
+
+
+def history_plot(scene, hist, budget, out: Path):
+    """Error and time of each estimator of `scene` at `budget` across the
+    runs of the store (oldest first, each labelled by its commit): the
+    geometric mean over seeds and its 95 % band, the way asv draws its
+    graphs. Returns None, or why there is no plot (fewer than two runs).
+    A matplotlib PNG rather than inline SVG: it looks like the page's other
+    plots, the page's load check counts it as it counts them, and its size
+    does not grow with the number of runs in the store (an SVG of every run
+    and seed would, inside index.html)."""
+    rows = [h for h in hist if h["scene"] == scene and h["budget"] == budget and h["status"] == "ok"]
+    runs = []
+    for h in rows:
+        if h["run_id"] not in [r[0] for r in runs]:
+            runs.append((h["run_id"], h["commit_id"] or "?", h["started"] or ""))
+    if len(runs) < 2:
+        return f"{len(runs)} run of this matrix with this scene in the store: no history yet"
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.4), dpi=100)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    x_of = {rid: i for i, (rid, _, _) in enumerate(runs)}
+    for i, est in enumerate(sorted({h["estimator"] for h in rows})):
+        c = colours[i % len(colours)]
+        for ax, q in zip(axes, ("relmse", "seconds")):
+            xs, ms, los, his = [], [], [], []
+            for rid, _, _ in runs:
+                b = _band([h[q] for h in rows if h["run_id"] == rid and h["estimator"] == est])
+                if b is None:
+                    continue
+                xs.append(x_of[rid])
+                ms.append(b[0])
+                los.append(b[1])
+                his.append(b[2])
+            ax.plot(xs, ms, "-o", color=c, ms=3, lw=1.2, label=est if q == "relmse" else None)
+            ax.fill_between(xs, los, his, color=c, alpha=0.2, lw=0)
+    labels = [f"{cid[:12]}\n{started[5:16]}" for _, cid, started in runs]
+    for ax, q in zip(axes, ("relMSE", "seconds per job")):
+        ax.set_yscale("log")
+        ax.set_ylabel(q)
+        ax.set_xticks(range(len(runs)))
+        ax.set_xticklabels(labels, fontsize=6, rotation=30, ha="right")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"{scene}: history over {len(runs)} runs ({T.budget_label(budget)}; 95 % band over seeds)",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+    return None
+
+
+def _ratio_colour(ratio, resolved) -> str:
+    """Background of a winner cell: white at a tie, deeper green up to a
+    ratio of 100; grey where the seeds do not resolve the ratio."""
+    if ratio is None:
+        return "#f3f3f3"
+    if resolved != "yes":
+        return "#e8e8e8"
+    t = min(1.0, math.log10(max(ratio, 1.0)) / 2.0)
+    g = (int(255 - 155 * t), int(255 - 60 * t), int(255 - 155 * t))
+    return "#%02x%02x%02x" % g
+
+
+def _ratio_text(ratio, resolved=None) -> str:
+    if resolved == "exact":
+        return "exact"
+    if ratio is None:
+        return "alone"
+    return "x" + (T.fmt(ratio, 2) if ratio < 1e6 else "&gt;1e6")
+
+
+def winner_matrix_html(wins) -> str:
+    """The scene x effect matrix of winners: each cell the winner, its
+    efficiency ratio over the runner-up, coloured by it, linking to the
+    scene's evidence table row."""
+    if not wins:
+        return "<p class='note'>no finished job to compare</p>"
+    effs = ["total"] + T.effect_columns([{"effects": {w["effect"]: 1 for w in wins if w["effect"] != "total"}}])
+    scenes = sorted({w["scene"] for w in wins})
+    cell = {(w["scene"], w["effect"]): w for w in wins}
+    out = ["<table class='winners'><thead><tr><th>scene</th><th>budget</th>" +
+           "".join(f"<th>{esc(e)}</th>" for e in effs) + "</tr></thead><tbody>"]
+    for sc in scenes:
+        ws = [w for w in wins if w["scene"] == sc]
+        kind = "equal time" if ws[0]["equal_time"] else "equal spp"
+        row = [f"<td><a href='#{esc(sc)}'>{esc(sc)}</a></td><td>{esc(ws[0]['budget'])} ({kind})</td>"]
+        for e in effs:
+            w = cell.get((sc, e))
+            if w is None:
+                row.append("<td></td>")
+                continue
+            tie = {"yes": "", "no": " ~", "n<2": " (n&lt;2)", "exact": ""}[w["resolved"]]
+            title = (f"{w['winner']} over {w['runner_up']}: efficiency ratio {w['ratio']:.3g}" if w["ratio"]
+                     else f"{w['winner']} and {w['runner_up']}: both exact to rounding" if w["resolved"] == "exact"
+                     else f"{w['winner']}: the only estimator measured")
+            row.append(f"<td style='background:{_ratio_colour(w['ratio'], w['resolved'])}' title='{esc(title)}'>"
+                       f"<a href='#ev-{esc(sc)}-{esc(e)}'>{esc(w['winner'])}</a> "
+                       f"<span class='ratio'>{_ratio_text(w['ratio'], w['resolved'])}{tie}</span></td>")
+        out.append("<tr>" + "".join(row) + "</tr>")
+    out.append("</tbody></table>")
+    return "\n".join(out)
+
+
+def evidence_html(scene, wins) -> str:
+    """Per effect of `scene`: every estimator's efficiency (geometric mean
+    over seeds, 95 % interval) and mean relMSE, best first; each row is the
+    target of a winner-matrix cell and links to the viewer."""
+    ws = [w for w in wins if w["scene"] == scene]
+    if not ws:
+        return ""
+    out = ["<table class='evidence'><thead><tr><th>effect</th><th>winner</th><th>ratio</th><th>resolved</th>"
+           "<th>estimators: efficiency 1/(relMSE s) [95 % over seeds], relMSE</th><th></th></tr></thead><tbody>"]
+    for w in ws:
+        cands = "; ".join(f"{esc(c[0])} {T.fmt(c[1])} [{T.fmt(c[2])}, {T.fmt(c[3])}] n={c[4]}, {T.fmt(c[5])}"
+                          for c in w["candidates"])
+        link = f"viewer.html#scene={esc(scene)}&amp;layer={esc(w['effect'])}&amp;src={esc(w['winner'])}"
+        out.append(f"<tr id='ev-{esc(scene)}-{esc(w['effect'])}'><td>{esc(w['effect'])}</td><td>{esc(w['winner'])}"
+                   f"</td><td>{_ratio_text(w['ratio'], w['resolved'])}</td><td>{esc(w['resolved'])}</td>"
+                   f"<td class='why'>{cands}</td><td><a href='{link}'>view</a></td></tr>")
+    out.append("</tbody></table>")
+    return "\n".join(out)
+
+
+def verdict_table_html(rows) -> str:
+    """Per configuration: its verdict against the target and its error terms."""
+    from .verdict import TERMS, verdict_word
+
+    head = ["scene", "estimator", "budget", "seeds", "relMSE", "own error", "target", "verdict", "dominant",
+            "noise", "bias (remainder)", "reference noise"]
+    out = ["<table class='verdicts'><thead><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr></thead><tbody>"]
+    for r in rows:
+        v = r.get("verdict")
+        if r["status"] != "ok" or not v:
+            continue
+        cls = {True: "usable", False: "unusable", None: "cannot"}[v["usable"]]
+        cells = [esc(r["scene"]), esc(r["estimator"]), esc(r["budget"]), v["n"], T.fmt(r["total"]),
+                 T.fmt(v["own_error"]), T.fmt(v["target"]), f"<span class='{cls}'>{verdict_word(v['usable'])}</span>",
+                 esc(v["dominant"])] + [T.fmt(v["terms"].get(k)) for k in TERMS]
+        out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    out.append("</tbody></table>")
+    return "\n".join(out)
 
 
 def _crop_box(err_maps, shape, frac=0.25):
@@ -311,18 +488,25 @@ def scene_view(desc, out: Path, size=(420, 320), photons=None):
 # -- the page -------------------------------------------------------------------
 
 
-def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print) -> Path:
+def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, history=None) -> Path:
     """Writes the report of one run (its store row `run` and job records
     `recs`, renders under `root`) into the folder `out`; `source` names
-    where they came from. Returns index.html's path. The harness reads
-    the store and calls this (radiometer.benchmarks.report)."""
+    where they came from; `history`: the store's jobs of every run of this
+    matrix (Store.history), for the history view. Returns index.html's
+    path. The harness reads the store and calls this
+    (radiometer.benchmarks.report)."""
     from radiometer.reference_scenes import references as R
     from radiometer.reference_scenes import registry as S
+
+    from . import viewer as V
+    from .verdict import TERM_HOW, winners
 
     root, out = Path(root), Path(out)
     rid = run["run_id"]
     out.mkdir(parents=True, exist_ok=True)
     rows = T.aggregate(recs)
+    wins = winners(recs)
+    target = next((r["verdict"]["target"] for r in rows if r.get("verdict")), None)
     n = {s: sum(1 for r in recs if r["status"] == s) for s in ("ok", "unsupported", "failed")}
     m = run.get("machine") or {}
     parts = [f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'><title>radiometer bench {esc(rid)}</title>",
@@ -341,6 +525,23 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print) 
              f"{n['failed']} failed</td></tr>",
              "</table>",
              "<p id='selfcheck'>(image check runs on load)</p>",
+             "<p><a href='viewer.html'>image viewer</a>: flip between the reference, the estimators and the effects, "
+             "zoom, exposure, relative and FLIP error maps.</p>",
+             "<h2>Which estimator wins</h2>",
+             "<p class='note'>Per scene and effect, the estimator with the highest efficiency 1 / (relMSE x seconds) "
+             "at the compared budget (equal time where the run has a seconds budget), a geometric mean over seeds; "
+             "the cell shows its ratio over the runner-up and is greener the larger it is (white: a tie, full green: "
+             "100x). Grey with ~: the 95 % intervals over seeds overlap, so the seeds do not tell the two apart. Each "
+             "cell links to its evidence (every estimator's efficiency and interval) in the scene's section.</p>",
+             winner_matrix_html(wins),
+             "<h2>Is each result usable?</h2>",
+             "<p class='note'>" + (f"Target relMSE {target:g} (the matrix's <code>target_relmse</code>). " if target
+                                   else "") +
+             "A configuration is usable when every seed's own error (relMSE less the reference's own noise) is at "
+             "most the target; 'cannot tell' when the reference's noise alone reaches it. The dominant term is the "
+             "largest of: " + "; ".join(f"<b>{esc(k)}</b>: {esc(v)}" for k, v in TERM_HOW.items()) +
+             ". Means over seeds.</p>",
+             verdict_table_html(rows),
              "<h2>Per-effect error</h2>",
              "<p class='note'>relMSE (eps 1e-2) of each effect class against its per-effect reference, mean over "
              "seeds; total: the whole image against the scene's reference (analytic, or Mitsuba 3's). Per-effect "
@@ -358,26 +559,47 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print) 
              "rare paths in every seed and underestimates its variance there (tests/test_canonical_mitsuba.py measures "
              "this), so a moderate |z| is a hint; a large one with a large bias is a finding (direct lighting's "
              "truncation, light tracing's missing L...S E paths). A zero-variance render's z measures float32 "
-             "rounding.</p>", _bias_table(recs, root)]
+             "rounding.</p>", _bias_table(recs, root),
+             "<h2>Error budget per effect over seeds</h2>",
+             "<p class='note'>For each effect class against its per-effect reference, from the seeds of each "
+             "configuration (renders keep one variance, of the whole image, so a per-effect noise comes from the "
+             "spread over seeds): noise = mean(s<sup>2</sup> / (ref<sup>2</sup> + 0.01)), s<sup>2</sup> the "
+             "per-pixel variance across seeds, the expected relMSE of one render from noise; bias = "
+             "mean(((mean - ref)<sup>2</sup> - s<sup>2</sup> / k) / (ref<sup>2</sup> + 0.01)), clamped at 0, the "
+             "squared bias less the seed mean's own variance. The larger is bold. With few seeds both are rough "
+             "(the variance over k seeds has k - 1 degrees of freedom). In brackets: the noise from each render's own "
+             "per-effect variance (res.effect_variance: the films of camera estimators keep it), mean over seeds; "
+             "the two noise estimates should agree within the seeds' spread.</p>", _effect_budget_table(recs, root)]
     scenes = sorted({r["scene"] for r in recs})
     views_note = None
+    viewer_scenes = []
+    from .verdict import comparison_budget
+
     for scene in scenes:
         srecs = [r for r in recs if r["scene"] == scene]
-        parts.append(f"<h2 id='{esc(scene)}'>{esc(scene)}</h2><div class='figs'>")
+        parts.append(f"<h2 id='{esc(scene)}'>{esc(scene)}</h2>")
+        parts.append(evidence_html(scene, wins))
+        parts.append("<div class='figs'>")
         spec = S.SCENES.get(scene)
         params = srecs[0]["scene_params"]
         # Convergence plot.
         png = f"{scene}-convergence.png"
         if convergence_plot(scene, srecs, out / png):
             parts.append(f"<figure><img src='{png}' alt='{esc(scene)} error against time'><figcaption>relMSE "
-                         f"against time (checkpoints of each render, every seed), fitted slopes</figcaption></figure>")
+                         f"against time: geometric mean over seeds at each checkpoint, 95 % band, fitted slopes"
+                         f"</figcaption></figure>")
         else:
             parts.append("<p class='note'>no convergence curve: no job of this scene finished</p>")
-        # Equal-budget images (the largest budget).
-        budgets = sorted({json.dumps(r["budget"], sort_keys=True) for r in srecs})
-        big = max(budgets, key=lambda b: list(json.loads(b).values())[0])
-        b = json.loads(big)
-        brecs = [r for r in srecs if json.dumps(r["budget"], sort_keys=True) == big]
+        # The compared budget (as the winners'): equal time where there is a seconds budget.
+        b, _ = comparison_budget(srecs)
+        brecs = [r for r in srecs if r["budget"] == b]
+        png = f"{scene}-history.png"
+        why_hist = history_plot(scene, history or [], b, out / png)
+        if why_hist is None:
+            parts.append(f"<figure><img src='{png}' alt='{esc(scene)} history'><figcaption>error and time per "
+                         f"estimator across the store's runs of this matrix</figcaption></figure>")
+        else:
+            parts.append(f"<p class='note'>no history view: {esc(why_hist)}</p>")
         ref = None
         try:
             eff_ref = next((r.get("effect_ref") for r in brecs if r.get("effect_ref")), None)
@@ -386,6 +608,15 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print) 
             parts.append(f"<p class='note'>no reference image: {esc(str(e))}</p>")
         png = f"{scene}-images.png"
         label = ("equal time, " if "seconds" in b else "equal samples, ") + T.budget_label(b)
+        if ref is not None:
+            shown = []
+            for est in sorted({r["estimator"] for r in brecs}):
+                ok = sorted((r for r in brecs if r["estimator"] == est and r["status"] == "ok"),
+                            key=lambda r: r["seed"])
+                if ok:
+                    shown.append((est, f"{est} ({ok[0]['spp']} spp, seed {ok[0]['seed']})", _load_exr(root, ok[0])))
+            if V.scene_data(scene, ref, shown, out) is not None:
+                viewer_scenes.append(scene)
         if ref is not None and image_comparison(scene, brecs, ref.image, root, out / png, label):
             parts.append(f"<figure><img src='{png}' alt='{esc(scene)} equal-budget images'><figcaption>{esc(label)}: "
                          f"image, crop, per-pixel relative squared error</figcaption></figure>")
@@ -426,6 +657,7 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print) 
     parts.append(f"<p class='note'>written {_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')} "
                  f"from {esc(str(source))}</p>")
     parts.append(f"<script>{SELF_CHECK}</script></body></html>")
+    V.write_viewer(out, viewer_scenes, f"radiometer bench {rid}", CSS)
     index = out / "index.html"
     index.write_text("\n".join(parts))
     return index
@@ -468,6 +700,64 @@ def _bias_table(recs, root: Path) -> str:
     out.append("</tbody></table>")
     if n == 0:
         return "<p class='note'>no configuration has two finished seeds with their images here</p>"
+    return "\n".join(out)
+
+
+def _effect_budget_table(recs, root: Path) -> str:
+    """Per configuration with two seeds or more and its EXRs here: each
+    effect's noise and bias over seeds (verdict.effect_budget_over_seeds),
+    the larger one in bold."""
+    from radiometer.reference_scenes import references as R
+
+    from .verdict import effect_budget_over_seeds
+
+    groups = {}
+    for r in recs:
+        if r["status"] == "ok":
+            groups.setdefault((r["scene"], r["estimator"], T.budget_label(r["budget"])), []).append(r)
+    lines, effs_all = [], set()
+    for (scene, est, bl), rs in sorted(groups.items()):
+        ims = [im for im in (_load_exr(root, r) for r in rs) if im is not None]
+        if len(ims) < 2:
+            continue
+        try:
+            ref = R.reference(scene, rs[0]["scene_params"], rs[0].get("effect_ref"))
+        except Exception:
+            continue
+        if ref.effects is None:
+            continue
+        cells = {}
+        for eff, theirs in ref.effects.items():
+            theirs = np.asarray(theirs, np.float64)
+            mine = [np.asarray(im.effects.get(eff, np.zeros_like(theirs)), np.float64) for im in ims]
+            if not (np.any(theirs != 0) or any(np.any(m != 0) for m in mine)):
+                continue
+            cells[eff] = effect_budget_over_seeds(mine, theirs)
+            own = [((r.get("effect_metrics") or {}).get(eff) or {}).get("noise") for r in rs]
+            own = [x for x in own if x is not None]
+            cells[eff]["render_noise"] = float(np.mean(own)) if own else None
+            effs_all.add(eff)
+        if cells:
+            lines.append((scene, est, bl, len(ims), cells))
+    if not lines:
+        return "<p class='note'>no configuration has two finished seeds, its images and a per-effect reference here</p>"
+    effs = T.effect_columns([{"effects": {e: 1 for e in effs_all}}])
+    out = ["<table><thead><tr><th>scene</th><th>estimator</th><th>budget</th><th>seeds</th>" +
+           "".join(f"<th>{esc(e)}: noise / bias</th>" for e in effs) + "</tr></thead><tbody>"]
+    for scene, est, bl, k, cells in lines:
+        row = [esc(scene), esc(est), esc(bl), str(k)]
+        for e in effs:
+            c = cells.get(e)
+            if c is None:
+                row.append("")
+                continue
+            n, b = T.fmt(c["noise"]), T.fmt(c["bias"])
+            txt = f"<b>{n}</b> / {b}" if c["noise"] >= c["bias"] else f"{n} / <b>{b}</b>"
+            if c["render_noise"] is not None:
+                txt += f" <span class='note'>(render: {T.fmt(c['render_noise'])})</span>"
+            row.append(txt)
+        out.append("<tr>" + "".join(f"<td>{x}</td>" for x in row) + "</tr>")
+    out.append("</tbody></table>")
     return "\n".join(out)
 
 

@@ -32,7 +32,7 @@ def aggregate(records, metric: str = "relmse") -> list:
         row = {"scene": scene, "estimator": est, "budget": bl, "n": len(rs), "n_ok": len(ok),
                "status": "ok" if ok else rs[0]["status"], "error": None if ok else (rs[0].get("error") or ""),
                "total": None, "total_sd": None, "effects": {}, "spp": None, "seconds": None, "slope": None,
-               "efficiency": None, "metrics": {}, "effects_kind": None}
+               "efficiency": None, "metrics": {}, "effects_kind": None, "verdict": None}
         if ok:
             vals = [r["metrics"].get(metric) for r in ok if r["metrics"].get(metric) is not None]
             if vals:
@@ -44,11 +44,16 @@ def aggregate(records, metric: str = "relmse") -> list:
                 row["metrics"][m] = float(np.mean(v)) if v else None
             row["spp"] = float(np.mean([r["spp"] for r in ok]))
             row["seconds"] = float(np.mean([r["seconds"] for r in ok]))
-            # One fit over every seed's checkpoints (the report's plot draws the same line).
-            from .metrics import loglog_slope
+            # One fit over the seeds' checkpoints (the report's plot draws the same line).
+            from .metrics import curves_slope
 
-            pts = [p for r in ok for p in (r.get("curve") or [])]
-            row["slope"] = loglog_slope([p[1] for p in pts], [p[2] for p in pts]) if pts else None
+            row["slope"] = curves_slope([r.get("curve") or [] for r in ok])
+            from .verdict import config_verdict
+
+            target = next((r["target_relmse"] for r in ok if r.get("target_relmse")), None)
+            if target is None:
+                from radiometer.benchmarks.matrix import DEFAULT_TARGET_RELMSE as target
+            row["verdict"] = config_verdict(ok, target)
             row["efficiency"] = row["metrics"]["efficiency"]
             effs = {}
             for r in ok:
@@ -103,26 +108,112 @@ def fmt(v, digits=3) -> str:
     return f"{v:.{digits}g}" if 1e-3 <= abs(v) < 1e4 else f"{v:.{max(1, digits - 1)}e}"
 
 
-def effect_table_text(rows, metric: str = "relmse") -> str:
-    """A plain-text table for the terminal."""
-    rows = collapse_unsupported(rows)
-    effs = effect_columns(rows)
-    head = ["scene", "estimator", "budget", "spp", f"total {metric}"] + effs + ["slope"]
-    body = []
-    for r in rows:
-        if r["status"] != "ok":
-            body.append([r["scene"], r["estimator"], r["budget"], "", r["status"]] +
-                        [""] * len(effs) + [short_reason(r["error"], 70)])
-            continue
-        body.append([r["scene"], r["estimator"], r["budget"], f"{r['spp']:.0f}", fmt(r["total"])] +
-                    [fmt(r["effects"].get(e)) for e in effs] + [fmt(r["slope"], 2)])
-    widths = [max(len(str(x)) for x in col) for col in zip(head, *body)] if body else [len(h) for h in head]
-    # The last column (slope or an error message) is not padded.
-    lines = ["  ".join(str(x).ljust(w) for x, w in zip(head, widths)).rstrip()]
-    lines.append("  ".join("-" * w for w in widths))
+TEXT_WIDTH = 100  # the terminal table stays one screen wide
+EFFECT_SHORT = {"subsurface": "subsurf"}
+TERM_SHORT = {"noise": "noise", "bias": "bias", "reference": "ref", "none": "-"}
+USABLE_SHORT = {True: "yes", False: "NO", None: "?"}
+
+
+def _clip(s: str, w: int) -> str:
+    return s if len(s) <= w else s[:max(1, w - 1)] + "~"
+
+
+def _grid(head, body, width):
+    """Left-aligned columns two spaces apart, indented by two; each line
+    cut at `width` (the callers choose columns that fit)."""
+    widths = [max(len(str(x)) for x in col) for col in zip(head, *body)]
+    lines = ["  " + "  ".join(str(x).ljust(w) for x, w in zip(head, widths)).rstrip()]
     for b in body:
-        lines.append("  ".join(str(x).ljust(w) for x, w in zip(b, widths)).rstrip())
-    return "\n".join(lines)
+        lines.append("  " + "  ".join(str(x).ljust(w) for x, w in zip(b, widths)).rstrip())
+    return [ln[:width] for ln in lines]
+
+
+def effect_table_text(rows, metric: str = "relmse", winners=None, width: int = TEXT_WIDTH) -> str:
+    """A plain-text table for the terminal, at most `width` columns: one
+    block per scene, a row per estimator and budget (spp, total error, each
+    effect's error, slope, verdict against the target, dominant error
+    term), a star on each effect's winner, and a line naming the winners
+    with their efficiency ratio over the runner-up (analysis/verdict.py).
+    Effect columns that do not fit continue in a second part of the block."""
+    import textwrap
+
+    rows = collapse_unsupported(rows)
+    win = {(w["scene"], w["effect"]): w for w in (winners or [])}
+    target = next((r["verdict"]["target"] for r in rows if r.get("verdict")), None)
+    out = []
+    if target is not None:
+        out += textwrap.wrap(f"{metric} per effect, mean over seeds; usable: every seed's own error (relMSE less "
+                             f"the reference's noise) <= target {target:g} (? = the reference's noise alone "
+                             f"exceeds it); dominant term: noise (the render's variance), bias (remainder), ref "
+                             f"(the reference's noise); * = the effect's winner by efficiency", width)
+    by_scene = {}
+    for r in rows:
+        by_scene.setdefault(r["scene"], []).append(r)
+    for scene, rs in by_scene.items():
+        effs = effect_columns(rs)
+        wl = [w for (sc, _), w in win.items() if sc == scene]
+        budgets = ", ".join(sorted({r["budget"] for r in rs}))
+        out.append("")
+        out.append(_clip(f"{scene}  ({budgets})", width))
+
+        def cell(r, eff):
+            v = r["total"] if eff == "total" else r["effects"].get(eff)
+            w = win.get((scene, eff))
+            star = "*" if w and w["winner"] == r["estimator"] and w["budget"] == r["budget"] else ""
+            return fmt(v) + star
+
+        fixed_head = ["estimator", "spp", "total"]
+        tail_head = ["slope", "usable", "dominant"]
+
+        def fixed(r):
+            return [_clip(r["estimator"], 14), f"{r['spp']:.0f}", cell(r, "total")]
+
+        def tail(r):
+            v = r.get("verdict")
+            return [fmt(r["slope"], 2), USABLE_SHORT[v["usable"]] if v else "-",
+                    TERM_SHORT.get(v["dominant"], v["dominant"]) if v else "-"]
+
+        ok = [r for r in rs if r["status"] == "ok"]
+        bad = [r for r in rs if r["status"] != "ok"]
+        # As many effect columns as fit beside the fixed ones; the rest continue below.
+        groups, cur = [], []
+        for e in effs:
+            trial = cur + [e]
+            head = fixed_head + [EFFECT_SHORT.get(x, x) for x in trial] + (tail_head if not groups else [])
+            body = [fixed(r) + [cell(r, x) for x in trial] + (tail(r) if not groups else []) for r in ok]
+            if cur and max(len(ln) for ln in _grid(head, body, 10 ** 6)) > width:
+                groups.append(cur)
+                cur = [e]
+            else:
+                cur = trial
+        groups.append(cur)
+        for i, g in enumerate(groups):
+            if not ok:
+                break
+            head = (fixed_head if i == 0 else ["estimator"]) + [EFFECT_SHORT.get(x, x) for x in g]
+            head += tail_head if i == 0 else []
+            body = [(fixed(r) if i == 0 else fixed(r)[:1]) + [cell(r, x) for x in g] + (tail(r) if i == 0 else [])
+                    for r in ok]
+            out += _grid(head, body, width)
+        for r in bad:
+            out.append(_clip(f"  {_clip(r['estimator'], 14)}  {r['budget']}  {r['status']}: "
+                             f"{short_reason(r['error'])}", width))
+        if wl:
+            words = []
+            for w in wl:
+                what = "total" if w["effect"] == "total" else EFFECT_SHORT.get(w["effect"], w["effect"])
+                if w["resolved"] == "exact":
+                    words.append(f"{what} {w['winner']} (exact, as {w['runner_up']})")
+                elif w["ratio"] is None:
+                    words.append(f"{what} {w['winner']} (alone)")
+                else:
+                    tie = "" if w["resolved"] == "yes" else " ~" if w["resolved"] == "no" else " n<2"
+                    words.append(f"{what} {w['winner']} x{fmt(w['ratio'], 2)}{tie}")
+            kind = "equal time" if wl[0]["equal_time"] else "equal samples"
+            out += textwrap.wrap(f"winners ({kind}, {wl[0]['budget']}; efficiency over the runner-up, ~ = "
+                                 f"within the seeds' noise): " + ", ".join(words), width,
+                                 initial_indent="  ", subsequent_indent="    ")
+    return "\n".join(out)
 
 
 def effect_table_html(rows, metric: str = "relmse") -> str:

@@ -7,7 +7,8 @@
                                   # cores // threads jobs at once
     budgets = [{ seconds = 4.0 }] # each { spp = N } (1..2^24) or { seconds = S } (finite, at most a week)
                                   # (required)
-    target_relmse = 0.05          # for time-to-error (optional)
+    target_relmse = 0.05          # the error a render must reach to be "usable" (its verdict), and
+                                  # time-to-error's target (optional; default 0.05, DEFAULT_TARGET_RELMSE)
 
     [scenes.cornell_box]          # a scene of reference_scenes/registry.py
     [scenes.furnace]
@@ -59,6 +60,10 @@ PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*\Z")
 MAX_SPP = 1 << 24
 MAX_THREADS = 1024
 MAX_SECONDS = 7 * 24 * 3600
+# relMSE 0.05: an RMS relative error of about 22 % per pixel (eps 1e-2 in
+# the denominator), the default main job's target.
+DEFAULT_TARGET_RELMSE = 0.05
+MAX_TARGET_RELMSE = 1e3
 
 
 def plain_name(s) -> bool:
@@ -187,9 +192,8 @@ def parse(d: dict, path: str = "<dict>", text: str = "") -> Matrix:
     checkpoints = d.get("checkpoints", True)
     if not isinstance(checkpoints, bool):
         raise err("checkpoints", f"expected true or false, got {checkpoints!r}")
-    target = d.get("target_relmse")
-    if target is not None:
-        _check_positive(target, f"{path}: target_relmse")
+    target = _check_positive(d.get("target_relmse", DEFAULT_TARGET_RELMSE), f"{path}: target_relmse",
+                             MAX_TARGET_RELMSE)
     budgets = d["budgets"]
     if not isinstance(budgets, list) or not budgets:
         raise err("budgets", "expected a non-empty list of tables like { spp = 64 } or { seconds = 2.0 }")
@@ -273,7 +277,7 @@ def parse(d: dict, path: str = "<dict>", text: str = "") -> Matrix:
             for b in budgets:
                 for seed in seeds:
                     jobs.append(Job(sname, lab, integ, params, dict(b), int(seed), threads, checkpoints,
-                                    None if target is None else float(target)))
+                                    float(target)))
     keys = [j.key for j in jobs]
     if len(set(keys)) != len(keys):
         raise MatrixError(f"{path}: the matrix names the same job twice (duplicate seeds or budgets)")

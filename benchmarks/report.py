@@ -20,6 +20,7 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
         rid = st.resolve_run(run_id)
         run = st.run(rid)
         recs = st.jobs(rid)
+        history = st.history(run["matrix"])
     if not out_dir and not plain_name(rid):  # a merged store's run id may be anything, a path included
         raise ValueError(f"{store_path}: run id {rid!r} cannot name a folder of reports/; give the report's "
                          f"folder with -o")
@@ -29,4 +30,4 @@ def write(store_path, run_id=None, out_dir=None, log=print) -> Path:
             raise ValueError(f"{store_path}: run {rid}: job {r.get('key')!r} has scene {r.get('scene')!r} and EXR "
                              f"{exr!r}; a report reads and writes only under the results folder")
     out = Path(out_dir) if out_dir else root / "reports" / rid
-    return write_page(run, recs, root, out, store_path, log=log)
+    return write_page(run, recs, root, out, store_path, log=log, history=history)

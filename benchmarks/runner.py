@@ -25,6 +25,7 @@ import uuid
 from pathlib import Path
 from typing import Optional
 
+from radiometer.analysis import verdict as _verdict
 from radiometer.reference_scenes import references as _references
 from radiometer.reference_scenes import registry as _scenes
 
@@ -108,7 +109,7 @@ def _run_job(job, rec, root: Path, run_id: str):
     b = job["budget"]
     res = rm.render(scene, integrator=job["integrator"], spp=b.get("spp"), seconds=b.get("seconds"),
                     seed=job["seed"], threads=job["threads"],
-                    checkpoints=True if job.get("checkpoints", True) else None)
+                    checkpoints=True if job.get("checkpoints", True) else None, effect_variance=True)
     rec["_stage"] = "metrics"
     rec["spp"], rec["seconds"] = int(res.spp), float(res.seconds)
     rec["stats"] = {k: v for k, v in res.stats.items() if isinstance(v, (int, float, str, bool))}
@@ -125,6 +126,7 @@ def _run_job(job, rec, root: Path, run_id: str):
             rec.setdefault("metric_errors", {})[name] = f"{type(e).__name__}: {e}"
     if ref.variance is not None:
         m["relmse_floor"] = M.relmse_floor(ref.image, ref.variance)
+    m["relmse_noise"] = _verdict.noise_relmse(res.variance, ref.image)
     # Convergence: relMSE at each checkpoint against the same reference.
     curve = M.error_curve(res.checkpoints, ref.image, "relmse") if res.checkpoints else []
     rec["curve"] = curve
@@ -133,6 +135,7 @@ def _run_job(job, rec, root: Path, run_id: str):
     m["time_to_target"] = M.time_to_error(curve, target) if target else None
     m["efficiency"] = M.efficiency(m.get("relmse"), rec["seconds"])
     rec["metrics"] = m
+    rec["verdict"] = _verdict.verdict(rec, target or _matrix.DEFAULT_TARGET_RELMSE)
     # Per effect class, against the per-effect reference (where there is one).
     em = {}
     if ref.effects is not None:
@@ -153,13 +156,20 @@ def _run_job(job, rec, root: Path, run_id: str):
                     d[name] = None
             d["reference_mean"] = float(theirs.mean())
             d["mean"] = float(mine.mean())
+            # The effect's noise term, from its own per-pixel variance (camera estimators' films keep it).
+            ev = (res.effect_variance or {}).get(eff)
+            d["noise"] = None if ev is None else _verdict.noise_relmse(ev, theirs)
             em[eff] = d
     rec["effect_metrics"] = em
     # The render itself, with every effect layer.
     rel = Path("runs") / run_id / job["scene"] / f"{job['estimator']}-{_budget_label(b)}-s{job['seed']}.exr"
     out = root / rel
     out.parent.mkdir(parents=True, exist_ok=True)
-    rm.write_exr(out, res, scene=job["scene"], run_id=run_id, job_key=job["key"])
+    budget = dict(res.error_budget, target_relmse=rec["verdict"]["target"] if rec["verdict"] else None,
+                  terms=rec["verdict"]["terms"] if rec["verdict"] else None, terms_how=_verdict.TERM_HOW,
+                  effect_noise_relmse={e: d.get("noise") for e, d in em.items()})
+    rec["error_budget"] = budget
+    rm.write_exr(out, res, scene=job["scene"], run_id=run_id, job_key=job["key"], error_budget=budget)
     rec["exr"] = str(rel)
 
 

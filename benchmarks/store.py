@@ -189,6 +189,17 @@ class Store:
                                  (run_id,)).fetchall()
         return [json.loads(r["record"]) for r in rows]
 
+    def history(self, matrix: str) -> list:
+        """Every job of every run of `matrix`, oldest run first, as dicts of
+        the query columns only (run_id, started, commit_id, scene, estimator,
+        budget as a dict, seed, status, relmse, seconds): what the report's
+        history view plots, without parsing each record."""
+        rows = self.conn.execute(
+            "SELECT j.run_id, r.started, r.commit_id, j.scene, j.estimator, j.budget, j.seed, j.status, j.relmse, "
+            "j.seconds FROM jobs j JOIN runs r ON r.run_id = j.run_id WHERE r.matrix = ? "
+            "ORDER BY r.started, j.run_id", (matrix,)).fetchall()
+        return [dict(r, budget=json.loads(r["budget"] or "{}")) for r in rows]
+
     # -- merging ------------------------------------------------------------
 
     def merge(self, other) -> tuple:

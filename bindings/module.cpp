@@ -82,7 +82,12 @@ PYBIND11_MODULE(_core, m) {
             "to_world", [](const EmitterDesc& d) { return d.to_world; },
             [](EmitterDesc& d, py::object v) { d.to_world = to_matrix(v); })
         .def_readwrite("cutoff_angle", &EmitterDesc::cutoff_angle)
-        .def_readwrite("beam_width", &EmitterDesc::beam_width);
+        .def_readwrite("beam_width", &EmitterDesc::beam_width)
+        .def_readwrite("env_width", &EmitterDesc::env_width)
+        .def_readwrite("env_height", &EmitterDesc::env_height)
+        .def_property(
+            "env_data", [](const EmitterDesc& d) { return d.env_data; },
+            [](EmitterDesc& d, py::object v) { d.env_data = flat<float>(v, 1, "environment map data"); });
 
     py::class_<SensorDesc>(m, "SensorDesc")
         .def(py::init<>())
@@ -95,13 +100,17 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("far_clip", &SensorDesc::far_clip)
         .def_readwrite("width", &SensorDesc::width)
         .def_readwrite("height", &SensorDesc::height)
+        .def_readwrite("crop_x", &SensorDesc::crop_x)
+        .def_readwrite("crop_y", &SensorDesc::crop_y)
+        .def_readwrite("crop_width", &SensorDesc::crop_width)
+        .def_readwrite("crop_height", &SensorDesc::crop_height)
         .def_readwrite("rfilter", &SensorDesc::rfilter)
         .def_readwrite("filter_radius", &SensorDesc::filter_radius)
         .def_readwrite("filter_stddev", &SensorDesc::filter_stddev)
         .def_readwrite("shape", &SensorDesc::shape)
         .def_readwrite("medium", &SensorDesc::medium);
 
-    // Measurement (benchmarks/majorant_grid.py): sigma_t lookups by delta and
+    // Measurement (benchmarks/studies/majorant_grid.py): sigma_t lookups by delta and
     // ratio tracking in grid media since the last reset, all threads.
     m.def("medium_tracking_lookups", &Medium::tracking_lookups);
     m.def("reset_medium_tracking_lookups", &Medium::reset_tracking_lookups);
@@ -429,7 +438,7 @@ PYBIND11_MODULE(_core, m) {
     }();
 
     // The photon map's kd-tree on bare points, for the brute-force query
-    // tests and benchmarks/photon_kdtree.py. Indices returned are the input
+    // tests and benchmarks/studies/photon_kdtree.py. Indices returned are the input
     // rows; knn pads with -1 / inf where fewer than k lie within r_max.
     py::class_<PhotonMap>(m, "PhotonMap")
         .def(py::init([](py::object points, int threads) {
@@ -527,7 +536,7 @@ PYBIND11_MODULE(_core, m) {
     m.def(
         "render",
         [](const Scene& scene, const IntegratorDesc& idesc, std::vector<bool> effects, int spp, double seconds,
-           uint64_t seed, int threads, std::vector<int> checkpoints, py::object progress) {
+           uint64_t seed, int threads, std::vector<int> checkpoints, py::object progress, bool effect_variance) {
             if (!scene.committed()) throw py::value_error("render: scene is not committed");
             EffectMask mask;
             if (effects.size() != size_t(kNumEffects)) throw py::value_error("render: effects mask needs 7 entries");
@@ -539,6 +548,7 @@ PYBIND11_MODULE(_core, m) {
             opts.seed = seed;
             opts.threads = threads;
             opts.checkpoints = std::move(checkpoints);
+            opts.effect_variance = effect_variance;
             bool interrupted = false;
             std::unique_ptr<py::error_already_set> callback_error;
             // Runs on the calling thread with the GIL re-acquired: checks for
@@ -579,6 +589,14 @@ PYBIND11_MODULE(_core, m) {
             py::dict eff;
             for (int k = 0; k < kNumEffects; ++k) eff[effect_name(k)] = to_numpy(std::move(out.effects[k]), {H, W, 3});
             r["effects"] = eff;
+            if (out.effect_variance.empty()) {
+                r["effect_variance"] = py::none();
+            } else {
+                py::dict ev;
+                for (int k = 0; k < kNumEffects; ++k)
+                    ev[effect_name(k)] = to_numpy(std::move(out.effect_variance[k]), {H, W, 3});
+                r["effect_variance"] = ev;
+            }
             // Per-strategy images, keyed (s, t) (strategy_index order, integrator.h).
             py::dict strat, strat_u;
             for (int d = 1, k = 0; k < int(out.strategies.size()); ++d)
@@ -617,6 +635,8 @@ PYBIND11_MODULE(_core, m) {
                 d["trace_seconds"] = pm.trace_seconds;
                 d["build_seconds"] = pm.build_seconds;
                 d["target_reached"] = pm.target_reached;
+                d["target"] = pm.target;
+                d["max_paths"] = pm.max_paths;
                 maps[py::str(pm.name)] = d;
             }
             st["photon_maps"] = maps;
@@ -629,5 +649,6 @@ PYBIND11_MODULE(_core, m) {
             return r;
         },
         py::arg("scene"), py::arg("integrator"), py::arg("effects"), py::arg("spp"), py::arg("seconds"),
-        py::arg("seed"), py::arg("threads"), py::arg("checkpoints"), py::arg("progress"));
+        py::arg("seed"), py::arg("threads"), py::arg("checkpoints"), py::arg("progress"),
+        py::arg("effect_variance") = false);
 }

@@ -6,6 +6,7 @@
 
 #include "bindings.h"
 #include "convert.h"
+#include "render/memory.h"
 #include "render/registry.h"
 #include "scene/scene.h"
 #include "transport/common.h"
@@ -157,9 +158,10 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                         Interaction it;
                         if (s.intersect(ray, it)) {
                             int e = s.shapes[it.shape]->emitter;
-                            if (e >= 0) out[i] = light_pdf_w(s, *s.emitters[e], ray.o, &it);
+                            if (e >= 0) out[i] = light_pdf_w(s, *s.emitters[e], ray.o, &it, ray.d);
                         } else {
-                            for (const Emitter* env : s.environment) out[i] += light_pdf_w(s, *env, ray.o, nullptr);
+                            for (const Emitter* env : s.environment)
+                                out[i] += light_pdf_w(s, *env, ray.o, nullptr, ray.d);
                         }
                     }
                 }
@@ -240,6 +242,13 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
             return from_param_set(resolved);
         },
         py::arg("type"), py::arg("params"), py::arg("reads"));
+
+    // The memory a render may use (render/memory.h), in bytes: the machine's,
+    // or `bytes` when the tests set it (0 restores the machine's), so that
+    // the limit tests do not depend on the machine they run on.
+    m.def("memory_limit", &memory_limit_bytes, "bytes of memory a render may use (render/memory.h)");
+    m.def("set_memory_limit_for_tests", &set_memory_limit_override, py::arg("bytes"),
+          "test hook: the memory limit of render/memory.h (0: the machine's)");
 }
 
 }  // namespace rm::bind

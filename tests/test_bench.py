@@ -159,7 +159,7 @@ def test_bench_command_prints_table_and_report(tmp_path, capsys):
     mat = _write(tmp_path, BASE + "[estimators.ptracer]\n")
     assert main(["bench", mat, "--results", str(tmp_path / "r"), "--workers", "1"]) == 0
     out = capsys.readouterr().out
-    assert re.search(r"^furnace\s+path\s+2 spp\s+2\s+\S+\s+", out, re.M), out
+    assert re.search(r"^furnace  \(2 spp\)\n  estimator\s+spp\s+total.*\n  path\s+2\s+\S+\s+", out, re.M), out
     assert "emission" in out and "indirect" in out
     m = re.search(r"^report: (.*index\.html)$", out, re.M)
     assert m and Path(m.group(1)).exists(), out

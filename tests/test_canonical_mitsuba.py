@@ -1,25 +1,23 @@
-"""The canonical scenes against their committed Mitsuba 3 references
+"""The canonical scenes' committed Mitsuba 3 references themselves
 (reference_scenes/<name>/reference.exr, 64 x 64, mean of 32 independent
 llvm_ad_rgb runs and the variance of that mean; parameters, budgets and
 known exclusions in reference_scenes/registry.py, what each scene isolates
-in its card.md).
+in its card.md): the two with an independent answer (Beer-Lambert; van de
+Hulst's slab) against it, and the veach_mis finding (Mitsuba's small
+sphere lights, against the exact answer). Every estimator against every
+reference, each with its power check, is a cell of
+tests/test_estimator_matrix.py (the blocked z-test of tests/refcompare.py
+with the reference variance floor; why the floor, below).
 
-Surface scenes (glass_sphere_caustic, veach_mis, ajar_door): our `path` at
-a CI budget (about 2-4 s each on 2 shared cores) against the reference, with the
-blocked z-test of tests/refcompare.py (4 x 4 block means, each channel at
-alpha / 3, alpha = 0.01 in all; see test_cornell_reference.py for why blocks),
-and a power check: the reference scaled by 1.01 (ajar_door: its effect region
-scaled by 1.05, see below) must be rejected.
-
-One addition to the Cornell box's test, measured on these scenes: the
-variance of each of our blocks is the larger of our render's own estimate
-and the per-sample variance the reference measured, scaled to our sample
-count (`reference_variance_floor`). These scenes are built around rare
-paths (a caustic of a small light seen through or reflected by a glass
-sphere, light through a door gap), which a render at CI budget mostly
-misses, and when it misses them its own variance estimate misses them too:
-the estimate is low exactly where its variance is underestimated. With our
-own variance only, 20 of 20 glass_sphere_caustic renders at 1024 spp
+The reference variance floor, measured on these scenes: the variance of
+each of our blocks is the larger of our render's own estimate and the
+per-sample variance the reference measured, scaled to our sample count
+(`reference_variance_floor`). These scenes are built around rare paths (a
+caustic of a small light seen through or reflected by a glass sphere,
+light through a door gap), which a render at CI budget mostly misses, and
+when it misses them its own variance estimate misses them too: the
+estimate is low exactly where its variance is underestimated. With our own
+variance only, 20 of 20 glass_sphere_caustic renders at 1024 spp
 (independent seeds) failed against Mitsuba (mean z -60.9, 125 of 256
 blocks rejected per channel), and 4 of 4 failed the same way against our
 own 16384 spp render (mean z about -11), while the mean of 8 renders agreed
@@ -30,16 +28,10 @@ did), 20 of 20 passed and 20 of 20 with a 1 % bias were rejected; numbers
 for each scene, including the floor's measured false-alarm rates, in the
 scene's card.md.
 
-Media and subsurface scenes (homogeneous_slab, fog_room, vandehulst_slab,
-translucent_slab, translucent_object, volumetric_caustic): our `volpath`
-(the same estimator as `path` on a scene with media, tests/test_media.py)
-against the reference with the same blocked z-test and reference variance
-floor, at the budgets and block sizes of MEDIA (measured per scene in its
-card.md); their references are also checked for form, and the two with an
-independent answer (Beer-Lambert; the slab's diffuse transmittance) against
-it. `ptracer` against these references: tests/test_ptracer_media.py; `bdpt`:
-tests/test_bdpt_media.py (van de Hulst's irradiancemeter scenes:
-tests/test_irradiancemeter.py).
+Why the budgets differ per estimator and scene (volpath, bdpt, ptracer on
+the media scenes, ptracer's known exclusions on the surface scenes): the
+comments at the matrix's MITSUBA table and in the registry; the ptracer
+exclusions on veach_mis measured below.
 """
 import math
 
@@ -50,58 +42,16 @@ import radiometer as rm
 from radiometer.analysis.stats import z_test
 from radiometer.reference_scenes import registry
 
-from refcompare import blocked_z_test, reference_variance_floor, region_mask, scale_region
+from refcompare import region_mask
 
 RES = 64
 ALPHA = 0.01
-
-# Per surface scene: our CI budget and the power check; every scene renders
-# with its reference's parameters (res, max_depth: the registry). Regions
-# are card.md's pixel boxes (x0, y0, x1, y1), half-open, at 64 x 64.
-AJAR_DOORWAY = (28, 15, 40, 41)  # the view through the doorway into the lit room
-AJAR_BEAM = (54, 18, 64, 40)  # the lamp's strip through the gap on the near room's right wall
-SURFACE = {
-    "glass_sphere_caustic": {"spp": 1024, "power": None},
-    "veach_mis": {"spp": 512, "power": None},
-    # At 512 spp a 1 % overall bias is near the mean z's noise here
-    # (measured: rejected for 1 of seeds 1-3), so the check scales the region
-    # the scene is about, the near room lit only through the gap (every
-    # pixel outside the doorway and the lamp's strip), by 5 % (rejected for
-    # 3 of 3; the unscaled reference passed 3 of 3).
-    "ajar_door": {"spp": 512, "power": ("near room, indirect only", 1.05)},
-}
-# Our volpath's budget per media scene, the block size of the comparison and
-# the bias its power check must reject (the reference scaled by it). Budgets:
-# the block test's mean z is biased negative for a heavy-tailed estimator
-# (a render that misses the rare paths is low and estimates its own variance
-# low too), so each scene gets the budget at which independent seeds pass
-# (measured, card.md). volumetric_caustic's L S S V E paths are found only by
-# phase sampling through the glass sphere onto a small light: at 1024 spp
-# 2 of 3 seeds failed with 4 x 4 blocks (mean z -3.7, -4.8) while 4 pooled
-# renders (4096 spp) matched (image mean ratio 1.0035 +- 0.0043, mean z
-# -2.4 shrinking with budget: skew, not bias); 16 x 16 blocks (256 pixels x
-# 1024 samples each) pass 3 of 3 and see a 2 % bias in 2 of 3 seeds (the
-# reference's own noise, 10 % per pixel, limits what any budget can see).
-MEDIA_CI = {
-    "homogeneous_slab": {"spp": 512, "k": 4, "power": 1.01},
-    "fog_room": {"spp": 1024, "k": 4, "power": 1.01},
-    "vandehulst_slab": {"spp": 1 << 18, "k": 1, "power": 1.02},
-    "translucent_slab": {"spp": 512, "k": 4, "power": 1.01},
-    "translucent_object": {"spp": 512, "k": 4, "power": 1.01},
-    "volumetric_caustic": {"spp": 1024, "k": 16, "power": 1.02},
-}
-MEDIA = list(MEDIA_CI)
 
 
 def _load(name):
     """The scene with its reference's XML parameters."""
     spec = registry.get(name)
     return rm.load_file(spec.xml, **spec.fixed_params)
-
-
-def _max_depth(name):
-    """The max_depth the scene's reference was made with."""
-    return registry.max_depth(registry.get(name))
 
 
 def _reference(name, shape=(RES, RES, 3), min_spp=16384):
@@ -117,98 +67,7 @@ def _reference(name, shape=(RES, RES, 3), min_spp=16384):
     return ref
 
 
-def _effect_mask(name):
-    if name == "ajar_door":
-        return ~region_mask((RES, RES), [AJAR_DOORWAY, AJAR_BEAM])
-    raise KeyError(name)
-
-
-_ours = {}
-
-
-def _render_ours(name):
-    """Our `path` on the scene, once per session (the comparison and the
-    power check use the same render)."""
-    if name not in _ours:
-        cfg = SURFACE[name]
-        scene = _load(name)
-        _ours[name] = rm.render(scene, integrator={"type": "path", "max_depth": _max_depth(name)},
-                                spp=cfg["spp"], seed=1)
-    return _ours[name]
-
-
-def _compare(res, ref_image, ref_variance, total_spp):
-    floor = reference_variance_floor(ref_variance, total_spp, res.spp)
-    return blocked_z_test(res.image, res.variance, ref_image, ref_variance, b_splatted=False, alpha=ALPHA,
-                          var_a_floor=floor)
-
-
-@pytest.mark.parametrize("name", sorted(SURFACE))
-def test_path_matches_mitsuba_reference(name):
-    ref = _reference(name)
-    res = _render_ours(name)
-    assert res.spp == SURFACE[name]["spp"]
-    assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, res.stats
-    passed, msg = _compare(res, ref.image, ref.variance, int(ref.metadata["total_spp"]))
-    assert passed, f"{name}: ours ({res.spp} spp) differs from Mitsuba's reference:\n{msg}"
-
-
-@pytest.mark.parametrize("name", sorted(SURFACE))
-def test_power_scaled_reference_is_rejected(name):
-    """The reference with a bias the test must see (1 % overall, or 5 % on
-    the scene's effect region) must fail: the test can fail."""
-    ref = _reference(name)
-    res = _render_ours(name)
-    power = SURFACE[name]["power"]
-    if power is None:
-        what, image, var = "1 % overall", ref.image * 1.01, ref.variance * 1.01 ** 2
-    else:
-        region, s = power
-        image, var = scale_region(ref.image, ref.variance, _effect_mask(name), s)
-        what = f"{(s - 1) * 100:.0f} % on the {region} region"
-    passed, msg = _compare(res, image, var, int(ref.metadata["total_spp"]))
-    assert not passed, f"{name}: a bias of {what} went undetected:\n{msg}"
-
-
 # -- media and subsurface scenes ---------------------------------------------
-
-
-@pytest.mark.parametrize("name", MEDIA)
-def test_media_reference_is_well_formed(name):
-    shape = (1, 1, 3) if name == "vandehulst_slab" else (RES, RES, 3)
-    ref = _reference(name, shape=shape, min_spp=8192)
-    assert float(ref.image.max()) > 0, f"{name}: the reference is black"
-
-
-@pytest.mark.parametrize("name", MEDIA)
-def test_volpath_matches_mitsuba_reference(name):
-    """Our volpath against the reference, as the surface scenes above, with
-    MEDIA_CI's budget, block size and power check."""
-    cfg = MEDIA_CI[name]
-    shape = (1, 1, 3) if name == "vandehulst_slab" else (RES, RES, 3)
-    ref = _reference(name, shape=shape, min_spp=8192)
-    total = int(ref.metadata["total_spp"])
-    scene = _load(name)
-    res = rm.render(scene, integrator="volpath", spp=cfg["spp"], seed=1)
-    assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, res.stats
-    floor = reference_variance_floor(ref.variance, total, res.spp)
-    s = cfg["power"]
-    if name == "vandehulst_slab":  # one pixel: no blocks
-        r = z_test(res.image, np.maximum(res.variance, floor), ref.image, ref.variance, alpha=ALPHA)
-        assert r.passed, r.summary()
-        r = z_test(res.image, np.maximum(res.variance, floor), ref.image * s, ref.variance * s * s, alpha=ALPHA)
-        assert not r.passed, f"a {(s - 1) * 100:.0f} % bias went undetected: {r.summary()}"
-        return
-
-    def compare(image, variance):
-        return blocked_z_test(res.image, res.variance, image, variance, b_splatted=False, alpha=ALPHA,
-                              var_a_floor=floor, k=cfg["k"])
-
-    passed, msg = compare(ref.image, ref.variance)
-    assert passed, f"{name}: ours ({res.spp} spp) differs from Mitsuba's reference:\n{msg}"
-    passed, msg = compare(ref.image * s, ref.variance * s * s)
-    assert not passed, f"{name}: a {(s - 1) * 100:.0f} % bias went undetected:\n{msg}"
-
 
 # Fully covered pixels of each slab (card.md), and its optical thickness.
 SLABS = {"slab_0.25": ((2, 10, 14, 54), 0.25), "slab_0.5": ((18, 10, 30, 54), 0.5),
@@ -334,13 +193,9 @@ def test_volpath_matches_vandehulst_reflectance():
     assert 2 * norm.sf(abs(v - VDH_R) / se) >= ALPHA, f"volpath R {v} +- {se} vs published {VDH_R}"
 
 
-# -- the other unbiased estimators on the surface scenes ----------------------
-# `bdpt` estimates every path class, so it must match every surface reference
-# (same budget and comparison as `path`).
-#
-# `ptracer` (light tracing) is held to each scene except the pixels where it
-# cannot work (the registry's known exclusions), left out of the test
-# (every 4 x 4 block touching them):
+# -- ptracer's known exclusions on the surface scenes (the registry's) ------
+# ptracer (light tracing) is held to each scene except the pixels where it
+# cannot work, left out of the comparison (every 4 x 4 block touching them):
 # - glass_sphere_caustic: the sphere itself (card.md box (16, 14, 41, 39)).
 #   The camera sees it through a delta BSDF (L ... S E); a light path can
 #   never connect to a pinhole through a delta vertex, so ptracer renders
@@ -362,21 +217,3 @@ def test_volpath_matches_vandehulst_reflectance():
 # ajar_door is tested whole (seeds 2 and 3 at 1024 spp passed, the near
 # room's mean at 0.9975 and 0.9999 of the reference; every surface there is
 # diffuse, and Mitsuba's reference is itself a light tracer's, card.md).
-PTRACER_EXCLUDE = {name: registry.get(name).exclusions.get("ptracer", []) for name in SURFACE}
-PTRACER_SPP = 1024
-
-
-@pytest.mark.parametrize("estimator,name", [("bdpt", n) for n in sorted(SURFACE)] +
-                         [("ptracer", n) for n in sorted(SURFACE)])
-def test_other_estimators_match_mitsuba_reference(estimator, name):
-    ref = _reference(name)
-    cfg = SURFACE[name]
-    scene = _load(name)
-    spp = PTRACER_SPP if estimator == "ptracer" else cfg["spp"]
-    res = rm.render(scene, integrator={"type": estimator, "max_depth": _max_depth(name)}, spp=spp, seed=2)
-    assert res.stats["nan_samples"] == 0 and res.stats["inf_samples"] == 0, res.stats
-    exclude = PTRACER_EXCLUDE[name] if estimator == "ptracer" else ()
-    floor = reference_variance_floor(ref.variance, int(ref.metadata["total_spp"]), res.spp)
-    passed, msg = blocked_z_test(res.image, res.variance, ref.image, ref.variance, b_splatted=False, alpha=ALPHA,
-                                 var_a_floor=floor, exclude=exclude)
-    assert passed, f"{name}: {estimator} ({res.spp} spp) differs from Mitsuba's reference:\n{msg}"

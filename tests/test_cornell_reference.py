@@ -1,7 +1,8 @@
-"""End to end: our `path` on the Cornell box against the committed Mitsuba 3
-reference (reference_scenes/cornell_box/reference.exr: 64 x 64, max_depth 8,
-32 runs x 2048 spp of llvm_ad_rgb, mean and variance of the mean), plus a
-power check and `direct` == `path` at max_depth 2.
+"""The Cornell box: `direct` == `path` at max_depth 2. Every estimator
+against the committed Mitsuba 3 reference (reference_scenes/cornell_box/
+reference.exr: 64 x 64, max_depth 8, 32 runs x 2048 spp of llvm_ad_rgb,
+mean and variance of the mean), with its power check, is a cell of
+tests/test_estimator_matrix.py, which compares as described here.
 
 How the images are compared, and why (measured on this scene, 64 x 64):
 
@@ -32,7 +33,6 @@ How the images are compared, and why (measured on this scene, 64 x 64):
   Cauchy-Schwarz bound (mean of the pixel standard deviations)^2, which is
   conservative and at most a few percent of ours.
 """
-import pytest
 
 import radiometer as rm
 from radiometer.reference_scenes import registry
@@ -40,44 +40,10 @@ from refcompare import blocked_z_test  # block means per channel; why: this modu
 
 SPEC = registry.get("cornell_box")
 SCENE = SPEC.xml
-REFERENCE = SPEC.reference_exr
 
 RES = SPEC.fixed_params["res"]  # 64, as the reference was made
-MAX_DEPTH = registry.max_depth(SPEC)  # 8
 SPP = 512  # about 3 s on 2 cores
 ALPHA = 0.01
-
-
-@pytest.fixture(scope="module")
-def reference():
-    assert REFERENCE.exists(), (f"{REFERENCE} is missing: regenerate it with "
-                                "python -m radiometer.reference_scenes.make_reference cornell_box")
-    ref = rm.read_exr(REFERENCE)
-    assert ref.variance is not None, f"{REFERENCE} has no variance layer"
-    assert ref.image.shape == (RES, RES, 3), ref.image.shape
-    assert int(ref.metadata.get("total_spp", 0)) >= 16384, ref.metadata
-    return ref
-
-
-@pytest.fixture(scope="module")
-def ours():
-    scene = rm.load_file(SCENE, res=RES)
-    return rm.render(scene, integrator={"type": "path", "max_depth": MAX_DEPTH}, spp=SPP, seed=1)
-
-
-def test_path_matches_mitsuba_reference(ours, reference):
-    assert ours.spp == SPP
-    assert ours.stats["nan_samples"] == 0 and ours.stats["inf_samples"] == 0, ours.stats
-    passed, msg = blocked_z_test(ours.image, ours.variance, reference.image, reference.variance, b_splatted=True)
-    assert passed, f"ours ({SPP} spp) differs from Mitsuba's reference:\n{msg}"
-
-
-def test_power_scaled_render_is_rejected(ours, reference):
-    """The same render scaled by 1.01 (a 1 % bias) must fail: the test can fail."""
-    s = 1.01
-    passed, msg = blocked_z_test(ours.image * s, ours.variance * s * s, reference.image, reference.variance,
-                                 b_splatted=True)
-    assert not passed, f"a 1 % bias went undetected:\n{msg}"
 
 
 def test_direct_equals_path_at_depth_2():
@@ -92,26 +58,3 @@ def test_direct_equals_path_at_depth_2():
     # And the test sees a 1 % bias between them.
     passed, msg = blocked_z_test(d.image * 1.01, d.variance * 1.01 ** 2, p.image, p.variance, b_splatted=False)
     assert not passed, f"a 1 % bias between direct and path went undetected:\n{msg}"
-
-
-# The bidirectional estimators against the same reference. Their
-# light-path splats are spread over the gaussian filter's footprint, so our
-# pixels are correlated too: both sides' block variances use the
-# Cauchy-Schwarz bound (conservative: measured at 512 / 256 spp, 3 seeds
-# each, no block rejected at the per-pixel level, and the 1 % power check
-# still rejected every time).
-BIDIR_SPP = {"ptracer": 256, "bdpt": 128}
-
-
-@pytest.mark.parametrize("estimator", sorted(BIDIR_SPP))
-def test_bidirectional_estimators_match_mitsuba_reference(estimator, reference):
-    scene = rm.load_file(SCENE, res=RES)
-    r = rm.render(scene, integrator={"type": estimator, "max_depth": MAX_DEPTH}, spp=BIDIR_SPP[estimator], seed=2)
-    assert r.stats["nan_samples"] == 0 and r.stats["inf_samples"] == 0, r.stats
-    passed, msg = blocked_z_test(r.image, r.variance, reference.image, reference.variance, b_splatted=True,
-                                 a_correlated=True)
-    assert passed, f"{estimator} ({r.spp} spp) differs from Mitsuba's reference:\n{msg}"
-    s = 1.01
-    passed, msg = blocked_z_test(r.image * s, r.variance * s * s, reference.image, reference.variance,
-                                 b_splatted=True, a_correlated=True)
-    assert not passed, f"{estimator}: a 1 % bias went undetected:\n{msg}"

@@ -665,8 +665,9 @@ BAD_DICTS = [
      ["scene['cam']['film']['width']", "must be an integer"]),
     (_scene(cam={"type": "perspective", "film": {"type": "hdrfilm", "height": 20000}}),
      ["scene['cam']['film']['height']", "outside [1, 16384]"]),
-    (_scene(cam={"type": "perspective", "film": {"type": "hdrfilm", "crop_width": 8}}),
-     ["scene['cam']['film']['crop_width']", "unknown parameter"]),
+    (_scene(cam={"type": "perspective", "film": {"type": "hdrfilm", "width": 16, "crop_width": 8,
+                                                 "crop_offset_x": 9}}),
+     ["scene['cam']['film']['crop_width']", "crop_offset_x + crop_width = 9 + 8 exceeds the film's width 16"]),
     (_scene(floor={"type": "rectangle", "to_world": np.diag([1.0, np.nan, 1.0, 1.0])}),
      ["scene['floor']['to_world']", "non-finite"]),
     (_scene(ball={"type": "sphere", "radius": 0.0}),
@@ -758,9 +759,9 @@ BAD_XML = [
 </scene>""", 3, ["non-finite"]),
     ("""<scene version="3.0.0">
 <texture type="bitmap"/>
-</scene>""", 2, ["<texture> is not supported"]),
-    ("""<scene version="2.1.0">
-</scene>""", 1, ["only version 3.x"]),
+</scene>""", 2, ["texture type 'bitmap' is not supported"]),
+    ("""<scene version="2.1">
+</scene>""", 1, ["cannot parse version '2.1'"]),
     ("""<scene version="3.0.0">
 <sensor type="perspective">
     <transform name="to_world">

@@ -65,6 +65,7 @@ PARAMS = {
     "emitter": {
         "area": {"radiance": "rgb"}, "constant": {"radiance": "rgb"},
         "point": {"intensity": "rgb", "position": "point", "to_world": "transform"},
+        "envmap": {"scale": "float", "to_world": "transform"},
         "spot": {"intensity": "rgb", "cutoff_angle": "angle", "beam_width": "angle", "to_world": "transform"},
         "directional": {"irradiance": "rgb", "direction": "vector", "to_world": "transform"},
     },
@@ -90,7 +91,7 @@ PARAMS = {
     # The estimators' declarations in the core's registry, Mitsuba 0.6 names included.
     "integrator": {n: {name: {"int": "int", "float": "float", "bool": "bool", "string": "string"}[p["type"]]
                        for k, p in e["params"].items() for name in [k, *p["aliases"]]}
-                   for e in estimators().values() for n in [e["name"], *e["aliases"]]},
+                   for e in estimators().values() for n in [e["name"], *e["aliases"]]} | {"moment": {}},
 }
 assert {c: set(t) for c, t in PARAMS.items()} == {c: set(t) for c, t in PLUGINS.items()}, \
     "the fuzzer's schema must cover the loader's plugin table"

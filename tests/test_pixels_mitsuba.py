@@ -31,7 +31,7 @@ smallest (quiet_square, chosen from the variances, not the difference);
 test_per_pixel_test_sees_what_blocks_miss shows the block test missing
 that bias on the same renders.
 
-Exclusions: ptracer's, from test_canonical_mitsuba.py (pixels that light
+Exclusions: ptracer's, the registry's (reference_scenes/registry.py: pixels that light
 tracing cannot reach, or reaches only through rare huge samples).
 """
 from pathlib import Path
@@ -42,8 +42,7 @@ import pytest
 import radiometer as rm
 from radiometer.analysis.blocks import block_mean, block_var_independent, reference_variance_floor, region_mask
 from radiometer.analysis.pixels import position_sampling_floor, seed_t_test, sidak_level, two_sample_t_test
-
-from test_canonical_mitsuba import PTRACER_EXCLUDE
+from radiometer.reference_scenes import registry as _registry
 
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
 RES = 64
@@ -52,7 +51,7 @@ N_COMPARISONS = 17
 SEEDS = 32
 POWER = 1.1
 MAX_DEPTH = {"cornell_box": 8, "glass_sphere_caustic": 12, "veach_mis": 8, "ajar_door": 10}
-EXCLUDE = {"ptracer": PTRACER_EXCLUDE}
+EXCLUDE = {"ptracer": {n: s.exclusions.get("ptracer", []) for n, s in _registry.mitsuba_scenes().items()}}
 
 # Per (estimator, scene): samples per pixel per seed, and the bias factor
 # the power check applies to the 4 pixels (POWER unless the budget cannot

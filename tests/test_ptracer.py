@@ -21,8 +21,7 @@ import numpy as np
 import pytest
 
 import radiometer as rm
-from refcompare import (_rgb, assert_clean, assert_same_bytes_whatever_threads, blocked_z, check_mirror_caustic,
-                        lookat)
+from refcompare import (_rgb, assert_clean, assert_same_bytes_whatever_threads, blocked_z, lookat)
 
 ALPHA = 0.01
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
@@ -105,12 +104,6 @@ def test_cornell_max_depth_2_matches_path():
     scene = rm.load_file(CORNELL, res=32, rfilter="box")
     a, b = compare_with_path(scene, 256, 256, seed=7, max_depth=2, where="cornell box, max_depth 2")
     assert not np.any(b.effects["indirect"])
-
-
-def test_mirror_caustic_matches_analytic():
-    """Orthographic camera, mirror caustic (L S D E) and direct light against
-    the method-of-images solution (zero variance)."""
-    check_mirror_caustic("ptracer", 512)
 
 
 def test_point_light_matches_path():

@@ -18,6 +18,13 @@ estimator, the median of each side and their ratio (this tree / base), and
 writes benchmarks/results/<study>.json. Also says whether the two builds
 give the same image bytes for the same seed.
 
+`--instructions` counts instructions instead (valgrind's cachegrind, one
+run per side and budget, no repeats needed: the count does not depend on
+the machine's load): each side renders at 1 spp and at 1 + spp, and the
+difference, the instructions of `spp` samples per pixel, is compared; the
+1 spp runs' totals (imports, scene load, photon maps) are reported beside
+it. Use a small --res (32): valgrind runs about 50 times slower.
+
 Studies recorded with it: `media_free_when_absent` (path only: media
 support must cost nothing in a scene without media) and
 `plumbing_cpu_time` (every estimator across the registry / pass-loop /
@@ -27,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -47,7 +55,7 @@ if base != "-":
 import numpy as np
 import radiometer as rm
 scene = rm.load_file(sys.argv[2], res=int(sys.argv[3]))
-integ = dict(json.loads(sys.argv[7]), max_depth=int(sys.argv[5]))
+integ = json.loads(sys.argv[7])
 rm.render(scene, integrator=integ, spp=1, seed=0)
 threads = int(sys.argv[6])
 t0, c0 = time.perf_counter(), time.process_time()
@@ -60,13 +68,53 @@ print(dt, dc, hashlib.sha256(np.ascontiguousarray(r.image).tobytes()).hexdigest(
 # Estimator settings for the timing (photon counts sized like the default matrix's).
 SETTINGS = {"photonmapper": {"global_photons": 50000, "caustic_photons": 50000},
             "sppm": {"photon_count": 20000}}
+# Estimators without a max_depth parameter (one bounce by construction).
+DEPTHLESS = {"direct"}
 
 
 def _run(base, res, spp, max_depth, threads, integrator="path"):
-    spec = json.dumps(dict(SETTINGS.get(integrator, {}), type=integrator))
+    spec = dict(SETTINGS.get(integrator, {}), type=integrator)
+    if integrator not in DEPTHLESS:
+        spec["max_depth"] = max_depth
+    spec = json.dumps(spec)
     out = subprocess.run([sys.executable, "-c", CHILD, base, str(SCENE), str(res), str(spp), str(max_depth),
                           str(threads), spec], capture_output=True, text=True, check=True).stdout.split()
     return float(out[0]), float(out[1]), out[2], out[3]
+
+
+def _instructions(base, res, spp, max_depth, integrator):
+    """Instructions of the whole child process under cachegrind."""
+    import re
+    import tempfile
+
+    spec = dict(SETTINGS.get(integrator, {}), type=integrator)
+    if integrator not in DEPTHLESS:
+        spec["max_depth"] = max_depth
+    with tempfile.NamedTemporaryFile(suffix=".cg") as tmp:
+        out = subprocess.run(["valgrind", "--tool=cachegrind", "--cache-sim=no", f"--cachegrind-out-file={tmp.name}",
+                              sys.executable, "-c", CHILD, base, str(SCENE), str(res), str(spp), str(max_depth),
+                              "1", json.dumps(spec)], capture_output=True, text=True, check=True,
+                             env=dict(os.environ, PYTHONHASHSEED="0"))  # the same Python work in every run
+    m = re.search(r"I\s+refs:\s+([\d,]+)", out.stderr)
+    if not m:
+        raise RuntimeError(f"no instruction count in valgrind's output: {out.stderr[-500:]}")
+    return int(m.group(1).replace(",", "")), out.stdout.split()[2]
+
+
+def _measure_instructions(a, integrator):
+    row = {}
+    for side, base in (("this", "-"), ("base", a.base)):
+        lo, _ = _instructions(base, a.res, 1, a.max_depth, integrator)
+        hi, h = _instructions(base, a.res, 1 + a.spp, a.max_depth, integrator)
+        row[side] = {"total_1spp": lo, "total": hi, "samples": hi - lo, "hash": h}
+        print(f"{integrator:12s} {side:4s} instructions: 1 spp run {lo:,}, {1 + a.spp} spp run {hi:,}, "
+              f"{a.spp} spp of samples {hi - lo:,}", flush=True)
+    ratio = row["this"]["samples"] / row["base"]["samples"]
+    ratio_setup = row["this"]["total_1spp"] / row["base"]["total_1spp"]
+    print(f"{integrator}: instructions per sample this / base {ratio:.4f}; whole 1 spp run {ratio_setup:.4f}",
+          flush=True)
+    return {"instructions": row, "ratio_samples_this_over_base": ratio, "ratio_1spp_run_this_over_base": ratio_setup,
+            "same_image_bytes": row["this"]["hash"] == row["base"]["hash"]}
 
 
 def _measure(a, integrator):
@@ -92,6 +140,12 @@ def _measure(a, integrator):
             "ratio_this_over_base": ratio, "ratio_cpu_this_over_base": ratio_cpu, "same_image_bytes": same}
 
 
+TIMING_SECONDS = ("wall seconds (time.perf_counter) and process CPU seconds (time.process_time, all threads) of "
+                  "one render per fresh process, after an untimed 1 spp render; sides interleaved")
+TIMING_INSTRUCTIONS = ("instructions (valgrind cachegrind) of the child process at 1 and 1 + spp spp; the "
+                       "difference is the samples' cost")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", required=True, help="folder with the earlier commit's radiometer package")
@@ -106,15 +160,18 @@ def main(argv=None):
                          "steadiest measure)")
     ap.add_argument("--study", default="cpu_time_vs_base", help="the results file's name")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--instructions", action="store_true",
+                    help="count instructions under valgrind instead of timing (load-independent)")
     a = ap.parse_args(argv)
-    rows = {name: _measure(a, name) for name in a.integrators.split(",")}
+    measure = _measure_instructions if a.instructions else _measure
+    rows = {name: measure(a, name) for name in a.integrators.split(",")}
     params = {"res": a.res, "spp": a.spp, "max_depth": a.max_depth, "repeats": a.repeats,
+              "instructions": a.instructions,
               "integrators": list(rows), "threads": a.threads, "base": a.base, "base_commit": a.base_commit,
               "settings": {k: SETTINGS.get(k, {}) for k in rows}}
     rec = {
         "scene": "reference_scenes/cornell_box/scene.xml",
-        "timing": "wall seconds (time.perf_counter) and process CPU seconds (time.process_time, all threads) of "
-                  "one render per fresh process, after an untimed 1 spp render; sides interleaved",
+        "timing": TIMING_INSTRUCTIONS if a.instructions else TIMING_SECONDS,
         "estimators": rows,
     }
     print("wrote", record.write(a.study, params, rec, out=a.out))

@@ -26,11 +26,12 @@ ESTIMATORS = {
     "photonmapper": {"type": "photonmapper", "global_photons": 20000, "caustic_photons": 20000,
                      "volume_photons": 20000, "direct_samples": 1, "gather_rays": 4},
     "sppm": {"type": "sppm", "photon_count": 10000},
+    "whitted": {"type": "whitted"},
 }
-KEEP_STREAMS = ("path", "direct", "ptracer", "bdpt")
+KEEP_STREAMS = ("path", "direct", "ptracer", "bdpt", "whitted")
 
 
-def _render_all(spp: int):
+def _render_all(spp: int, estimators=None):
     import radiometer as rm
     from radiometer.reference_scenes import registry as sc
 
@@ -38,6 +39,8 @@ def _render_all(spp: int):
     for name, spec in sorted(sc.SCENES.items()):
         params = sc.scene_params(spec, {})
         for est, integ in ESTIMATORS.items():
+            if estimators and est not in estimators:
+                continue
             key = f"{name}/{est}"
             try:
                 scene = rm.load_file(spec.xml, **params)
@@ -57,8 +60,13 @@ def main(argv=None):
     ap.add_argument("--against")
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--must-match", default=",".join(KEEP_STREAMS))
+    ap.add_argument("--estimators", help="comma-separated subset of " + ",".join(ESTIMATORS) + " (default: all)")
     a = ap.parse_args(argv)
-    res = _render_all(a.spp)
+    chosen = a.estimators.split(",") if a.estimators else None
+    unknown = sorted(set(chosen or ()) - set(ESTIMATORS))
+    if unknown:
+        ap.error(f"unknown estimator(s) {', '.join(unknown)} (known: {', '.join(ESTIMATORS)})")
+    res = _render_all(a.spp, chosen)
     if a.out:
         with open(a.out, "w") as f:
             json.dump(res, f, indent=1, sort_keys=True)
@@ -67,7 +75,10 @@ def main(argv=None):
             base = json.load(f)
         must = set(a.must_match.split(","))
         bad = 0
-        for key in sorted(set(base) | set(res)):
+        keys = set(base) | set(res)
+        if chosen:
+            keys = {k for k in keys if k.split("/")[1] in chosen}
+        for key in sorted(keys):
             b, r = base.get(key, {}), res.get(key, {})
             if b.get("sha256") == r.get("sha256") and b.get("error") == r.get("error"):
                 state = "same"

@@ -34,6 +34,9 @@ def _emitter(e) -> "_core.EmitterDesc":
     c.to_world = np.asarray(e.to_world, dtype=np.float64)
     c.cutoff_angle = float(e.cutoff_angle)
     c.beam_width = float(e.beam_width)
+    if e.env is not None:
+        c.env_height, c.env_width = int(e.env.shape[0]), int(e.env.shape[1])
+        c.env_data = np.ascontiguousarray(e.env, np.float32).reshape(-1, 1)
     return c
 
 
@@ -129,6 +132,9 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
     c.far_clip = float(sd.far_clip)
     c.width = int(sd.width)
     c.height = int(sd.height)
+    crop = (int(sd.crop_x), int(sd.crop_y), int(sd.crop_width), int(sd.crop_height))
+    if crop[2] > 0 and crop != (0, 0, int(sd.width), int(sd.height)):  # else the full film (0: its default)
+        c.crop_x, c.crop_y, c.crop_width, c.crop_height = crop
     c.rfilter = sd.rfilter
     c.filter_radius = float(sd.filter_radius)
     c.filter_stddev = float(sd.filter_stddev)

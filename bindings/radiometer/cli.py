@@ -236,12 +236,13 @@ def _store_path(a) -> Path:
 
 def _print_effect_table(store_path: Path, run_id: str):
     from .analysis.tables import aggregate, effect_table_text
+    from .analysis.verdict import winners
     from .benchmarks.store import Store
 
     with Store(store_path, readonly=True) as st:
         recs = st.jobs(run_id)
-    print(f"\nper-effect error (relMSE, mean over seeds; total against the scene's reference) -- run {run_id}")
-    print(effect_table_text(aggregate(recs)))
+    print(f"\nper-effect error -- run {run_id}")
+    print(effect_table_text(aggregate(recs), winners=winners(recs)))
 
 
 def cmd_bench(a) -> int:

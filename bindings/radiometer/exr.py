@@ -76,6 +76,8 @@ def write_exr(path, result=None, *, image=None, variance=None, effects=None, lay
         effects = result.effects
         meta = {"spp": int(result.spp), "seconds": float(result.seconds), "seed": int(getattr(result, "seed", 0)),
                 "integrator": json.dumps(getattr(result, "integrator", {}))}
+        if getattr(result, "error_budget", None):
+            meta["error_budget"] = json.dumps(result.error_budget)
         meta.update(metadata)
         metadata = meta
     if image is None:

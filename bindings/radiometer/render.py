@@ -52,6 +52,14 @@ class RenderResult:
     # depth is kept) and unweighted ones (each an estimate on its own).
     strategies: dict = field(default_factory=dict)
     strategies_unweighted: dict = field(default_factory=dict)
+    # effect class -> (H, W, 3) variance of that effect's estimate, when
+    # render(effect_variance=True) asked and the estimator's film keeps it
+    # (camera estimators); None otherwise.
+    effect_variance: Optional[dict] = None
+    # What the render knows of its own error (analysis/verdict.py
+    # render_error_budget): the standard error of the image mean, and per
+    # effect where effect_variance was kept.
+    error_budget: dict = field(default_factory=dict)
 
     def write_exr(self, path, **metadata):
         from .exr import write_exr
@@ -123,7 +131,7 @@ def _effects_mask(effects):
 
 def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0,
            threads: int = 0, checkpoints=None, effects=None,
-           progress: Optional[Callable[[int, int], None]] = None) -> RenderResult:
+           progress: Optional[Callable[[int, int], None]] = None, effect_variance: bool = False) -> RenderResult:
     """Renders `scene` (from load_file/load_dict) and returns a RenderResult.
 
     integrator: None (the scene's), a name, or a dict like the XML's.
@@ -135,6 +143,9 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
         True for every power of two.
     effects: simulate only these effect classes (see EFFECTS).
     progress: called with (done, total) samples; total is 0 under a time budget.
+    effect_variance: also keep each effect's per-pixel variance
+        (res.effect_variance; camera estimators, whose film sums the
+        squares; 21 more doubles a pixel). The image is the same either way.
     Ctrl-C raises RenderCancelled carrying the finished passes.
     """
     from . import _core
@@ -166,17 +177,23 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
         checkpoints = [int(c) for c in checkpoints]
         if any(c < 1 for c in checkpoints):
             raise ValueError("checkpoints: spp counts must be >= 1")
+    if not isinstance(effect_variance, (bool, np.bool_)):
+        raise ValueError(f"effect_variance: expected True or False, got {effect_variance!r}")
     mask = _effects_mask(effects)
     core_scene = scene.core()
     r = _core.render(core_scene, _core_integrator(spec), mask, int(spp), float(seconds or 0.0), int(seed),
-                     int(threads), checkpoints, progress)
+                     int(threads), checkpoints, progress, bool(effect_variance))
     stats = dict(r["stats"])
     stats.update(threads=r["threads"], cancelled=r["cancelled"], features=core_scene.features,
                  effects_simulated=[e for e, m in zip(EFFECTS, mask) if m])
     result = RenderResult(image=r["image"], variance=r["variance"], effects=dict(r["effects"]), spp=r["spp"],
                           seconds=r["seconds"], stats=stats, checkpoints=list(r["checkpoints"]), integrator=spec,
                           seed=int(seed), strategies=dict(r["strategies"]),
-                          strategies_unweighted=dict(r["strategies_unweighted"]))
+                          strategies_unweighted=dict(r["strategies_unweighted"]),
+                          effect_variance=None if r["effect_variance"] is None else dict(r["effect_variance"]))
+    from .analysis.verdict import render_error_budget
+
+    result.error_budget = render_error_budget(result)
     if spec["type"] in ("sppm", "ppm"):
         mixed = _mixed_bsdfs(scene.desc)
         if mixed:
@@ -189,6 +206,16 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
             msg = (f"{est}: BSDF(s) {', '.join(mixed)} have a delta and a smooth lobe; {est} stops camera paths at "
                    "them, so what their delta lobe reflects is missing (not consistent there); use photonmapper, "
                    "bdpt, vcm or path for these")
+            stats.setdefault("warnings", []).append(msg)
+            import warnings
+
+            warnings.warn(msg, stacklevel=2)
+    for name, pm in stats.get("photon_maps", {}).items():
+        if not pm["target_reached"] and not r["cancelled"]:
+            # The give-up bound of photon tracing (renderer/transport/photon_trace.cpp).
+            msg = (f"{spec['type']}: the {name} photon map stored {pm['photons']} of the {pm['target']} photons "
+                   f"asked for: tracing gave up after {pm['paths']} light paths (at most {pm['max_paths']}), as "
+                   f"few of this scene's light paths store one; its estimate is noisier and blurrier than asked")
             stats.setdefault("warnings", []).append(msg)
             import warnings
 

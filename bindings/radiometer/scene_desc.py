@@ -58,6 +58,10 @@ class EmitterDesc:
     to_world: np.ndarray = field(default_factory=_eye)  # point/spot position+frame; directional: +z is the direction
     cutoff_angle: float = 20.0
     beam_width: float = -1.0
+    # envmap: (rows, columns, 3) float32 linear RGB radiance, scale applied;
+    # to_world above maps its local frame (Mitsuba's latitude-longitude
+    # convention, +y up) to the world.
+    env: Optional[np.ndarray] = None
 
 
 @dataclass
@@ -127,6 +131,13 @@ class SensorDesc:
     filter_radius: float = 2.0
     filter_stddev: float = 0.5
     spp: int = 4  # from the sampler's sample_count
+    # The film's crop window (Mitsuba's crop_offset_x/y, crop_width/height):
+    # the pixels rendered and returned; width/height keep the full film's
+    # geometry. crop_width/height 0: the full film.
+    crop_x: int = 0
+    crop_y: int = 0
+    crop_width: int = 0
+    crop_height: int = 0
     medium: Optional[MediumDesc] = None  # the medium the sensor sits in
 
 

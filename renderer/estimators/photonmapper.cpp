@@ -47,13 +47,14 @@
 // itself overestimates a Poisson density by n / (n - 1) (the n-th photon
 // sits on the disc's rim); it vanishes as the photon count grows with
 // n -> inf, n / N -> 0 (Jensen 2001, sec. 7.2). Measured per scene and effect
-// in benchmarks/photon_bias.py; sppm is the consistent form.
+// in benchmarks/studies/photon_bias.py; sppm is the consistent form.
 #include <chrono>
 #include <limits>
 #include <stdexcept>
 #include <thread>
 
 #include "core/warp.h"
+#include "render/memory.h"
 #include "render/pass_loop.h"
 #include "render/registry.h"
 #include "transport/common.h"
@@ -179,6 +180,13 @@ public:
     }
 
     RenderOutput drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const override;
+    // The photon maps the scene calls for (DESIGN section 3).
+    struct MapNeeds {
+        bool caustic = false, global = false, volume = false;
+    };
+    MapNeeds needs(const Scene& scene) const;
+    // The films, the output and the maps against the machine's memory (memory.h).
+    void check_memory_for(const Scene& scene, const RenderOptions& opts) const;
     // Pass 1: the photon maps the scene calls for, and the ray-marching
     // steps; false when cancelled.
     bool photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMapStats>& info, ThreadStats& pstats) const;
@@ -188,55 +196,38 @@ public:
                   ThreadStats& stats) const {
         if (scene.features.has_media) return radiance_media(scene, maps, sampler, camera_ray, out, stats);
         thread_local std::vector<Neighbour> nb;
-        Ray ray = camera_ray;
-        Color beta(1.f);
-        PathClass pc;
-        BsdfContext ctx;
-        for (int depth = 0;; ++depth) {
-            // 1. The next vertex, and emission it shows (reached from the camera
-            //    directly or through specular vertices only).
-            Interaction it;
-            int cls = pc.classify();
-            if (!trace_counting_emission(scene, ray, it, beta, cls, !(depth == 0 && hide_) && mask[cls], out, stats))
-                break;
-            const Shape& shape = *scene.shapes[it.shape];
-            if (max_depth_ >= 0 && depth + 1 >= max_depth_) break;
-            const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
-            Vec3 wi = it.to_local(it.wi);
-            const int c = depth + 1;  // segments from the camera to x
-            const bool via_specular = pc.scatter_vertices > 0;
-
-            if (bsdf.has_smooth()) {
-                // 2. Direct light by ray tracing: light samples only (nothing
-                //    else finds emitters from x, so no MIS weight: bsdf_frac 0).
-                // 3. Caustics from the caustic map.
-                direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb,
-                                    [&] { return estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f); });
-                // 4. Indirect light from the global map: final gathering, or the
-                //    map read at x itself.
-                int cls_i = via_specular ? kSpecular : kIndirect;
-                if (maps.has_global && mask[cls_i]) {
-                    Color li = final_gather_ ? gather(scene, maps, sampler, it, bsdf, wi, c, nb, stats)
-                                             : estimate(maps.global, maps.r2_global, it, bsdf, wi,
-                                                        photon_budget(max_depth_, c), nb);
-                    out.add(cls_i, beta * li);
-                }
-            }
-
-            // 5. Specular reflection by Monte Carlo ray tracing: follow a delta
-            //    lobe; a sampled smooth lobe ends the path (its light came from
-            //    steps 2-4, and the lobe-selection weight keeps this unbiased).
-            if (!(bsdf.flags() & kDelta)) break;
-            if (!mask[kSpecular] && !(bsdf.flags() == kNull && !via_specular)) break;
-            BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
-            if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || !bs.is_delta) break;
-            beta *= bs.weight;
-            if (bsdf.flags() != kNull) pc.push(true);
-            ray = it.spawn(it.to_world(bs.wo));
-            if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta), sampler.next_1d(),
-                                   beta))
-                break;
-        }
+        // 1. Each vertex of the chain, with the emission it shows (reached
+        //    from the camera directly or through specular vertices only).
+        walk_specular_chain(scene, sampler, camera_ray, SpecularChain{max_depth_, rr_depth_, hide_}, mask, out, stats,
+                            [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta,
+                                const PathClass& pc, int depth) {
+                                const int c = depth + 1;  // segments from the camera to x
+                                const bool via_specular = pc.scatter_vertices > 0;
+                                if (bsdf.has_smooth()) {
+                                    // 2. Direct light by ray tracing: light samples only (nothing
+                                    //    else finds emitters from x, so no MIS weight: bsdf_frac 0).
+                                    // 3. Caustics from the caustic map.
+                                    direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb, [&] {
+                                        return estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f);
+                                    });
+                                    // 4. Indirect light from the global map: final gathering, or the
+                                    //    map read at x itself.
+                                    int cls_i = via_specular ? kSpecular : kIndirect;
+                                    if (maps.has_global && mask[cls_i]) {
+                                        Color li = final_gather_
+                                                       ? gather(scene, maps, sampler, it, bsdf, wi, c, nb, stats)
+                                                       : estimate(maps.global, maps.r2_global, it, bsdf, wi,
+                                                                  photon_budget(max_depth_, c), nb);
+                                        out.add(cls_i, beta * li);
+                                    }
+                                }
+                                // 5. Specular reflection by Monte Carlo ray tracing: follow a delta
+                                //    lobe (the chain samples it); a sampled smooth lobe ends the path
+                                //    (its light came from steps 2-4, and the lobe-selection weight
+                                //    keeps this unbiased).
+                                if (!(bsdf.flags() & kDelta)) return false;
+                                return mask[kSpecular] || (bsdf.flags() == kNull && !via_specular);
+                            });
     }
 
 private:
@@ -406,15 +397,10 @@ private:
 //
 // Bias of the volume estimate: the sphere of radius r blurs the in-scattered
 // radiance, n / r_n^3 over-estimates a Poisson density by n / (n - 1), and a
-// sphere that pokes out of the medium (near its boundary: the top of a
-// translucent slab, where a camera ray enters) holds photons in only part
-// of its volume, so the estimate there is low, by up to half at a flat
-// boundary for r much smaller than the medium (translucent_slab's lit half:
-// -7 / -5.6 % at 80 000 / 320 000 photons; van de Hulst's slab, two mean
-// free paths thick: -19 % at 400 000). volume_boundary_rays > 0 measures
-// the sphere's part inside the medium instead (volume_estimate): +5.8 /
-// +2.8 % and -4.3 % there. Measured in tests/test_volume_photon.py and
-// benchmarks/volume_photon.py.
+// sphere that pokes out of the medium holds photons in only part of its
+// volume, so the estimate is low near a boundary (up to half at a flat one);
+// volume_boundary_rays > 0 measures the sphere's part inside the medium
+// instead (volume_estimate). Figures: docs/measurements.md.
 // ---------------------------------------------------------------------------
 
 namespace {
@@ -761,6 +747,7 @@ private:
 RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
     // 1. Pass 1, the photon maps: the loop's setup, whose time counts
     //    against a time budget (and in the checkpoints' seconds).
+    check_memory_for(scene, opts);
     PassLoop loop(scene, opts, poll);
     Maps maps;
     std::vector<PhotonMapStats> info;
@@ -777,19 +764,57 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     return out;
 }
 
+PhotonMapper::MapNeeds PhotonMapper::needs(const Scene& scene) const {
+    const SceneFeatures& f = scene.features;
+    bool lights = !scene.emitters.empty();
+    bool long_paths = max_depth_ < 0 || max_depth_ >= 3;  // L S D E and L D D E have 3 segments
+    bool specular_chain = f.has_delta_bsdf && mask[kSpecular];
+    MapNeeds n;
+    n.caustic = lights && long_paths && caustic_photons_ > 0 && f.has_smooth_bsdf && f.has_delta_bsdf &&
+                (mask[kCaustic] || specular_chain);
+    n.global = lights && long_paths && global_photons_ > 0 && f.has_smooth_bsdf && (mask[kIndirect] || specular_chain);
+    // Purely absorbing media (homogeneous with sigma_s = 0) never store one.
+    bool scattering_media = false;
+    for (const auto& med : scene.media) scattering_media |= !med->homogeneous || !is_black(med->sigma_s);
+    n.volume = lights && f.has_media && scattering_media && volume_photons_ > 0 && long_paths &&
+               (mask[kVolume] || mask[kSubsurface]);
+    return n;
+}
+
+void PhotonMapper::check_memory_for(const Scene& scene, const RenderOptions& opts) const {
+    const int W = scene.sensor->width, H = scene.sensor->height;
+    const MapNeeds need = needs(scene);
+    std::vector<MemoryPart> parts = {camera_film_memory(W, H), output_memory(opts, W, H)};
+    // Each map's photons stay for the camera passes; the one being built
+    // has its tree's copy besides (the largest is the worst case).
+    const double per = double(PhotonMap::bytes_per_photon());
+    double largest = 0;
+    std::string largest_param;
+    auto map = [&](bool needed, const char* name, const char* param, int count) {
+        if (!needed) return;
+        parts.push_back(
+            {std::string(name) + " photon map (" + std::to_string(count) + " photons)", per * count, param});
+        if (count > largest) {
+            largest = count;
+            largest_param = param;
+        }
+    };
+    map(need.caustic, "caustic", "caustic_photons", caustic_photons_);
+    map(need.global, "global", "global_photons", global_photons_);
+    map(need.volume, "volume", "volume_photons", volume_photons_);
+    if (largest > 0)
+        parts.push_back(
+            {"building the largest map's tree", photon_map_build_bytes(largest) - per * largest, largest_param});
+    check_memory(type, W, H, parts);
+}
+
 bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMapStats>& info,
                                ThreadStats& pstats) const {
     const Scene& scene = loop.scene();
     const RenderOptions& opts = loop.options();
     int threads = loop.threads();
     const SceneFeatures& f = scene.features;
-    bool lights = !scene.emitters.empty();
-    bool long_paths = max_depth_ < 0 || max_depth_ >= 3;  // L S D E and L D D E have 3 segments
-    bool specular_chain = f.has_delta_bsdf && mask[kSpecular];
-    bool need_caustic = lights && long_paths && caustic_photons_ > 0 && f.has_smooth_bsdf && f.has_delta_bsdf &&
-                        (mask[kCaustic] || specular_chain);
-    bool need_global =
-        lights && long_paths && global_photons_ > 0 && f.has_smooth_bsdf && (mask[kIndirect] || specular_chain);
+    const MapNeeds need = needs(scene);
     Vec3 center;
     float radius;
     scene.bounding_sphere(center, radius);
@@ -805,6 +830,8 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
         s.paths = pass.paths;
         s.trace_seconds = pass.seconds;
         s.target_reached = pass.target_reached;
+        s.target = target;
+        s.max_paths = pass.max_paths;
         auto tb = Clock::now();
         make(std::move(pass.photons));
         s.build_seconds = since(tb);
@@ -825,14 +852,14 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
         spec.stream = stream;
         return spec;
     };
-    if (need_caustic) {
+    if (need.caustic) {
         PhotonTraceSpec spec = spec_for(1, 1);
         spec.caustic_only = true;
         if (!build("caustic", spec, uint64_t(caustic_photons_), maps.caustic)) return false;
         maps.has_caustic = true;
         maps.r2_caustic = sqr(caustic_radius_ * radius);
     }
-    if (need_global) {
+    if (need.global) {
         PhotonTraceSpec spec = spec_for(2, final_gather_ ? 2 : 1);
         spec.indirect_only = !final_gather_;
         if (!build("global", spec, uint64_t(global_photons_), maps.global)) return false;
@@ -844,12 +871,7 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
     // light segment, one more vertex and the camera segment.
     maps.center = center;
     maps.radius = radius;
-    // Purely absorbing media (homogeneous with sigma_s = 0) never store one.
-    bool scattering_media = false;
-    for (const auto& med : scene.media) scattering_media |= !med->homogeneous || !is_black(med->sigma_s);
-    bool need_volume = lights && f.has_media && scattering_media && volume_photons_ > 0 && long_paths &&
-                       (mask[kVolume] || mask[kSubsurface]);
-    if (need_volume) {
+    if (need.volume) {
         PhotonTraceSpec spec = spec_for(3, 1);
         spec.volume = true;
         // One tree per medium (the photons are in path order, so each
@@ -872,12 +894,8 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
     // path of the medium's densest channel (its majorant in a grid), at
     // most 1/16 of the scene's radius. The step moves the variance and the
     // time, not the expectation (jittered steps, exact or ratio-tracked
-    // transmittance). Measured on translucent_slab (32 x 32, 8 spp, 320 000
-    // photons; the slab's mean free path is 0.05): steps 0.005 / 0.025 /
-    // 0.05 / 0.2 took 4.7 / 1.3 / 0.4 / 0.1 s of camera pass for a per-pixel
-    // relative deviation of 9.2 / 9.5 / 10.7 / 29 %; one mean free path is
-    // the most efficient of these (1 / (variance x time) 3 times half a
-    // mean free path's, 6 times a tenth's; timings on 2 shared cores, +-50 %).
+    // transmittance); one mean free path was the most efficient step measured
+    // (docs/measurements.md).
     if (f.has_media) {
         maps.step.resize(scene.media.size());
         for (size_t m = 0; m < scene.media.size(); ++m) {

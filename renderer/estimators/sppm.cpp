@@ -39,6 +39,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "render/memory.h"
 #include "render/pass_loop.h"
 #include "render/registry.h"
 #include "transport/camera_sample.h"
@@ -125,41 +126,24 @@ private:
     // along the way go to `out`.
     void camera_path(const Scene& scene, Sampler& sampler, Ray ray, EffectRadiance& out, VisiblePoint& vp,
                      ThreadStats& stats) const {
-        Color beta(1.f);
-        PathClass pc;
-        BsdfContext ctx;
-        for (int depth = 0;; ++depth) {
-            Interaction it;
-            int cls = pc.classify();
-            if (!trace_counting_emission(scene, ray, it, beta, cls, !(depth == 0 && hide_) && mask[cls], out, stats))
-                return;
-            const Shape& shape = *scene.shapes[it.shape];
-            if (max_depth_ >= 0 && depth + 1 >= max_depth_) return;
-            const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
-            Vec3 wi = it.to_local(it.wi);
-            bool via_specular = pc.scatter_vertices > 0;
-            if (bsdf.has_smooth()) {
-                // Direct light by one light sample (no MIS partner: bsdf_frac 0).
-                int cls_d = via_specular ? kSpecular : kDirect;
-                if (mask[cls_d] && !scene.emitters.empty())
-                    out.add(cls_d, beta * estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f));
-                vp.it = it;
-                vp.bsdf = &bsdf;
-                vp.wi = wi;
-                vp.beta = beta;
-                vp.via_specular = via_specular;
-                vp.c = depth + 1;
-                return;
-            }
-            BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
-            if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) return;
-            beta *= bs.weight;
-            if (bsdf.flags() != kNull) pc.push(true);
-            ray = it.spawn(it.to_world(bs.wo));
-            if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta), sampler.next_1d(),
-                                   beta))
-                return;
-        }
+        walk_specular_chain(scene, sampler, ray, SpecularChain{max_depth_, rr_depth_, hide_}, mask, out, stats,
+                            [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta,
+                                const PathClass& pc, int depth) {
+                                if (!bsdf.has_smooth()) return true;
+                                bool via_specular = pc.scatter_vertices > 0;
+                                // Direct light by one light sample (no MIS partner: bsdf_frac 0).
+                                int cls_d = via_specular ? kSpecular : kDirect;
+                                if (mask[cls_d] && !scene.emitters.empty())
+                                    out.add(cls_d,
+                                            beta * estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f));
+                                vp.it = it;
+                                vp.bsdf = &bsdf;
+                                vp.wi = wi;
+                                vp.beta = beta;
+                                vp.via_specular = via_specular;
+                                vp.c = depth + 1;
+                                return false;
+                            });
     }
 
     int max_depth_, rr_depth_;
@@ -193,6 +177,9 @@ public:
         spec_.stream = 3;
         pms_.name = "sppm";
         pms_.bytes_per_photon = double(PhotonMap::bytes_per_photon());
+        // What the memory left beside the per-pixel buffers holds (memory.h).
+        const double left = memory_limit_bytes() - double(pixels) * (sizeof(PixelStats) + sizeof(VisiblePoint));
+        if (memory_limit_bytes() > 0) max_photons_ = left > 0 ? uint64_t(left / photon_map_build_bytes(1.0)) : 0;
     }
 
     int pass(PassLoop& loop, int s0, int s1) override {
@@ -287,7 +274,14 @@ private:
     // Step 2: pass s's photon paths into `map`; false when cancelled.
     bool photon_pass(PassLoop& loop, int s, PhotonMap& map) {
         PhotonPass pp = trace_photon_paths(scene_, spec_, loop.seed(), uint64_t(s), uint64_t(sppm_.photon_count_),
-                                           loop.threads(), loop.poll_once(), pstats_);
+                                           loop.threads(), loop.poll_once(), pstats_, max_photons_);
+        if (pp.over_memory)
+            throw std::invalid_argument("render: integrator 'sppm': a pass's " + std::to_string(sppm_.photon_count_) +
+                                        " photon paths stored more than " + std::to_string(max_photons_) +
+                                        " photons (" + format_bytes(photon_map_build_bytes(double(pp.photons.size()))) +
+                                        " with their tree), more than " + "this machine's " +
+                                        format_bytes(memory_limit_bytes()) +
+                                        " of memory holds beside the film; lower " + "photon_count");
         if (pp.cancelled) return false;
         pms_.photons += pp.photons.size();
         pms_.paths += pp.paths;
@@ -352,10 +346,23 @@ private:
     bool photons_needed_ = false;
     PhotonTraceSpec spec_;
     PhotonMapStats pms_;
-    ThreadStats pstats_;  // photon tracing's counters
+    ThreadStats pstats_;                 // photon tracing's counters
+    uint64_t max_photons_ = UINT64_MAX;  // a pass's photons beyond this do not fit in memory
 };
 
 RenderOutput Sppm::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
+    // Said up front (memory.h): the per-pixel visible points and statistics,
+    // the output, and a pass's photon map (the photons a path stores are
+    // known only once traced; counted here as one per path, and
+    // trace_photon_paths refuses a pass whose photons outgrow the memory).
+    const int W = scene.sensor->width, H = scene.sensor->height;
+    const double pixels = double(W) * double(H);
+    check_memory(type, W, H,
+                 {{"visible points", pixels * sizeof(VisiblePoint), "the resolution (film width, height)"},
+                  {"pixel statistics", pixels * sizeof(PixelStats), "the resolution (film width, height)"},
+                  output_memory(opts, W, H),
+                  {"a pass's photon map (" + std::to_string(photon_count_) + " paths, one photon each)",
+                   photon_map_build_bytes(double(photon_count_)), "photon_count"}});
     PassLoop loop(scene, opts, poll);
     Passes passes(*this, scene);
     return loop.run(passes);

@@ -57,6 +57,7 @@
 
 #include "estimators/vcm_internal.h"
 #include "photon/photon_map.h"
+#include "render/memory.h"
 #include "render/pass_loop.h"
 #include "render/registry.h"
 #include "transport/camera_sample.h"
@@ -513,8 +514,12 @@ public:
         sum_.assign(px * kNumEffects * 3, 0.0);
         tot_.assign(px * 3, 0.0);
         tot_sq_.assign(px * 3, 0.0);
-        norm_x_ = splat_norms(filter_, W_);
-        norm_y_ = splat_norms(filter_, H_);
+        // Light tracing's splats: the crop window's (by default the film's),
+        // as the light driver's (camera samples stay inside it: camera_sample.cpp).
+        const Sensor& sn = *scene.sensor;
+        cx0_ = sn.crop_x, cx1_ = sn.crop_x + sn.crop_w, cy0_ = sn.crop_y, cy1_ = sn.crop_y + sn.crop_h;
+        norm_x_ = splat_norms(filter_, W_, cx0_, cx1_);
+        norm_y_ = splat_norms(filter_, H_, cy0_, cy1_);
         n_tech_ = num_techniques(v.tech_depth_);
         tech_iter_.assign(px * size_t(n_tech_) * 6, 0.0);
         tech_sum_.assign(px * size_t(n_tech_) * 6, 0.0);
@@ -707,6 +712,8 @@ private:
 
     // A light-tracing splat over the pixels whose filter covers it (film.h).
     void splat(const LtSplat& sp, double scale) {
+        if (sp.film.x < float(cx0_) || sp.film.x > float(cx1_) || sp.film.y < float(cy0_) || sp.film.y > float(cy1_))
+            return;
         for_each_splat_pixel(filter_, norm_x_, norm_y_, W_, 0, H_, sp.film.x, sp.film.y, [&](size_t p, double wgt) {
             double* e = &iter_[(p * kNumEffects + sp.effect) * 3];
             for (int c = 0; c < 3; ++c) e[c] += wgt * scale * double(sp.value[c]);
@@ -876,6 +883,7 @@ private:
     const Scene& scene_;
     FilterSampler filter_;
     int W_, H_;
+    int cx0_ = 0, cx1_ = 0, cy0_ = 0, cy1_ = 0;  // the crop window
     std::vector<double> norm_x_, norm_y_;
     std::vector<double> iter_, sum_, tot_, tot_sq_;
     int n_tech_ = 0;
@@ -893,6 +901,25 @@ private:
 };
 
 RenderOutput VcmIntegrator::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
+    // What an iteration holds (memory.h): the per-pixel sums, the light
+    // vertices (each path's items and their concatenation; 5 vertices per
+    // path, the Cornell box's 4 to 5 measured) and the merge structure.
+    const int W = scene.sensor->width, H = scene.sensor->height;
+    const double px = double(W) * double(H), nl = double(n_light(scene));
+    const double vertex = double(sizeof(PathVertex) + sizeof(VcmMis));
+    const int techs = num_techniques(tech_depth_);
+    const std::string paths = "light_paths";
+    check_memory(
+        type, W, H,
+        {{"per-pixel sums", px * 8.0 * (2.0 * kNumEffects * 3 + 6 + 12.0 * techs),
+          techs > 0 ? "the resolution (film width, height) or strategy_images" : "the resolution (film width, height)"},
+         {"light vertices (" + std::to_string(int64_t(nl)) + " light paths per iteration)", 2.0 * 5.0 * nl * vertex,
+          paths},
+         {"merge search",
+          vm_ ? (range_ == RangeSearch::KdTree ? photon_map_build_bytes(4.0 * nl) : 4.0 * nl * (12.0 + 8.0 + 8.0))
+              : 0.0,
+          paths},
+         output_memory(opts, W, H)});
     PassLoop loop(scene, opts, poll);
     Passes passes(*this, scene);
     return loop.run(passes);

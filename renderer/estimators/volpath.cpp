@@ -21,8 +21,8 @@
 //    formulation of light transport", sec. 5.2; pbrt-v4's
 //    VolPathIntegrator, PBR4 sec. 14.2.2). Its weight is at most 3 times the
 //    hero's, however long the walk; a per-event average instead multiplies
-//    bounded factors into an exponentially growing weight (measured: mean z
-//    -13 on translucent_slab at 512 spp, fireflies beside the shadow edge).
+//    bounded factors into an exponentially growing weight
+//    (docs/measurements.md).
 //    Heterogeneous (grid) media: delta tracking with null collisions against
 //    a majorant, the same per-channel bookkeeping (see free_flight_tracking).
 // 3. Next event estimation from every scattering vertex (surface or medium)

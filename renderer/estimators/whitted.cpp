@@ -26,43 +26,25 @@ public:
 
     void sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
                 ThreadStats& stats) const override {
-        Ray ray = camera_ray;
-        Color beta(1.f);
-        PathClass pc;
-        BsdfContext ctx;
-        for (int depth = 0;; ++depth) {
-            // 1. Find the next vertex, with the emission it shows: seen
-            //    directly or through delta lobes only (no other technique
-            //    reaches emitters from there, so no MIS weight).
-            Interaction it;
-            int cls = pc.classify();
-            bool count = !(depth == 0 && hide_) && mask[cls];
-            if (!trace_counting_emission(scene, ray, it, beta, cls, count, out, stats)) break;
-
-            // 2. Stop after max_depth segments, or when no requested class is reachable.
-            if (depth + 1 >= max_depth_ || !pc.can_reach(mask)) break;
-            const Bsdf& bsdf = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
-            Vec3 wi = it.to_local(it.wi);
-
-            // 3. A smooth lobe: direct light by light sampling alone (bsdf
-            //    fraction 0: the power heuristic's weight is then 1).
-            if (bsdf.has_smooth()) {
-                PathClass pn = pc;
-                pn.push(false);
-                if (mask[pn.classify()])
-                    out.add(pn.classify(), beta * estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f));
-                else  // keep the random stream aligned whatever the mask is (a light sample draws 4)
-                    sampler.next_1d(), sampler.next_2d(), sampler.next_1d();
-            }
-
-            // 4. Follow a delta lobe (reflection or refraction, chosen as the
-            //    BSDF samples it); a smooth sample ends the path.
-            BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
-            if (!bs.is_delta || !(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
-            beta *= bs.weight;
-            if (bsdf.flags() != kNull) pc.push(true);
-            ray = it.spawn(it.to_world(bs.wo));
-        }
+        // Emission is counted along the chain without an MIS weight: seen
+        // directly or through delta lobes only, no other technique reaches
+        // emitters from there. A sampled smooth lobe ends the path.
+        walk_specular_chain(
+            scene, sampler, camera_ray, SpecularChain{max_depth_, -1, hide_}, mask, out, stats,
+            [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta, const PathClass& pc, int) {
+                if (!pc.can_reach(mask)) return false;
+                // A smooth lobe: direct light by light sampling alone
+                // (bsdf fraction 0: the power heuristic's weight is then 1).
+                if (bsdf.has_smooth()) {
+                    PathClass pn = pc;
+                    pn.push(false);
+                    if (mask[pn.classify()])
+                        out.add(pn.classify(), beta * estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f));
+                    else  // keep the random stream aligned whatever the mask is (a light sample draws 4)
+                        sampler.next_1d(), sampler.next_2d(), sampler.next_1d();
+                }
+                return true;
+            });
     }
 
 private:

@@ -88,11 +88,12 @@ double FilterSampler::integral(float lo, float hi) const {
     return std::max(0.0, cdf_at(double(hi)) - cdf_at(double(lo)));
 }
 
-Film::Film(int width, int height) : w_(width), h_(height) {
+Film::Film(int width, int height, bool effect_squares) : w_(width), h_(height) {
     size_t n = size_t(width) * size_t(height);
     sum_.assign(3 * n, 0.0);
     sum_sq_.assign(3 * n, 0.0);
     effects_.assign(3 * n * kNumEffects, 0.0);
+    if (effect_squares) effects_sq_.assign(3 * n * kNumEffects, 0.0);
 }
 
 void Film::add(int pixel, const EffectRadiance& v) {
@@ -106,6 +107,11 @@ void Film::add(int pixel, const EffectRadiance& v) {
     double* e = &effects_[3 * kNumEffects * size_t(pixel)];
     for (int k = 0; k < kNumEffects; ++k)
         for (int c = 0; c < 3; ++c) e[3 * k + c] += v.by_effect[k][c];
+    if (!effects_sq_.empty()) {
+        double* eq = &effects_sq_[3 * kNumEffects * size_t(pixel)];
+        for (int k = 0; k < kNumEffects; ++k)
+            for (int c = 0; c < 3; ++c) eq[3 * k + c] += double(v.by_effect[k][c]) * double(v.by_effect[k][c]);
+    }
 }
 
 void Film::merge_and_clear(Film& pass) {
@@ -114,9 +120,21 @@ void Film::merge_and_clear(Film& pass) {
         sum_sq_[i] += pass.sum_sq_[i];
     }
     for (size_t i = 0; i < effects_.size(); ++i) effects_[i] += pass.effects_[i];
+    for (size_t i = 0; i < effects_sq_.size() && i < pass.effects_sq_.size(); ++i)
+        effects_sq_[i] += pass.effects_sq_[i];
     std::fill(pass.sum_.begin(), pass.sum_.end(), 0.0);
     std::fill(pass.sum_sq_.begin(), pass.sum_sq_.end(), 0.0);
     std::fill(pass.effects_.begin(), pass.effects_.end(), 0.0);
+    std::fill(pass.effects_sq_.begin(), pass.effects_sq_.end(), 0.0);
+}
+
+// Unbiased sample variance divided by n: the variance of the mean. One
+// sample says nothing about its variance: NaN, never a fake 0.
+static float mean_variance(double sum, double sum_sq, int spp, double inv) {
+    if (spp <= 1) return std::numeric_limits<float>::quiet_NaN();
+    double mean = sum * inv;
+    double var = std::max(0.0, (sum_sq - spp * mean * mean) / (spp - 1.0));
+    return float(var * inv);
 }
 
 void Film::develop(int spp, std::vector<float>& image, std::vector<float>& variance,
@@ -128,22 +146,28 @@ void Film::develop(int spp, std::vector<float>& image, std::vector<float>& varia
     if (spp <= 0) return;
     double inv = 1.0 / spp;
     for (size_t i = 0; i < 3 * n; ++i) {
-        double mean = sum_[i] * inv;
-        image[i] = float(mean);
-        // Unbiased sample variance divided by n: the variance of the mean.
-        // One sample says nothing about its variance: NaN, never a fake 0.
-        if (spp > 1) {
-            double var = std::max(0.0, (sum_sq_[i] - spp * mean * mean) / (spp - 1.0));
-            variance[i] = float(var * inv);
-        } else {
-            variance[i] = std::numeric_limits<float>::quiet_NaN();
-        }
+        image[i] = float(sum_[i] * inv);
+        variance[i] = mean_variance(sum_[i], sum_sq_[i], spp, inv);
     }
     if (effects)
         for (size_t p = 0; p < n; ++p)
             for (int k = 0; k < kNumEffects; ++k)
                 for (int c = 0; c < 3; ++c)
                     (*effects)[k][3 * p + c] = float(effects_[3 * kNumEffects * p + 3 * k + c] * inv);
+}
+
+void Film::develop_effect_variance(int spp, std::vector<std::vector<float>>& variance) const {
+    variance.clear();
+    if (effects_sq_.empty() || spp <= 0) return;
+    size_t n = size_t(w_) * size_t(h_);
+    variance.assign(kNumEffects, std::vector<float>(3 * n, 0.f));
+    double inv = 1.0 / spp;
+    for (size_t p = 0; p < n; ++p)
+        for (int k = 0; k < kNumEffects; ++k)
+            for (int c = 0; c < 3; ++c) {
+                size_t i = 3 * kNumEffects * p + 3 * k + c;
+                variance[k][3 * p + c] = mean_variance(effects_[i], effects_sq_[i], spp, inv);
+            }
 }
 
 }  // namespace rm

@@ -60,9 +60,11 @@ private:
 // borders included. for_each_splat_pixel calls fn(pixel, weight) for the
 // pixels of rows [y0, y1) of a w-wide film. Shared by the light driver
 // (light_render.cpp) and vcm's light tracing.
-inline std::vector<double> splat_norms(const FilterSampler& filter, int n) {
+// splat_norms: N per column (or row) i of n, the film's sensitive part
+// spanning [lo, hi] (the whole film: 0, n; a crop window: its bounds).
+inline std::vector<double> splat_norms(const FilterSampler& filter, int n, int lo, int hi) {
     std::vector<double> norm(static_cast<size_t>(n));
-    for (int i = 0; i < n; ++i) norm[size_t(i)] = filter.integral(-float(i) - 0.5f, float(n - i) - 0.5f);
+    for (int i = 0; i < n; ++i) norm[size_t(i)] = filter.integral(float(lo - i) - 0.5f, float(hi - i) - 0.5f);
     return norm;
 }
 template <class Fn>
@@ -85,7 +87,9 @@ void for_each_splat_pixel(const FilterSampler& filter, const std::vector<double>
 
 class Film {
 public:
-    Film(int width, int height);
+    // effect_squares: also sum each effect's squares, for per-effect
+    // variances (develop_effect_variance); 21 more doubles per pixel.
+    Film(int width, int height, bool effect_squares = false);
     int width() const { return w_; }
     int height() const { return h_; }
     void add(int pixel, const EffectRadiance& v);
@@ -94,10 +98,13 @@ public:
     // Mean, variance of the mean (per channel), and effect means after `spp` samples per pixel.
     void develop(int spp, std::vector<float>& image, std::vector<float>& variance,
                  std::vector<std::vector<float>>* effects) const;
+    // Variance of each effect's mean (kNumEffects images), as develop's
+    // variance of the total; empty when the film keeps no effect squares.
+    void develop_effect_variance(int spp, std::vector<std::vector<float>>& variance) const;
 
 private:
     int w_, h_;
-    std::vector<double> sum_, sum_sq_, effects_;
+    std::vector<double> sum_, sum_sq_, effects_, effects_sq_;
 };
 
 }  // namespace rm

@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "render/memory.h"
 #include "render/pass_loop.h"
 #include "transport/camera_sample.h"
 
@@ -18,16 +19,20 @@ constexpr int kTile = 16;
 
 class CameraStep final : public PassStep {
 public:
-    CameraStep(const Scene& scene, const Integrator& integrator)
+    CameraStep(const Scene& scene, const Integrator& integrator, bool effect_variance)
         : scene_(scene),
           integrator_(integrator),
           W_(scene.sensor->width),
           H_(scene.sensor->height),
           filter_(scene.sensor_desc.rfilter, scene.sensor_desc.filter_radius, scene.sensor_desc.filter_stddev),
-          film_(W_, H_),
-          pass_film_(W_, H_),
-          tiles_x_((W_ + kTile - 1) / kTile),
-          tiles_y_((H_ + kTile - 1) / kTile) {}
+          cx_(scene.sensor->crop_x),
+          cy_(scene.sensor->crop_y),
+          cw_(scene.sensor->crop_w),
+          ch_(scene.sensor->crop_h),
+          film_(W_, H_, effect_variance),
+          pass_film_(W_, H_, effect_variance),
+          tiles_x_((cw_ + kTile - 1) / kTile),
+          tiles_y_((ch_ + kTile - 1) / kTile) {}
 
     int pass(PassLoop& loop, int s0, int s1) override {
         // 1. Tiles over threads, into the film of the pass in flight.
@@ -43,10 +48,16 @@ public:
         film_.develop(spp, image, variance, effects);
     }
 
+    void develop_effect_variance(int spp, std::vector<std::vector<float>>& variance) const override {
+        film_.develop_effect_variance(spp, variance);
+    }
+
 private:
     void render_tile(PassLoop& loop, int tile, int s0, int s1, ThreadStats& stats) {
-        int x0 = (tile % tiles_x_) * kTile, y0 = (tile / tiles_x_) * kTile;
-        int x1 = std::min(x0 + kTile, W_), y1 = std::min(y0 + kTile, H_);
+        // Tiles cover the crop window (by default the film); a pixel keeps
+        // its film index, and with it its random streams.
+        int x0 = cx_ + (tile % tiles_x_) * kTile, y0 = cy_ + (tile / tiles_x_) * kTile;
+        int x1 = std::min(x0 + kTile, cx_ + cw_), y1 = std::min(y0 + kTile, cy_ + ch_);
         for (int y = y0; y < y1; ++y)
             for (int x = x0; x < x1; ++x) {
                 if (loop.cancelled()) return;
@@ -75,6 +86,7 @@ private:
     const Scene& scene_;
     const Integrator& integrator_;
     const int W_, H_;
+    const int cx_, cy_, cw_, ch_;  // the crop window
     FilterSampler filter_;
     Film film_;       // finished passes
     Film pass_film_;  // the pass in flight; merged only when complete
@@ -86,14 +98,11 @@ private:
 RenderOutput render_camera_paths(PassLoop& loop, const Integrator& integrator) {
     const Scene& scene = loop.scene();
     int W = scene.sensor->width, H = scene.sensor->height;
-    // Two films of 27 doubles per pixel (estimate, squares, 7 effects): say
-    // so up front rather than fail inside an allocation.
-    double film_bytes = 2.0 * double(W) * double(H) * (3 + 3 + 3 * kNumEffects) * sizeof(double);
-    if (film_bytes > 16.0 * (1ull << 30))
-        throw std::invalid_argument("render: a " + std::to_string(W) + "x" + std::to_string(H) + " film needs " +
-                                    std::to_string(int(film_bytes / (1ull << 30))) +
-                                    " GiB of accumulation buffers (limit 16 GiB); lower the resolution");
-    CameraStep step(scene, integrator);
+    // Said up front rather than failing inside an allocation (memory.h).
+    const bool effvar = loop.options().effect_variance;
+    check_memory(integrator.type, W, H, {camera_film_memory(W, H, effvar), output_memory(loop.options(), W, H)});
+    CameraStep step(scene, integrator, effvar);
+    loop.set_pixels(uint64_t(scene.sensor->crop_w) * uint64_t(scene.sensor->crop_h));  // the window's, for progress
     return loop.run(step);
 }
 

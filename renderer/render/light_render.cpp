@@ -36,6 +36,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "render/memory.h"
 #include "render/pass_loop.h"
 
 namespace rm {
@@ -74,14 +75,24 @@ struct ItemSplat {
 
 class SplatFilm {
 public:
-    SplatFilm(int w, int h, const FilterSampler& f, int n_strategies)
-        : w_(w), h_(h), n_strat_(n_strategies), filter_(f) {
+    // The crop window (sensor.h) bounds the film positions splatted, as it
+    // bounds the camera side's samples (camera_sample.cpp).
+    SplatFilm(const Sensor& s, const FilterSampler& f, int n_strategies)
+        : w_(s.width),
+          h_(s.height),
+          n_strat_(n_strategies),
+          filter_(f),
+          cx0_(s.crop_x),
+          cy0_(s.crop_y),
+          cx1_(s.crop_x + s.crop_w),
+          cy1_(s.crop_y + s.crop_h) {
+        const int w = w_, h = h_;
         size_t n = size_t(w) * size_t(h);
         effects_.assign(n * kNumEffects * 3, 0.0);
         strat_.assign(n * size_t(n_strat_) * 6, 0.0);
         batches_.assign(n * kBatches * 3, 0.0);
-        norm_x_ = splat_norms(filter_, w);
-        norm_y_ = splat_norms(filter_, h);
+        norm_x_ = splat_norms(filter_, w, cx0_, cx1_);
+        norm_y_ = splat_norms(filter_, h, cy0_, cy1_);
     }
 
     // Adds the items' splats, in item order, to the rows [y0, y1).
@@ -101,17 +112,18 @@ public:
                     add_strategy(p, is.s, 1.0);
                     continue;
                 }
-                for_each_splat_pixel(filter_, norm_x_, norm_y_, w_, y0, y1, is.s.film.x, is.s.film.y,
-                                     [&](size_t p, double wgt) {
-                                         double* e = &effects_[(p * kNumEffects + is.s.effect) * 3];
-                                         double* b = &batches_[(p * kBatches + is.batch) * 3];
-                                         for (int c = 0; c < 3; ++c) {
-                                             double v = wgt * double(is.s.value[c]);
-                                             e[c] += v;
-                                             b[c] += v;
-                                         }
-                                         add_strategy(p, is.s, wgt);
-                                     });
+                float x = is.s.film.x, y = is.s.film.y;
+                if (x < float(cx0_) || x > float(cx1_) || y < float(cy0_) || y > float(cy1_)) continue;
+                for_each_splat_pixel(filter_, norm_x_, norm_y_, w_, y0, y1, x, y, [&](size_t p, double wgt) {
+                    double* e = &effects_[(p * kNumEffects + is.s.effect) * 3];
+                    double* b = &batches_[(p * kBatches + is.batch) * 3];
+                    for (int c = 0; c < 3; ++c) {
+                        double v = wgt * double(is.s.value[c]);
+                        e[c] += v;
+                        b[c] += v;
+                    }
+                    add_strategy(p, is.s, wgt);
+                });
             }
     }
 
@@ -182,6 +194,7 @@ public:
 private:
     int w_, h_, n_strat_;
     const FilterSampler& filter_;
+    int cx0_, cy0_, cx1_, cy1_;    // the crop window
     std::vector<double> strat_;    // [pixel][strategy][weighted rgb, unweighted rgb] sums
     std::vector<double> effects_;  // [pixel][effect][channel] sums
     std::vector<double> batches_;  // [pixel][batch][channel] sums
@@ -197,7 +210,7 @@ public:
           integrator_(integrator),
           pixels_(uint64_t(scene.sensor->width) * uint64_t(scene.sensor->height)),
           n_strat_(n_strat),
-          film_(scene.sensor->width, scene.sensor->height, filter, n_strat),
+          film_(*scene.sensor, filter, n_strat),
           stripes_(std::min(scene.sensor->height, threads * 4)),
           items_(kChunkItems) {}
 
@@ -273,12 +286,15 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
     int W = scene.sensor->width, H = scene.sensor->height;
     FilterSampler filter(sd.rfilter, sd.filter_radius, sd.filter_stddev);
     const int n_strat = integrator.strategy_depth() > 0 ? num_strategies(integrator.strategy_depth()) : 0;
-    double film_bytes = double(W) * double(H) * 3.0 * (kNumEffects + kBatches + 2 * n_strat) * sizeof(double);
-    if (film_bytes > 16.0 * (1ull << 30))
-        throw std::invalid_argument(
-            "render: a " + std::to_string(W) + "x" + std::to_string(H) + " film needs " +
-            std::to_string(int(film_bytes / (1ull << 30))) +
-            " GiB of light-tracing buffers (limit 16 GiB); lower the resolution or strategy_images");
+    // The splat film's sums (effects, batches) and the strategy images'
+    // sums and outputs, said up front (memory.h).
+    const double pixels = double(W) * double(H);
+    std::vector<MemoryPart> parts = {
+        {"light-tracing films", pixels * 3.0 * (kNumEffects + kBatches) * sizeof(double),
+         "the resolution (film width, height)"},
+        {"strategy images", pixels * 3.0 * 2.0 * n_strat * (sizeof(double) + sizeof(float)), "strategy_images"},
+        output_memory(opts, W, H)};
+    check_memory(integrator.type, W, H, parts);
     PassLoop loop(scene, opts, poll);
     LightStep step(scene, integrator, filter, n_strat, loop.threads());
     return loop.run(step);

@@ -5,6 +5,8 @@
 #include <limits>
 #include <thread>
 
+#include "scene/sensor.h"
+
 namespace rm {
 
 namespace {
@@ -63,6 +65,35 @@ PassLoop::PassLoop(const Scene& scene, const RenderOptions& opts, const PollFn& 
 
 double PassLoop::elapsed() const { return since(t0_); }
 
+void PassLoop::set_pixels(uint64_t pixels) { total_ = opts_.seconds > 0 ? 0 : pixels * uint64_t(opts_.spp); }
+
+namespace {
+
+// The crop window's part of a film-sized image of `ch` channels.
+void crop_image(const Sensor& s, int ch, std::vector<float>& img) {
+    if (img.empty() || (s.crop_w == s.width && s.crop_h == s.height)) return;
+    std::vector<float> out(size_t(s.crop_w) * size_t(s.crop_h) * size_t(ch));
+    for (int y = 0; y < s.crop_h; ++y)
+        std::copy_n(&img[(size_t(s.crop_y + y) * size_t(s.width) + size_t(s.crop_x)) * size_t(ch)],
+                    size_t(s.crop_w) * size_t(ch), &out[size_t(y) * size_t(s.crop_w) * size_t(ch)]);
+    img.swap(out);
+}
+
+void crop_output(const Sensor& s, RenderOutput& out) {
+    out.width = s.crop_w;
+    out.height = s.crop_h;
+    crop_image(s, 3, out.image);
+    crop_image(s, 3, out.variance);
+    for (auto* v : {&out.effects, &out.strategies, &out.strategies_unweighted, &out.merges, &out.merges_unweighted})
+        for (auto& img : *v) crop_image(s, 3, img);
+    for (Checkpoint& cp : out.checkpoints) {
+        crop_image(s, 3, cp.image);
+        crop_image(s, 3, cp.variance);
+    }
+}
+
+}  // namespace
+
 RenderOutput PassLoop::cancelled_output() const {
     RenderOutput out;
     out.width = scene_.sensor->width;
@@ -74,6 +105,7 @@ RenderOutput PassLoop::cancelled_output() const {
     out.cancelled = true;
     out.threads = threads_;
     out.seconds = elapsed();
+    crop_output(*scene_.sensor, out);
     return out;
 }
 
@@ -122,7 +154,9 @@ RenderOutput PassLoop::run(PassStep& step) {
     out.seconds = elapsed();
     for (const PaddedStats& t : stats_) out.stats.merge(t.s);
     step.develop(spp, out.image, out.variance, &out.effects);
+    if (opts_.effect_variance) step.develop_effect_variance(spp, out.effect_variance);
     step.finish(out);
+    crop_output(*scene_.sensor, out);
     return out;
 }
 

@@ -51,6 +51,10 @@ public:
     // estimate, effect images when `effects` is given.
     virtual void develop(int spp, std::vector<float>& image, std::vector<float>& variance,
                          std::vector<std::vector<float>>* effects) const = 0;
+    // The variance of each effect's estimate after `spp` samples per pixel,
+    // for a step whose film keeps it (RenderOptions::effect_variance); the
+    // default leaves `variance` empty: not known.
+    virtual void develop_effect_variance(int spp, std::vector<std::vector<float>>& variance) const { variance.clear(); }
     // Adds what the step alone knows to the final output (photon maps,
     // per-strategy images, stats of its own).
     virtual void finish(RenderOutput& out) const {}
@@ -68,8 +72,12 @@ public:
     int threads() const { return threads_; }
     double elapsed() const;
 
-    // Runs the passes that the budget allows and develops the estimate.
+    // Runs the passes that the budget allows and develops the estimate,
+    // returned for the sensor's crop window (by default the film).
     RenderOutput run(PassStep& step);
+    // The pixels whose samples a step counts with add_done (default: the
+    // film's), for the progress total.
+    void set_pixels(uint64_t pixels);
     // The output of a render cancelled during its setup: zero image, NaN
     // variance, no samples.
     RenderOutput cancelled_output() const;

@@ -22,6 +22,7 @@ struct RenderOptions {
     uint64_t seed = 0;
     int threads = 0;               // 0 = all hardware threads
     std::vector<int> checkpoints;  // spp counts at which to keep a snapshot
+    bool effect_variance = false;  // also the variance of each effect's estimate (camera driver)
 };
 
 struct Checkpoint {
@@ -38,6 +39,8 @@ struct PhotonMapStats {
     double bytes_per_photon = 0;  // memory of the map per photon
     double trace_seconds = 0, build_seconds = 0;
     bool target_reached = true;  // false: tracing gave up before storing the requested count
+    uint64_t target = 0;         // photons requested (photonmapper's maps; 0 for sppm's)
+    uint64_t max_paths = 0;      // the give-up bound on paths (photon_trace.h; 0 for sppm's)
 };
 
 struct RenderOutput {
@@ -46,6 +49,9 @@ struct RenderOutput {
     bool cancelled = false;
     std::vector<float> image, variance;
     std::vector<std::vector<float>> effects;  // kNumEffects images
+    // Variance of each effect's estimate (kNumEffects images) when asked for
+    // and the driver keeps it; empty otherwise.
+    std::vector<std::vector<float>> effect_variance;
     // Per strategy (strategy_index order, integrator.h), when asked for: the
     // MIS-weighted contributions (they sum to the image over all strategies)
     // and the unweighted ones (each alone an estimate of its depth's light).

@@ -40,6 +40,11 @@ struct EmitterDesc {
     Matrix4 to_world = identity4();  // point/spot: position + frame (spot looks along +z)
     float cutoff_angle = 20.f;       // spot, degrees
     float beam_width = -1.f;         // spot, degrees; < 0: 3/4 of cutoff_angle (Mitsuba default)
+    // envmap: a latitude-longitude image, env_height rows of env_width RGB
+    // pixels (row 0 looks along local +y), radiance with `scale` applied;
+    // to_world maps its local frame to the world.
+    int env_width = 0, env_height = 0;
+    std::vector<float> env_data;
 };
 
 struct SensorDesc {
@@ -48,6 +53,10 @@ struct SensorDesc {
     float fov_x = 39.3077f;  // horizontal field of view in degrees (fov_axis resolved in Python)
     float near_clip = 1e-2f, far_clip = 1e4f;
     int width = 256, height = 256;
+    // The crop window (Mitsuba's film crop_offset_x/y, crop_width/height):
+    // the pixels rendered and returned; width/height keep the geometry.
+    // crop_width/height 0: the full film.
+    int crop_x = 0, crop_y = 0, crop_width = 0, crop_height = 0;
     std::string rfilter = "gaussian";  // box tent gaussian
     float filter_radius = 2.f;         // box: 0.5, tent: 1, gaussian: 4 * stddev
     float filter_stddev = 0.5f;        // gaussian

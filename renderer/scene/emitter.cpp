@@ -1,6 +1,9 @@
 #include "scene/emitter.h"
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
+#include <vector>
 
 #include "core/warp.h"
 #include "scene/shape.h"
@@ -259,6 +262,7 @@ public:
     float pdf_direct(const Vec3&, const Vec3&, const Vec3&) const override {
         return warp::square_to_uniform_sphere_pdf_w();
     }
+    float pdf_environment(const Vec3&) const override { return warp::square_to_uniform_sphere_pdf_w(); }
     Color eval_environment(const Vec3&) const override { return radiance_; }
     // Direction uniform on the sphere, origin uniform on the disk of the
     // scene's bounding radius perpendicular to it, outside the scene (pbrt-v4
@@ -280,6 +284,180 @@ private:
     Color radiance_;
 };
 
+// Mitsuba 3's envmap: a latitude-longitude image around the scene. The
+// parametrisation is Mitsuba's (src/emitters/envmap.cpp): local direction
+// (sin phi sin theta, cos theta, -cos phi sin theta) with phi = 2 pi u,
+// theta = pi v; the radiance is the bilinear interpolation of a grid whose
+// vertex (i, j) is pixel (i, j) at u = (i + 1/2) / W, v = j / (H - 1),
+// periodic in u (vertex W is vertex 0).
+//
+// Sampling: a piecewise-constant 2D distribution over the grid's cells (pbrt
+// 3rd ed., sec. 13.6.7 and 14.2.4, "Piecewise-Constant 2D Distributions" and
+// the infinite area light; pbrt-v4's PiecewiseConstant2D): cell (i, j)
+// weighs the mean luminance of its corners times its solid angle, the sin
+// theta Jacobian integrated exactly, dphi (cos theta_j - cos theta_j+1). In
+// the cell, phi is uniform and cos theta is uniform, so the solid-angle
+// density is constant there: p(cell) / (dphi dcos). A constant image thus
+// samples the sphere uniformly, as `constant` does.
+constexpr double kPiD = 3.14159265358979323846;
+
+class EnvMapEmitter final : public Emitter {
+public:
+    explicit EnvMapEmitter(const EmitterDesc& d) : w_(d.env_width), h_(d.env_height), data_(d.env_data) {
+        if (w_ < 2 || h_ < 3)
+            throw std::invalid_argument("emitter '" + d.id + "': the environment map must be at least 2x3 pixels");
+        if (data_.size() != size_t(w_) * size_t(h_) * 3)
+            throw std::invalid_argument("emitter '" + d.id + "': environment map data has the wrong size");
+        for (float v : data_)
+            if (!std::isfinite(v) || v < 0.f)
+                throw std::invalid_argument("emitter '" + d.id +
+                                            "': environment map values must be finite and "
+                                            "non-negative");
+        if (!xf_.set(d.to_world.data())) throw std::invalid_argument("emitter '" + d.id + "': singular to_world");
+        environment_ = true;
+        infinite_ = true;
+        // Cell weights, row by row, into the marginal (rows) and conditional (columns) CDFs.
+        const int cw = w_, ch = h_ - 1;
+        dphi_ = 2.0 * kPiD / double(w_);
+        cos_.resize(size_t(h_));
+        for (int j = 0; j < h_; ++j) cos_[size_t(j)] = std::cos(kPiD * double(j) / double(h_ - 1));
+        cond_.assign(size_t(ch) * size_t(cw + 1), 0.0);
+        marg_.assign(size_t(ch) + 1, 0.0);
+        for (int j = 0; j < ch; ++j) {
+            double* c = &cond_[size_t(j) * size_t(cw + 1)];
+            double dcos = cos_[size_t(j)] - cos_[size_t(j) + 1];
+            for (int i = 0; i < cw; ++i) {
+                double lum = 0.25 * (lum_at(i, j) + lum_at(i + 1, j) + lum_at(i, j + 1) + lum_at(i + 1, j + 1));
+                c[i + 1] = c[i] + lum * dcos * dphi_;
+            }
+            marg_[size_t(j) + 1] = marg_[size_t(j)] + c[cw];
+        }
+        total_ = marg_[size_t(ch)];
+    }
+
+    Color eval_environment(const Vec3& d) const override {
+        double u, v;
+        to_uv(d, u, v);
+        // Mitsuba's lookup: shift by half a texel, wrap, scale to the grid.
+        u -= 0.5 / double(w_);
+        u -= std::floor(u);
+        double x = u * double(w_), y = v * double(h_ - 1);
+        int px = std::min(int(x), w_ - 1), py = std::min(int(y), h_ - 2);
+        float fx = float(x - px), fy = float(y - py);
+        Color c00 = pixel(px, py), c10 = pixel(px + 1, py), c01 = pixel(px, py + 1), c11 = pixel(px + 1, py + 1);
+        return (c00 * (1.f - fx) + c10 * fx) * (1.f - fy) + (c01 * (1.f - fx) + c11 * fx) * fy;
+    }
+
+    float pdf_environment(const Vec3& d) const override {
+        if (!(total_ > 0.0)) return 0.f;
+        double u, v;
+        to_uv(d, u, v);
+        int i, j;
+        cell_of(u, v, i, j);
+        const double* c = &cond_[size_t(j) * size_t(w_ + 1)];
+        double p = (c[i + 1] - c[i]) / total_;
+        double dcos = cos_[size_t(j)] - cos_[size_t(j) + 1];
+        return float(p / (dphi_ * dcos));
+    }
+
+    float pdf_direct(const Vec3& ref, const Vec3& p, const Vec3&) const override {
+        return pdf_environment(normalize(p - ref));
+    }
+
+    DirectSample sample_direct(const Vec3&, Vec2 u, float) const override {
+        DirectSample ds;
+        ds.dist = kInf;
+        float pdf;
+        ds.d = sample_dir(u, pdf);
+        if (!(pdf > 0.f)) return ds;
+        ds.pdf_w = pdf;
+        ds.radiance = eval_environment(ds.d);
+        return ds;
+    }
+
+    // As ConstantEmitter's, with the direction from the image's distribution
+    // (Mitsuba's envmap sample_ray): weight = L(w) pi r^2 / pdf_w(w).
+    EmissionSample sample_emission(Vec2 u_pos, float, Vec2 u_dir, const Vec3& c, float radius) const override {
+        EmissionSample es;
+        float pdf;
+        Vec3 w = sample_dir(u_dir, pdf);
+        if (!(pdf > 0.f)) return es;
+        float r = infinite_disk_radius(radius);
+        es.d = -w;
+        Vec2 q = warp::square_to_uniform_disk_concentric(u_pos);
+        Frame fr(es.d);
+        es.p = c + (fr.s * q.x + fr.t * q.y) * r - es.d * r;
+        es.pdf_a = 1.f / (kPi * r * r);
+        es.pdf_w = pdf;
+        es.weight = eval_environment(w) * (kPi * r * r / pdf);
+        return es;
+    }
+
+private:
+    float lum_at(int i, int j) const {
+        Color c = pixel(i, j);
+        // Mitsuba's luminance() of linear sRGB (Rec. 709 Y).
+        return 0.212671f * c.x + 0.715160f * c.y + 0.072169f * c.z;
+    }
+    Color pixel(int i, int j) const {
+        const float* p = &data_[(size_t(j) * size_t(w_) + size_t(i % w_)) * 3];
+        return Color(p[0], p[1], p[2]);
+    }
+    // World direction -> Mitsuba's (u, v): u = atan2(x, -z) / 2 pi, v = acos(y) / pi, local.
+    void to_uv(const Vec3& d, double& u, double& v) const {
+        Vec3 l = xf_.inv_vector(d);
+        double len = std::sqrt(double(l.x) * l.x + double(l.y) * l.y + double(l.z) * l.z);
+        double y = len > 0.0 ? std::clamp(double(l.y) / len, -1.0, 1.0) : 1.0;
+        u = std::atan2(double(l.x), -double(l.z)) / (2.0 * kPiD);
+        v = std::acos(y) / kPiD;
+    }
+    // The cell holding (u, v): column from the half-texel-shifted u, row from theta.
+    void cell_of(double u, double v, int& i, int& j) const {
+        double x = u * double(w_) - 0.5;
+        x -= std::floor(x / double(w_)) * double(w_);
+        i = std::clamp(int(x), 0, w_ - 1);
+        j = std::clamp(int(v * double(h_ - 1)), 0, h_ - 2);
+    }
+    static int find(const double* cdf, int n, double t) {  // last k in [0, n) with cdf[k] <= t
+        int k = int(std::upper_bound(cdf, cdf + n + 1, t) - cdf) - 1;
+        return std::clamp(k, 0, n - 1);
+    }
+    Vec3 sample_dir(Vec2 u, float& pdf) const {
+        pdf = 0.f;
+        if (!(total_ > 0.0)) return Vec3(0, 0, 1);
+        const int ch = h_ - 1;
+        double t = double(u.y) * total_;
+        int j = find(marg_.data(), ch, t);
+        while (j > 0 && !(marg_[size_t(j) + 1] > marg_[size_t(j)])) --j;  // skip empty rows at the top end
+        double row = marg_[size_t(j) + 1] - marg_[size_t(j)];
+        if (!(row > 0.0)) return Vec3(0, 0, 1);
+        double ry = std::clamp((t - marg_[size_t(j)]) / row, 0.0, 1.0);
+        const double* c = &cond_[size_t(j) * size_t(w_ + 1)];
+        double s = double(u.x) * c[w_];
+        int i = find(c, w_, s);
+        while (i > 0 && !(c[i + 1] > c[i])) --i;
+        double cell = c[i + 1] - c[i];
+        if (!(cell > 0.0)) return Vec3(0, 0, 1);
+        double rx = std::clamp((s - c[i]) / cell, 0.0, 1.0);
+        // In the cell: phi uniform, cos theta uniform.
+        double phi = (double(i) + 0.5 + rx) * dphi_;
+        double cos_t = cos_[size_t(j)] + ry * (cos_[size_t(j) + 1] - cos_[size_t(j)]);
+        double sin_t = std::sqrt(std::max(0.0, 1.0 - cos_t * cos_t));
+        Vec3 l(float(std::sin(phi) * sin_t), float(cos_t), float(-std::cos(phi) * sin_t));
+        Vec3 d = normalize(xf_.vector(l));
+        pdf = float((cell / total_) / (dphi_ * (cos_[size_t(j)] - cos_[size_t(j) + 1])));
+        return d;
+    }
+
+    int w_, h_;
+    std::vector<float> data_;
+    Transform xf_;
+    double dphi_ = 0.0, total_ = 0.0;
+    std::vector<double> cos_;   // cos theta of the grid's rows
+    std::vector<double> cond_;  // per row of cells: CDF over its columns (w + 1 entries)
+    std::vector<double> marg_;  // CDF over the rows of cells
+};
+
 }  // namespace
 
 std::unique_ptr<Emitter> make_area_emitter(const EmitterDesc& desc, const Shape* shape) {
@@ -298,6 +476,8 @@ std::unique_ptr<Emitter> make_emitter(const EmitterDesc& desc) {
         e = std::make_unique<DirectionalEmitter>(desc);
     else if (desc.type == "constant")
         e = std::make_unique<ConstantEmitter>(desc);
+    else if (desc.type == "envmap")
+        e = std::make_unique<EnvMapEmitter>(desc);
     else
         throw std::invalid_argument("emitter '" + desc.id + "': unknown type '" + desc.type + "'");
     e->id = desc.id;

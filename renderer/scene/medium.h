@@ -142,7 +142,7 @@ public:
     // Tests: the local majorant at p (the global one without a majorant grid).
     Color majorant_at(const Vec3& p) const { return has_majorant_grid() ? sigma_t_grid_->majorant_at(p) : majorant; }
 
-    // Measurement (benchmarks/majorant_grid.py): the number of sigma_t
+    // Measurement (benchmarks/studies/majorant_grid.py): the number of sigma_t
     // lookups made by delta and ratio tracking in grid media, over all
     // threads since the last reset (counting starts with the first reset).
     static uint64_t tracking_lookups();

@@ -256,11 +256,27 @@ std::unique_ptr<Sensor> make_sensor(const SensorDesc& d, const Shape* shape) {
     if (d.width < 1 || d.height < 1 || d.width > 16384 || d.height > 16384)
         throw std::invalid_argument("sensor: film size " + std::to_string(d.width) + "x" + std::to_string(d.height) +
                                     " is outside 1..16384");
-    if (d.type == "perspective") return std::make_unique<PerspectiveCamera>(d);
-    if (d.type == "orthographic") return std::make_unique<OrthographicCamera>(d);
-    if (d.type == "radiancemeter") return std::make_unique<RadianceMeter>(d);
-    if (d.type == "irradiancemeter") return std::make_unique<IrradianceMeter>(d, shape);
-    throw std::invalid_argument("sensor: unknown type '" + d.type + "'");
+    std::unique_ptr<Sensor> s;
+    if (d.type == "perspective")
+        s = std::make_unique<PerspectiveCamera>(d);
+    else if (d.type == "orthographic")
+        s = std::make_unique<OrthographicCamera>(d);
+    else if (d.type == "radiancemeter")
+        s = std::make_unique<RadianceMeter>(d);
+    else if (d.type == "irradiancemeter")
+        s = std::make_unique<IrradianceMeter>(d, shape);
+    else
+        throw std::invalid_argument("sensor: unknown type '" + d.type + "'");
+    s->crop_w = d.crop_width > 0 ? d.crop_width : s->width;
+    s->crop_h = d.crop_height > 0 ? d.crop_height : s->height;
+    s->crop_x = d.crop_x;
+    s->crop_y = d.crop_y;
+    if (s->crop_x < 0 || s->crop_y < 0 || s->crop_w > s->width - s->crop_x || s->crop_h > s->height - s->crop_y)
+        throw std::invalid_argument("sensor: crop window " + std::to_string(s->crop_w) + "x" +
+                                    std::to_string(s->crop_h) + " at (" + std::to_string(s->crop_x) + ", " +
+                                    std::to_string(s->crop_y) + ") exceeds the " + std::to_string(s->width) + "x" +
+                                    std::to_string(s->height) + " film");
+    return s;
 }
 
 }  // namespace rm

@@ -44,6 +44,12 @@ class Sensor {
 public:
     virtual ~Sensor() = default;
     int width = 1, height = 1;
+    // The crop window (desc.h): pixels [crop_x, crop_x + crop_w) x [crop_y,
+    // crop_y + crop_h) are rendered; the full film above fixes the geometry.
+    int crop_x = 0, crop_y = 0, crop_w = 1, crop_h = 1;
+    bool in_crop(int x, int y) const {
+        return x >= crop_x && x < crop_x + crop_w && y >= crop_y && y < crop_y + crop_h;
+    }
     // film: continuous film position in [0, width] x [0, height]; u1, u2, u3 for
     // sensors that integrate over area or direction.
     virtual SensorRay sample_ray(Vec2 film, float u1, Vec2 u2, Vec2 u3) const = 0;

@@ -49,7 +49,7 @@ void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* 
     const bool weighted = !(depth == 0 || prev_delta);
     if (!it) {
         for (const Emitter* e : scene.environment) {
-            float w = weighted ? mis_emission_hit(scene, *e, prev_p, nullptr, prev_pdf_w) : 1.f;
+            float w = weighted ? mis_emission_hit(scene, *e, prev_p, nullptr, ray.d, prev_pdf_w) : 1.f;
             out.add(cls, beta * e->eval_environment(ray.d) * w);
         }
         return;
@@ -59,18 +59,18 @@ void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* 
     const Emitter& e = *scene.emitters[shape.emitter];
     Color le = e.eval(*it, it->wi);
     if (is_black(le)) return;
-    float w = weighted ? mis_emission_hit(scene, e, prev_p, it, prev_pdf_w) : 1.f;
+    float w = weighted ? mis_emission_hit(scene, e, prev_p, it, ray.d, prev_pdf_w) : 1.f;
     out.add(cls, beta * le * w);
 }
 
-float light_pdf_w(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it) {
-    float light_pdf = it ? e.pdf_direct(prev_p, it->p, it->n) : e.pdf_direct(prev_p, Vec3(0.f), Vec3(0.f));
+float light_pdf_w(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it, const Vec3& d) {
+    float light_pdf = it ? e.pdf_direct(prev_p, it->p, it->n) : e.pdf_environment(d);
     return light_pdf * emitter_pick_prob(scene);
 }
 
-float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
+float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it, const Vec3& d,
                        float bsdf_pdf_w, float light_frac, float bsdf_frac) {
-    return mis_power(bsdf_pdf_w * bsdf_frac, light_pdf_w(scene, e, prev_p, it) * light_frac);
+    return mis_power(bsdf_pdf_w * bsdf_frac, light_pdf_w(scene, e, prev_p, it, d) * light_frac);
 }
 
 }  // namespace rm

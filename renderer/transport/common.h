@@ -30,9 +30,8 @@ inline const Emitter* pick_emitter(const Scene& s, float u) {
 //               In a medium the analog walk already ends paths by
 //               absorption, and a 5 % kill per event on top multiplies the
 //               weight of a long walk (hundreds of events in a dense, bright
-//               medium) by 1 / 0.95^n, a heavy tail that made every 512 spp
-//               render of translucent_slab fail the block test's mean z (-4
-//               to -6; -1 without it). The cap beyond kLongWalk ends a walk
+//               medium) by 1 / 0.95^n, a heavy tail (measured on
+//               translucent_slab: docs/measurements.md). The cap beyond kLongWalk ends a walk
 //               in a white medium (albedo 1, which never absorbs) with
 //               max_depth -1 in about 20 more events instead of
 //               (size * sigma_t)^2.
@@ -63,8 +62,8 @@ bool sample_light(const Scene& scene, const Vec3& p, float u_pick, Vec2 u, float
 
 // Solid-angle density with which sample_light from `prev_p` reaches emitter
 // `e` at `it` (an area emitter's point), or along a direction to the
-// environment (`it` null), the emitter's pick included.
-float light_pdf_w(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it);
+// environment (`it` null) along the unit direction d, the emitter's pick included.
+float light_pdf_w(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it, const Vec3& d);
 
 // Next event estimation at `it` (Veach 1997, sec. 9.2: light sample weighted by
 // the power heuristic against BSDF sampling). Returns the contribution before
@@ -74,8 +73,8 @@ Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsd
                       Sampler& sampler, ThreadStats& stats, float light_frac = 1.f, float bsdf_frac = 1.f);
 
 // MIS weight of emission reached by a BSDF sample of density bsdf_pdf_w from
-// `prev`, landing on `it` (an area emitter) or escaping along d.
-float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it,
+// `prev`, landing on `it` (an area emitter) or escaping along the unit direction d.
+float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it, const Vec3& d,
                        float bsdf_pdf_w, float light_frac = 1.f, float bsdf_frac = 1.f);
 
 // Emission a camera path's last sample reached (path.cpp, volpath.cpp):
@@ -88,12 +87,58 @@ void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* 
                          int depth, bool prev_delta, const Vec3& prev_p, float prev_pdf_w, EffectRadiance& out);
 
 // One step of a camera path for estimators that take emission found along
-// it without an MIS weight (photonmapper, sppm: their only other route to
+// it without an MIS weight (photonmapper, sppm, whitted: their only other route to
 // the emitters is light sampling at non-specular vertices): intersects
 // `ray`, and when `count` adds what the emitters it reaches show, times
 // `beta`, under class `cls`. Returns false when the ray left the scene.
 bool trace_counting_emission(const Scene& scene, const Ray& ray, Interaction& it, const Color& beta, int cls,
                              bool count, EffectRadiance& out, ThreadStats& stats);
+
+// A camera path through delta lobes only (the specular chain L ... S* E of
+// photonmapper, sppm and whitted, whose light at non-specular vertices comes
+// from elsewhere: light sampling, photon maps): each segment counts the
+// emission it reaches (trace_counting_emission, hidden at depth 0 when
+// `hide`), the path stops after `max_depth` segments (< 0: no limit), and at
+// every vertex `visit(it, bsdf, wi, beta, pc, depth)` does the estimator's
+// work and returns whether to go on. Going on samples the BSDF: a delta
+// sample continues the chain (beta times its weight, a non-null vertex
+// counted as specular in `pc`), anything else ends it (a smooth lobe's light
+// is the visitor's to estimate; the lobe-selection weight keeps the sum
+// unbiased). With rr_depth >= 0 the chain plays Russian roulette after
+// each vertex (RouletteRule::Capped).
+struct SpecularChain {  // SpecularChain{max_depth, rr_depth, hide}
+    int max_depth = -1;
+    int rr_depth = -1;
+    bool hide = false;
+};
+
+template <class Visit>
+void walk_specular_chain(const Scene& scene, Sampler& sampler, Ray ray, const SpecularChain& chain,
+                         const EffectMask& mask, EffectRadiance& out, ThreadStats& stats, Visit&& visit) {
+    Color beta(1.f);
+    PathClass pc;
+    BsdfContext ctx;
+    for (int depth = 0;; ++depth) {
+        Interaction it;
+        int cls = pc.classify();
+        if (!trace_counting_emission(scene, ray, it, beta, cls, !(depth == 0 && chain.hide) && mask[cls], out, stats))
+            return;
+        if (chain.max_depth >= 0 && depth + 1 >= chain.max_depth) return;
+        const Bsdf& bsdf = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
+        Vec3 wi = it.to_local(it.wi);
+        if (!visit(static_cast<const Interaction&>(it), bsdf, wi, static_cast<const Color&>(beta),
+                   static_cast<const PathClass&>(pc), depth))
+            return;
+        BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+        if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || !bs.is_delta) return;
+        beta *= bs.weight;
+        if (bsdf.flags() != kNull) pc.push(true);
+        ray = it.spawn(it.to_world(bs.wo));
+        if (chain.rr_depth >= 0 && !survives_roulette(RouletteRule::Capped, depth + 1, chain.rr_depth,
+                                                      max_component(beta), sampler.next_1d(), beta))
+            return;
+    }
+}
 
 // Adjoint BSDF with shading normals (Veach 1997, eq. 5.16; pbrt-v3's
 // CorrectShadingNormal): in importance transport a vertex that scatters

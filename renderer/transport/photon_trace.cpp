@@ -1,7 +1,9 @@
 #include "transport/photon_trace.h"
 
+#include <algorithm>
 #include <chrono>
 #include <climits>
+#include <cmath>
 
 #include "render/parallel.h"
 #include "transport/subpath.h"
@@ -15,6 +17,33 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 
 constexpr uint64_t kItemPaths = 1024;  // light paths per work item
 constexpr uint64_t kChunkItems = 64;   // items per chunk (a fixed number: the cut is thread-independent)
+
+// The give-up rule. A map stores photons at a rate per light path that only
+// tracing reveals, and reaching the target costs target / rate paths. pbrt
+// v1's rule (Pharr & Humphreys 2004, sec. 16.5: give up after 500 000 paths
+// if fewer than 1 in 1024 stored one) bounds only the rate, so a rate just
+// above 1/1024 costs 1024 paths per photon (a minute for a 16 x 16 image at
+// 1 spp). Here the paths are bounded, at kPathsPerPhoton per requested
+// photon, and tracing gives up early, from kMinPaths on, once even an upper
+// confidence bound on the rate (Poisson counts, 6 sigma on the square-root
+// scale: a false give-up about 1e-9 per check) is below 1 / kPathsPerPhoton,
+// so that a map that cannot reach its target costs about kMinPaths paths,
+// not the bound. A map cut short keeps its photons, their power divided by
+// the paths traced: fewer photons, a noisier and blurrier estimate
+// (reported), not a wrong one. 512 is twice the paths per photon of the
+// canonical scenes' sparsest map (translucent_object's caustic map, 1 in
+// 258; docs/photon_give_up.md), whose renders are unchanged by the rule.
+constexpr uint64_t kPathsPerPhoton = 512;
+// Paths traced before giving up in any case (about pbrt's 500 000, a whole
+// number of chunks): a small map is not cut short by chance.
+constexpr uint64_t kMinPaths = 8 * kChunkItems * kItemPaths;
+
+// Whether `stored` photons in `paths` paths show, beyond chance, a rate
+// below 1 / kPathsPerPhoton.
+bool rate_too_low(uint64_t stored, uint64_t paths) {
+    const double hi = std::sqrt(double(stored)) + 3.0;  // sqrt of a Poisson count: sd 1/2, so 6 sd
+    return hi * hi * double(kPathsPerPhoton) < double(paths);
+}
 
 struct Item {
     std::vector<Photon> photons;
@@ -146,21 +175,28 @@ void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t
     light_subpath(scene, sampler, max_vertices, spec.rr_depth, light, es, stats, &visit, false);
 }
 
+uint64_t photon_path_bound(uint64_t target) {
+    return target > UINT64_MAX / kPathsPerPhoton ? UINT64_MAX : std::max(kMinPaths, kPathsPerPhoton * target);
+}
+
 PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t target,
                                int threads, const std::function<bool()>& poll, ThreadStats& stats) {
     auto t0 = Clock::now();
     PhotonPass r;
+    r.max_paths = photon_path_bound(target);
     std::vector<Item> items;
     std::vector<ThreadStats> tstats(threads);
     const uint64_t chunk = kChunkItems * kItemPaths;
     while (r.photons.size() < target) {
-        if (!trace_chunk(scene, spec, seed, 0, r.paths, chunk, items, threads, poll, tstats)) {
+        const uint64_t n = std::min(chunk, r.max_paths - r.paths);
+        if (!trace_chunk(scene, spec, seed, 0, r.paths, n, items, threads, poll, tstats)) {
             r.cancelled = true;
             break;
         }
         // Concatenate in path order, up to the path that stores the target-th photon.
         bool done = false;
-        for (size_t i = 0; i < kChunkItems && !done; ++i) {
+        const size_t n_items = size_t((n + kItemPaths - 1) / kItemPaths);
+        for (size_t i = 0; i < n_items && !done; ++i) {
             const Item& it = items[i];
             uint32_t prev = 0;
             for (size_t j = 0; j < it.path_end.size(); ++j) {
@@ -175,8 +211,7 @@ PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, 
             }
         }
         if (done) break;
-        uint64_t found = r.photons.size();
-        if (r.paths >= 500000 && (found == 0 || found < r.paths / 1024)) {
+        if (r.paths >= r.max_paths || (r.paths >= kMinPaths && rate_too_low(r.photons.size(), r.paths))) {
             r.target_reached = false;
             break;
         }
@@ -190,7 +225,8 @@ PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, 
 }
 
 PhotonPass trace_photon_paths(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass,
-                              uint64_t paths, int threads, const std::function<bool()>& poll, ThreadStats& stats) {
+                              uint64_t paths, int threads, const std::function<bool()>& poll, ThreadStats& stats,
+                              uint64_t max_photons) {
     auto t0 = Clock::now();
     PhotonPass r;
     std::vector<Item> items;
@@ -205,6 +241,10 @@ PhotonPass trace_photon_paths(const Scene& scene, const PhotonTraceSpec& spec, u
         size_t n_items = size_t((n + kItemPaths - 1) / kItemPaths);
         for (size_t i = 0; i < n_items; ++i)
             r.photons.insert(r.photons.end(), items[i].photons.begin(), items[i].photons.end());
+        if (r.photons.size() > max_photons) {
+            r.over_memory = true;
+            break;
+        }
     }
     r.paths = paths;
     for (auto& s : tstats) stats.merge(s);

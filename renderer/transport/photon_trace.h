@@ -10,6 +10,7 @@
 // thread count.
 #pragma once
 #include <atomic>
+#include <cstdint>
 #include <functional>
 #include <vector>
 
@@ -60,22 +61,32 @@ void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t
 struct PhotonPass {
     std::vector<Photon> photons;  // power already divided by `paths`
     uint64_t paths = 0;           // light paths traced (the estimate's normaliser)
+    uint64_t max_paths = 0;       // trace_photons_until: the most it would trace (the give-up bound)
     bool target_reached = true;
     bool cancelled = false;
+    bool over_memory = false;  // trace_photon_paths: stopped at max_photons (the result is incomplete)
     double seconds = 0;
 };
+
+// The give-up bound of trace_photons_until: the paths it traces at most
+// for `target` photons (photon_trace.cpp says why).
+uint64_t photon_path_bound(uint64_t target);
 
 // Traces light paths 0, 1, 2, ... until `target` photons are stored
 // (Jensen's "photons in the map", Mitsuba's globalPhotons/causticPhotons);
 // the paths after the one that stored the target-th photon are dropped, so
-// the count of paths traced is a function of the seed. Gives up, as pbrt
-// v1's photon mapper does (Pharr & Humphreys 2004, sec. 16.5), once over
-// 500 000 paths stored nothing or fewer than one photon per 1024 paths.
+// the count of paths traced is a function of the seed. Gives up (the map
+// keeps what was stored, target_reached false) after photon_path_bound(target)
+// paths, or from 2^19 paths on once the storage rate is clearly too low to
+// reach the target within that bound (photon_trace.cpp).
 PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t target,
                                int threads, const std::function<bool()>& poll, ThreadStats& stats);
 
-// Traces exactly `paths` light paths of pass `pass` (SPPM's per-pass photons).
+// Traces exactly `paths` light paths of pass `pass` (SPPM's per-pass
+// photons); stops with over_memory once more than `max_photons` are stored
+// (the caller refuses the render: its photons outgrow the memory).
 PhotonPass trace_photon_paths(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass,
-                              uint64_t paths, int threads, const std::function<bool()>& poll, ThreadStats& stats);
+                              uint64_t paths, int threads, const std::function<bool()>& poll, ThreadStats& stats,
+                              uint64_t max_photons = UINT64_MAX);
 
 }  // namespace rm

@@ -61,8 +61,14 @@ emitter    area (nested in a shape): radiance [1]
                to_world (shines along +z)
            directional: irradiance [1], direction or to_world
            constant: radiance [1]
-           Mitsuba 3 emitters take no 'scale' parameter (3.9.1 rejects it as
-           unreferenced), so neither do we: scale the radiance itself.
+           envmap: filename (a latitude-longitude image: .exr through the
+               OpenEXR package, .png/.jpg through Pillow, sRGB to linear;
+               at least 2x3 pixels, finite, non-negative), scale [1],
+               to_world, mis_compensation [false] (only false). Mitsuba's
+               lat-long convention and bilinear lookup; importance-sampled
+               (renderer/scene/emitter.cpp).
+           The other Mitsuba 3 emitters take no 'scale' parameter (3.9.1
+           rejects it as unreferenced), so neither do we: scale the radiance.
 sensor     perspective: fov + fov_axis ['x'|'y'|'diagonal'|'smaller'|
                'larger'] or focal_length ['50mm', a string as in Mitsuba],
                near_clip [1e-2], far_clip [1e4], to_world (no scale); accepted
@@ -76,10 +82,19 @@ sensor     perspective: fov + fov_axis ['x'|'y'|'diagonal'|'smaller'|
                with an independent estimate).
            Each sensor may nest a film and a sampler.
 film       hdrfilm: width [768], height [576] (1..16384), pixel_format
-               ['rgb'|'rgba'], component_format ['float16'|'float32'], rfilter.
+               ['rgb'|'rgba'], component_format ['float16'|'float32'], rfilter;
+               crop_offset_x/y [0], crop_width/height [the film's]: only
+               the window's pixels are rendered and returned, with the
+               full film's geometry and each pixel's own random streams
+               (a crop is byte for byte that window of the full render
+               with the box filter); sample_border [false]: samples stay
+               in the window; true only with the box filter (Mitsuba's
+               border is then empty).
 rfilter    box (radius 0.5), tent: radius [1], gaussian: stddev [0.5]
                (radius = 4 stddev).
 sampler    independent: sample_count [4] -> SensorDesc.spp, seed (accepted).
+integrator moment: its one nested integrator (Mitsuba's moment adds
+               per-pixel moments; RenderResult.variance is always there).
 integrator every estimator the core registers (radiometer.registry); its
            parameters (ints, floats, bools, strings; integers within 32 bits)
            are checked against the estimator's declaration at load, so that
@@ -122,6 +137,21 @@ subsurface dipole (Mitsuba 0.6's plugin; nested in a shape, which it turns
                medium. Only the `path` and `volpath` integrators render it;
                the others refuse the scene.
 
+XML file structure (as Mitsuba 3's src/core/xml.cpp)
+----------------------------------------------------
+- Every version 'a.b.c' loads; a file older than 2.0.0 is first upgraded as
+  Mitsuba upgrades it (parameter names to underscore_case, <lookAt>, a
+  diffuse bsdf's diffuse_reflectance), so Mitsuba 0.6 files read the same.
+- <path value="..."/> (top level) puts a folder before the others on the
+  search list of relative file names (meshes, volumes, includes); the
+  scene's folder comes last. Mitsuba also searches the working directory
+  before it; here a scene means the same wherever it is loaded.
+- <include filename="..."/> (anywhere): an included <scene>'s children take
+  its place, another root element is that element; errors inside it name
+  the included file and line; a cycle, includes nested deeper than 15
+  levels (Mitsuba's limit) or more than 1000 included files in all are
+  refused.
+
 Decisions where Mitsuba leaves a choice (see also the functions' comments)
 -------------------------------------------------------------------------
 - A scene without a sensor gets Mitsuba's default `perspective` (50 mm focal
@@ -146,8 +176,8 @@ complex numbers, which numpy would convert); plugins nest at most _MAX_DEPTH
 levels; a float parameter lies within float32's range (|x| <= 3.4e38, what
 the renderer computes in), and so do mesh vertices after their to_world.
 `load_file(path, base_dir_only=True)` (`radiometer render --untrusted`) is for
-scenes from an untrusted source: every referenced file (meshes, volumes; XML
-<include> is not supported at all) must resolve, through '..' and symbolic
+scenes from an untrusted source: every referenced file (meshes, volumes,
+<include>d files, <path> folders) must resolve, through '..' and symbolic
 links, to a file inside the scene's folder; messages then quote nothing read
 from those files; the XML may not declare a DTD. Without it, as in Mitsuba,
 a scene may name any readable file, and parse errors quote the offending line.

@@ -22,6 +22,7 @@ from ..scene_desc import (
     SensorDesc,
     ShapeDesc,
 )
+from .images import read_rgb
 from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _rectangle_mesh
 from .nodes import _Node, _Prop, _Ref
 from .parameters import INT32_RANGE, _Params, _parse_float
@@ -35,8 +36,10 @@ _MAX_SPP = 1 << 24  # render()'s limit on spp, which the sampler's sample_count 
 
 
 class _Builder:
-    def __init__(self, base_dir, confine=False):
+    def __init__(self, base_dir, confine=False, resolve=None):
         self.base_dir = base_dir
+        # Relative file names: through the XML's search list (<path>), else base_dir.
+        self.resolve = resolve or (lambda name: os.path.join(base_dir, name))
         # Untrusted scenes (load_file's base_dir_only): referenced files stay
         # inside base_dir, and errors quote nothing read from them.
         self.confine = confine
@@ -67,7 +70,7 @@ class _Builder:
         place = p.node.props["filename"].place
         if "\0" in filename:
             raise p.error("parameter 'filename' contains a NUL character", place)
-        path = os.path.join(self.base_dir, filename)  # an absolute filename stays as it is
+        path = self.resolve(filename)  # an absolute filename stays as it is
         if self.confine:
             root = os.path.realpath(self.base_dir)
             path = os.path.realpath(path)
@@ -243,7 +246,7 @@ class _Builder:
 
     def _emitter(self, node):
         p, t = _Params(node), node.type
-        if p.has("scale"):
+        if p.has("scale") and t != "envmap":
             raise p.error("Mitsuba 3 emitters take no 'scale' parameter; multiply the "
                           "radiance/intensity/irradiance instead",
                           node.props["scale"].place)
@@ -278,6 +281,21 @@ class _Builder:
             if d is None:
                 raise p.error("the direction has zero length")
             e.to_world = _frame_along(d)
+        elif t == "envmap":
+            path = self.file(p, "environment map")
+            img = read_rgb(path, f"{node.place}: {node.label()}: '{p.string('filename')}'", quote=not self.confine)
+            if img.shape[0] < 3 or img.shape[1] < 2:
+                raise p.error(f"the environment map must be at least 2x3 pixels (Mitsuba's minimum), got "
+                              f"{img.shape[1]}x{img.shape[0]}")
+            scale = p.float("scale", 1.0, check="nonneg")
+            with np.errstate(over="ignore"):
+                e.env = np.ascontiguousarray(img * np.float32(scale), dtype=np.float32)
+            if not np.all(np.isfinite(e.env)):
+                raise p.error(f"the image times scale {scale} overflows float32", node.props["scale"].place)
+            m = p.transform("to_world")
+            e.to_world = np.eye(4) if m is None else m
+            if p.bool("mis_compensation", False):
+                raise p.error("mis_compensation = true is not supported", node.props["mis_compensation"].place)
         p.done()
         return e
 
@@ -365,9 +383,10 @@ class _Builder:
                           node.props["material"].place)
         # Mitsuba 0.6's irradiance-cache density: it sets nothing here, and
         # an unused parameter is an error (DESIGN sec. 3), so it says why.
-        if p.has("irrSamples"):
-            raise p.error("irrSamples (Mitsuba 0.6's irradiance-cache density) does not apply: exit points "
-                          "are sampled per path here; remove it", node.props["irrSamples"].place)
+        for irr in ("irrSamples", "irr_samples"):  # the latter: a version 0.x file after Mitsuba's upgrade
+            if p.has(irr):
+                raise p.error(f"{irr} (Mitsuba 0.6's irradiance-cache density) does not apply: exit points "
+                              f"are sampled per path here; remove it", node.props[irr].place)
 
         def name_of(name, alias):
             """The parameter given under its name or Mitsuba 0.6's alias."""
@@ -548,6 +567,22 @@ class _Builder:
         s.height = p.int("height", 576, lo=1, hi=_MAX_RESOLUTION)
         p.string("pixel_format", "rgb", ("rgb", "rgba"))
         p.string("component_format", "float16", ("float16", "float32"))
+        # The crop window (Mitsuba 3's Film): only its pixels are rendered and
+        # returned; the sensor keeps the geometry of the full film.
+        s.crop_x = p.int("crop_offset_x", 0, lo=0, hi=s.width - 1)
+        s.crop_y = p.int("crop_offset_y", 0, lo=0, hi=s.height - 1)
+        s.crop_width = p.int("crop_width", s.width, lo=1, hi=s.width)  # Mitsuba's defaults: the full film
+        s.crop_height = p.int("crop_height", s.height, lo=1, hi=s.height)
+        for axis, off, size, full in (("x", s.crop_x, s.crop_width, s.width),
+                                      ("y", s.crop_y, s.crop_height, s.height)):
+            if off + size > full:
+                name = "crop_width" if axis == "x" else "crop_height"
+                raise p.error(f"the crop window crop_offset_{axis} + {name} = {off} + {size} exceeds the film's "
+                              f"{'width' if axis == 'x' else 'height'} {full}",
+                              (node.props.get(name) or node.props[f"crop_offset_{axis}"]).place)
+        if (s.crop_x, s.crop_y, s.crop_width, s.crop_height) == (0, 0, s.width, s.height):
+            s.crop_width = s.crop_height = 0  # the full film, whatever width and height become
+        sample_border = p.bool("sample_border", False)
         rf = p.child("rfilter")
         if rf is not None:
             fp = _Params(rf)
@@ -560,13 +595,34 @@ class _Builder:
                 s.filter_stddev = fp.float("stddev", 0.5, check="positive")
                 s.filter_radius = 4.0 * s.filter_stddev
             fp.done()
+        # sample_border: Mitsuba 3 then also draws samples in a border of
+        # ceil(radius - 0.5) pixels around the crop window, which is none for
+        # the box filter; the other filters' border is not supported (light
+        # tracing cannot splat from beyond the film).
+        if sample_border and s.rfilter != "box":
+            raise p.error(f"sample_border = true with the '{s.rfilter}' filter is not supported (samples beyond "
+                          f"the crop window); only with the box filter, where Mitsuba's border is empty",
+                          node.props["sample_border"].place)
         p.done()
 
     # -- integrator ------------------------------------------------------------
 
-    @staticmethod
-    def integrator(node):
+    @classmethod
+    def integrator(cls, node):
         p = _Params(node)
+        if node.type == "moment":
+            # Mitsuba's `moment` renders its nested integrator(s) and adds
+            # per-pixel moments as extra channels; a render here always
+            # returns the variance of its estimate (RenderResult.variance),
+            # so `moment` is its one nested integrator.
+            if node.props:
+                name, prop = next(iter(node.props.items()))
+                raise p.error(f"unknown parameter '{name}'", prop.place)
+            kids = [c for _, c in node.children]
+            if len(kids) != 1 or kids[0].category != "integrator":
+                raise p.error(f"needs exactly one nested integrator (more are not supported), got "
+                              f"{len(kids)} nested plugin(s)")
+            return cls.integrator(kids[0])
         params = {}
         for name, prop in node.props.items():
             if prop.kind not in ("integer", "float", "boolean", "string"):
@@ -620,9 +676,9 @@ def _resolve_refs(nodes, ids):
                 stack.append(child)
 
 
-def _assemble(nodes, ids, source, base_dir, confine=False):
+def _assemble(nodes, ids, source, base_dir, confine=False, resolve=None):
     _resolve_refs(nodes, ids)
-    b = _Builder(base_dir, confine)
+    b = _Builder(base_dir, confine, resolve)
     scene = SceneDesc(source=source)
     sensors, integrators = [], []
     for node in nodes:

@@ -17,16 +17,21 @@ from .plugins import PLUGINS
 from .transforms import _look_at, _rotate, _translate
 
 # XML tags of Mitsuba 3 that are outside the subset, for a precise message.
-_UNSUPPORTED_TAGS = ("texture", "include", "alias", "path", "spectrum_file")
+_UNSUPPORTED_TAGS = ("texture", "alias", "spectrum_file")
+# <include> levels (Mitsuba 3: MI_XML_INCLUDE_MAX_RECURSION) and included
+# files in all (a file included twice by a file included twice ... grows
+# exponentially without a cycle).
+_MAX_INCLUDE_DEPTH = 15
+_MAX_INCLUDES = 1000
 _PROPERTY_TAGS = ("float", "integer", "boolean", "string", "rgb", "spectrum", "point",
                   "vector", "transform")
 
 
 class _XmlElem:
-    __slots__ = ("tag", "attrib", "line", "children")
+    __slots__ = ("tag", "attrib", "line", "children", "src")
 
-    def __init__(self, tag, attrib, line):
-        self.tag, self.attrib, self.line, self.children = tag, attrib, line, []
+    def __init__(self, tag, attrib, line, src):
+        self.tag, self.attrib, self.line, self.children, self.src = tag, attrib, line, [], src
 
 
 def _parse_xml(path, src, untrusted=False):
@@ -42,7 +47,7 @@ def _parse_xml(path, src, untrusted=False):
     stack, roots = [], []
 
     def start(tag, attrib):
-        elem = _XmlElem(tag, dict(attrib), parser.CurrentLineNumber)
+        elem = _XmlElem(tag, dict(attrib), parser.CurrentLineNumber, src)
         if len(stack) >= _MAX_DEPTH:
             raise SceneError(f"{src}:{elem.line}: <{tag}>: elements nested deeper than {_MAX_DEPTH} levels")
         (stack[-1].children if stack else roots).append(elem)
@@ -91,16 +96,78 @@ def _numbers(text, place, what, counts):
     return vals
 
 
+def _version(elem, place):
+    """Mitsuba's version attribute: three period-separated integers."""
+    text = elem.attrib["version"]
+    parts = text.strip().split(".")
+    if len(parts) != 3 or not all(p.isdigit() and p.isascii() and len(p) < 10 for p in parts):
+        raise SceneError(f"{place}: <scene>: cannot parse version {_quote(text)} (three period-separated "
+                         f"numbers, e.g. '3.0.0')")
+    return tuple(int(p) for p in parts)
+
+
+def _underscore(name):
+    """Mitsuba 3's upgrade of a Mitsuba 0.x parameter name (upgrade_tree in
+    src/core/xml.cpp): camelCase to underscore_case, an upper-case run after a
+    lower-case letter lower-cased ('intIOR' -> 'int_ior', 'sigmaA' ->
+    'sigma_a')."""
+    out, i = name, 0
+    while i < len(out) - 1:
+        if out[i].islower() and out[i + 1].isupper():
+            j = i + 1
+            while j < len(out) and out[j].isupper():
+                j += 1
+            out = out[:i + 1] + "_" + out[i + 1:j].lower() + out[j:]
+            i = j + 1
+        else:
+            i += 1
+    return out
+
+
+def _upgrade(elem, parent=None):
+    """Mitsuba 3 reads a file of version < 2.0.0 after rewriting it in memory
+    (upgrade_tree, src/core/xml.cpp): parameter names to underscore_case
+    (but not <default> names), <lookAt> to <lookat>, a diffuse bsdf's
+    diffuse_reflectance to reflectance. The rule for uoffset/vscale (moved
+    into a texture's to_uv) concerns textures, which the loader refuses."""
+    if elem.tag == "lookAt":
+        elem.tag = "lookat"
+    if "name" in elem.attrib and elem.tag != "default":
+        elem.attrib["name"] = _underscore(elem.attrib["name"])
+        if (elem.attrib["name"] == "diffuse_reflectance" and parent is not None and parent.tag == "bsdf"
+                and parent.attrib.get("type") == "diffuse"):
+            elem.attrib["name"] = "reflectance"
+    for c in elem.children:
+        _upgrade(c, elem)
+
+
 class _XmlReader:
-    def __init__(self, path, params):
+    def __init__(self, path, params, confine=False):
         self.src = str(path)
         self.dir = os.path.dirname(os.path.abspath(path))
         self.params = params
         self.used_params = set()
         self.ids = {}
+        self.confine = confine
+        # Mitsuba's file resolver: each <path> is put first; the scene's folder
+        # is last. (Mitsuba 3 also looks in the working directory, before the
+        # scene's folder; here a scene means the same wherever it is loaded.)
+        self.search = [self.dir]
+        self.n_includes = 0
+
+    def resolve(self, name):
+        """The file a relative name refers to: the first folder of the search
+        list holding it, else (for the error message) the scene's folder."""
+        if os.path.isabs(name):
+            return name
+        for base in self.search:
+            path = os.path.join(base, name)
+            if os.path.exists(path):
+                return path
+        return os.path.join(self.dir, name)
 
     def place(self, elem):
-        return f"{self.src}:{elem.line}"
+        return f"{elem.src}:{elem.line}"
 
     def attrs(self, elem, allowed, required=()):
         for a in elem.attrib:
@@ -111,8 +178,8 @@ class _XmlReader:
                 raise SceneError(f"{self.place(elem)}: <{elem.tag}>: missing attribute '{a}'")
         return elem.attrib
 
-    def substitute(self, elem):
-        """Replace $name in every attribute value (Mitsuba's <default>/params)."""
+    def sub_value(self, elem, text):
+        """$name replaced in one attribute value (Mitsuba's <default>/params)."""
 
         def repl(m):
             name = m.group(1)
@@ -122,33 +189,121 @@ class _XmlReader:
             self.used_params.add(name)
             return self.params[name]
 
+        return _PARAM_RE.sub(repl, text) if "$" in text else text
+
+    def substitute(self, elem):
+        """Replace $name in every attribute value."""
         for k, v in elem.attrib.items():
-            if "$" in v:
-                elem.attrib[k] = _PARAM_RE.sub(repl, v)
+            elem.attrib[k] = self.sub_value(elem, v)
         for c in elem.children:
             self.substitute(c)
 
-    def read(self, root):
+    def check_root(self, root):
         place = self.place(root)
         if root.tag != "scene":
             raise SceneError(f"{place}: root element must be <scene>, got <{root.tag}>")
-        attrib = self.attrs(root, ("version",), ("version",))
-        if not attrib["version"].split(".")[0] == "3":
-            raise SceneError(f"{place}: <scene>: only version 3.x scenes are supported, "
-                             f"got version '{attrib['version']}'")
-        # <default> declares parameters; values passed to load_file override them.
+        self.attrs(root, ("version",), ("version",))
+        # Mitsuba 3 reads every version; older than 2.0.0 after its upgrade.
+        if _version(root, place) < (2, 0, 0):
+            _upgrade(root)
+
+    def confined(self, path, elem, what):
+        """An untrusted scene names only files inside its folder."""
+        if not self.confine:
+            return path
+        root = os.path.realpath(self.dir)
+        real = os.path.realpath(path)
+        if os.path.commonpath([root, real]) != root:
+            raise SceneError(f"{self.place(elem)}: <{elem.tag}>: {what} lies outside the scene's folder {root} "
+                             f"(an untrusted scene may only name files inside it)")
+        return real
+
+    def add_path(self, elem):
+        """<path value="..."/>: a folder searched first for relative file
+        names (meshes, volumes, includes); a relative one is taken from the
+        folder of the file that declares it, else through the search list
+        (Mitsuba 3's Tag::Resource)."""
+        a = self.attrs(elem, ("value",), ("value",))
+        self.no_children(elem)
+        value = self.sub_value(elem, a["value"])
+        if "\0" in value:
+            raise SceneError(f"{self.place(elem)}: <path>: the value contains a NUL character")
+        path = value
+        if not os.path.isabs(path):
+            path = os.path.join(os.path.dirname(os.path.abspath(elem.src)), value)
+            if not os.path.isdir(path):
+                path = self.resolve(value)
+        path = self.confined(path, elem, f"folder '{value}'")
+        if not os.path.isdir(path):
+            raise SceneError(f"{self.place(elem)}: <path>: folder '{value}' not found (looked for {path})")
+        self.search.insert(0, os.path.abspath(path))
+
+    def include(self, elem, chain, top):
+        """<include filename="..."/> -> the included file's elements: a
+        <scene> root's children, else the root itself (Mitsuba 3's
+        Tag::Include). `chain`: the includes that led here, [(real path,
+        place of the include)], for cycles."""
+        a = self.attrs(elem, ("filename",), ("filename",))
+        self.no_children(elem)
+        place = self.place(elem)
+        name = self.sub_value(elem, a["filename"])
+        if "\0" in name:
+            raise SceneError(f"{place}: <include>: the filename contains a NUL character")
+        path = self.confined(self.resolve(name), elem, f"included file '{name}'")
+        if not os.path.isfile(path):
+            raise SceneError(f"{place}: <include>: file '{name}' not found (looked for {path})")
+        real = os.path.realpath(path)
+        if real == os.path.realpath(self.src) or any(real == r for r, _ in chain):
+            steps = " -> ".join(f"{p} includes" for _, p in chain + [(real, place)])
+            raise SceneError(f"{place}: <include>: include cycle: {steps} {name}, which is already being read")
+        if len(chain) >= _MAX_INCLUDE_DEPTH:
+            raise SceneError(f"{place}: <include>: includes nested deeper than {_MAX_INCLUDE_DEPTH} levels")
+        self.n_includes += 1
+        if self.n_includes > _MAX_INCLUDES:
+            raise SceneError(f"{place}: <include>: more than {_MAX_INCLUDES} included files in all")
+        root = _parse_xml(path, path, untrusted=self.confine)
+        chain = chain + [(real, place)]
+        if root.tag == "scene":
+            self.check_root(root)
+            return self.expand(root.children, chain, top=top)
+        return self.expand([root], chain, top=False)
+
+    def expand(self, elems, chain, top):
+        """Elements with <include>s replaced by what they include and <path>s
+        applied, in document order (a <path> applies to what follows it)."""
+        out = []
+        for elem in elems:
+            if elem.tag == "include":
+                out.extend(self.include(elem, chain, top))
+                continue
+            if elem.tag == "path":
+                if not top:
+                    raise SceneError(f"{self.place(elem)}: <path> is allowed only at the top level of a scene")
+                self.add_path(elem)
+                continue
+            if elem.tag == "default" and top:
+                a = self.attrs(elem, ("name", "value"), ("name", "value"))
+                self.params.setdefault(a["name"], a["value"])
+            elem.children = self.expand(elem.children, chain, top=False)
+            out.append(elem)
+        return out
+
+    def read(self, root):
+        self.check_root(root)
+        # <include> and <path> first, in document order; <default> declares
+        # parameters (values passed to load_file override them).
+        given = set(self.params)
+        children = self.expand(root.children, [], top=True)
         declared = set()
         body = []
-        for elem in root.children:
+        for elem in children:
             if elem.tag == "default":
-                a = self.attrs(elem, ("name", "value"), ("name", "value"))
-                declared.add(a["name"])
-                self.params.setdefault(a["name"], a["value"])
+                declared.add(elem.attrib["name"])
             else:
                 body.append(elem)
         for elem in body:
             self.substitute(elem)
-        unused = sorted(set(self.params) - self.used_params - declared)
+        unused = sorted(given - self.used_params - declared)
         if unused:
             raise SceneError(f"{self.src}: parameter(s) given but never used in the file: "
                              f"{', '.join(unused)}")
@@ -161,9 +316,9 @@ class _XmlReader:
             nodes.append(node)
         return nodes
 
-    def element(self, elem):
+    def element(self, elem, owner=None):
         """A plugin element -> _Node; a property element -> (name, _Prop); a
-        <ref> -> (name, _Ref)."""
+        <ref> -> (name, _Ref). `owner`: the plugin node it is nested in."""
         tag, place = elem.tag, self.place(elem)
         if tag in PLUGINS:
             a = self.attrs(elem, ("type", "id", "name"), ("type",))
@@ -175,7 +330,11 @@ class _XmlReader:
             if "id" in a:
                 _register(self.ids, a["id"], node)
             for c in elem.children:
-                item = self.element(c)
+                if c.tag == "texture":  # a parameter given as a texture
+                    raise SceneError(f"{self.place(c)}: {node.label()}: parameter '{c.attrib.get('name', '?')}': "
+                                     f"texture type '{c.attrib.get('type', '?')}' is not supported (textures are "
+                                     f"not implemented yet)")
+                item = self.element(c, node)
                 if isinstance(item, _Node):
                     node.children.append((c.attrib.get("name", c.tag), item))
                 elif isinstance(item[1], _Ref):
@@ -192,7 +351,10 @@ class _XmlReader:
             self.no_children(elem)
             return (a.get("name", "ref"), _Ref(a["id"], place))
         if tag in _PROPERTY_TAGS:
-            return self.prop(elem)
+            return self.prop(elem, owner)
+        if tag == "texture":
+            raise SceneError(f"{place}: texture type '{elem.attrib.get('type', '?')}' is not supported (textures "
+                             f"are not implemented yet)")
         if tag in _UNSUPPORTED_TAGS or tag == "default":
             where = " (only at the top level)" if tag == "default" else ""
             raise SceneError(f"{place}: <{tag}> is not supported{where}")
@@ -203,7 +365,7 @@ class _XmlReader:
             raise SceneError(f"{self.place(elem.children[0])}: <{elem.tag}> takes no nested "
                              f"elements")
 
-    def prop(self, elem):
+    def prop(self, elem, owner=None):
         tag, place = elem.tag, self.place(elem)
         if tag == "transform":
             a = self.attrs(elem, ("name",), ("name",))
@@ -221,6 +383,10 @@ class _XmlReader:
                         raise SceneError(f"{place}: <{tag}>: missing attribute '{k}'")
                 v = [_numbers(a[k], place, f"<{tag}> {k}", (1,))[0] for k in "xyz"]
             return a["name"], _Prop(tag, np.array(v, dtype=np.float64), place)
+        if tag == "spectrum" and "filename" in elem.attrib:
+            label = f"{owner.label()}: " if owner is not None else ""
+            raise SceneError(f"{place}: {label}parameter '{elem.attrib.get('name', '?')}': <spectrum>: spectra "
+                             f"from files are not supported (only a single uniform value)")
         a = self.attrs(elem, ("name", "value"), ("name", "value"))
         name, text = a["name"], a["value"]
         if tag == "float":
@@ -245,8 +411,9 @@ class _XmlReader:
             value = vals[0] if len(vals) == 1 else np.array(vals, dtype=np.float64)
         else:  # spectrum
             if ":" in text:
-                raise SceneError(f"{place}: <spectrum>: only uniform spectra (a single "
-                                 f"value) are supported")
+                label = f"{owner.label()}: " if owner is not None else ""
+                raise SceneError(f"{place}: {label}parameter '{name}': <spectrum>: only uniform spectra (a single "
+                                 f"value) are supported, got wavelength:value pairs")
             value = _numbers(text, place, "<spectrum>", (1,))[0]
         return name, _Prop(tag, value, place)
 
@@ -326,7 +493,7 @@ def load_file(path, base_dir_only=False, **params) -> SceneDesc:
         raise SceneError(f"{src}: scene file not found")
     text_params = {k: ("true" if v else "false") if isinstance(v, bool) else str(v)
                    for k, v in params.items()}
-    reader = _XmlReader(src, text_params)
+    reader = _XmlReader(src, text_params, confine=bool(base_dir_only))
     root = _parse_xml(src, src, untrusted=bool(base_dir_only))
     nodes = reader.read(root)
-    return _assemble(nodes, reader.ids, src, reader.dir, confine=bool(base_dir_only))
+    return _assemble(nodes, reader.ids, src, reader.dir, confine=bool(base_dir_only), resolve=reader.resolve)

@@ -8,12 +8,13 @@ PLUGINS = {
     "shape": ("obj", "ply", "rectangle", "cube", "disk", "sphere"),
     "bsdf": ("diffuse", "conductor", "roughconductor", "dielectric", "roughdielectric",
              "thindielectric", "plastic", "twosided", "null"),
-    "emitter": ("area", "point", "spot", "directional", "constant"),
+    "emitter": ("area", "point", "spot", "directional", "constant", "envmap"),
     "sensor": ("perspective", "orthographic", "radiancemeter", "irradiancemeter"),
     "film": ("hdrfilm",),
     "rfilter": ("box", "tent", "gaussian"),
     "sampler": ("independent",),
-    "integrator": estimator_names(),  # the core's registry
+    # the core's registry, and Mitsuba's `moment` around one of them
+    "integrator": estimator_names() + ("moment",),
     "medium": ("homogeneous", "heterogeneous"),
     "phase": ("isotropic", "hg"),
     "volume": ("gridvolume", "constvolume"),

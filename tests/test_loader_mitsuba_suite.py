@@ -1,0 +1,309 @@
+"""What Mitsuba 3's own scene files need from the XML front end, beyond
+the subset of test_loader.py: every version from 2.0.0 on (and older ones
+after Mitsuba's upgrade rules), <path>, <include> (cycles, file:line of
+errors inside included files), the `moment` integrator, and the film's
+crop window and sample_border. The crop renders are compared byte for
+byte with the window of the full render: a pixel of the window keeps its
+film index and with it its random streams (camera samples and light paths
+alike), so with the box filter every number is the same, not just its
+distribution; a z-test would pass a wrong crop whose error hides in noise.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import radiometer as rm
+from radiometer.loader import SceneError, load_dict, load_file
+
+SUITE = Path(__file__).resolve().parents[1].parent / "shared" / "peers" / "mitsuba-data"
+
+TRI_OBJ = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+
+
+def _write(path: Path, text: str) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    return path
+
+
+def _scene(version, body):
+    return f'<scene version="{version}">\n{body}\n</scene>\n'
+
+
+# -- versions -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("version", ["2.0.0", "2.1.0", "3.0.0", "3.5.2", "4.0.0"])
+def test_versions_from_2_load(tmp_path, version):
+    body = '<shape type="sphere"><float name="radius" value="2"/></shape>'
+    desc = load_file(_write(tmp_path / "s.xml", _scene(version, body)))
+    assert desc.shapes[0].radius == 2.0
+
+
+def test_version_0x_is_upgraded_as_mitsuba_does(tmp_path):
+    """Mitsuba 3's upgrade_tree for files older than 2.0.0: camelCase names to
+    underscore_case, <lookAt> to <lookat>, diffuse's diffuse_reflectance to
+    reflectance; the file then means what its 3.x form means."""
+    old = """<integrator type="path"><integer name="maxDepth" value="3"/></integrator>
+<sensor type="perspective"><float name="nearClip" value="0.5"/>
+  <transform name="toWorld"><lookAt origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+</sensor>
+<shape type="sphere"><bsdf type="diffuse"><rgb name="diffuseReflectance" value="0.2 0.3 0.4"/></bsdf></shape>
+<shape type="sphere"><subsurface type="dipole"><rgb name="sigmaA" value="0.1"/><rgb name="sigmaS" value="1"/>
+    <float name="intIOR" value="1.4"/></subsurface></shape>"""
+    new = """<integrator type="path"><integer name="max_depth" value="3"/></integrator>
+<sensor type="perspective"><float name="near_clip" value="0.5"/>
+  <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+</sensor>
+<shape type="sphere"><bsdf type="diffuse"><rgb name="reflectance" value="0.2 0.3 0.4"/></bsdf></shape>
+<shape type="sphere"><subsurface type="dipole"><rgb name="sigma_a" value="0.1"/><rgb name="sigma_s" value="1"/>
+    <float name="int_ior" value="1.4"/></subsurface></shape>"""
+    a = load_file(_write(tmp_path / "old.xml", _scene("0.6.0", old)))
+    b = load_file(_write(tmp_path / "new.xml", _scene("3.0.0", new)))
+    assert a.integrator == b.integrator and a.integrator.params == {"max_depth": 3}
+    assert np.array_equal(a.sensor.to_world, b.sensor.to_world) and a.sensor.near_clip == 0.5
+    assert a.shapes[0].bsdf.reflectance == b.shapes[0].bsdf.reflectance == (0.2, 0.3, 0.4)
+    sa, sb = a.shapes[1].subsurface, b.shapes[1].subsurface
+    assert sa.sigma_a == sb.sigma_a and sa.sigma_s == sb.sigma_s and sa.int_ior == 1.4
+    # A 3.x file is not upgraded: the 0.x name is an unknown parameter there.
+    with pytest.raises(SceneError, match=r"new2.xml:2: .*unknown parameter 'nearClip'"):
+        load_file(_write(tmp_path / "new2.xml", _scene("3.0.0", '<sensor type="perspective">'
+                                                        '<float name="nearClip" value="0.5"/></sensor>')))
+
+
+@pytest.mark.parametrize("text", ["2.0", "3", "2.0.0.1", "x.0.0", "3.0.0-rc1", ""])
+def test_bad_version_strings(tmp_path, text):
+    with pytest.raises(SceneError, match=r"s.xml:1: <scene>: cannot parse version"):
+        load_file(_write(tmp_path / "s.xml", _scene(text, "")))
+
+
+# -- <path> ---------------------------------------------------------------------
+
+
+def test_path_resolves_relative_names(tmp_path):
+    """A <path> folder is searched before the scene's own; a later <path>
+    before an earlier one; a relative <path> is taken from the folder of
+    the file declaring it (as Mitsuba's Tag::Resource)."""
+    _write(tmp_path / "assets" / "a" / "m.obj", TRI_OBJ)
+    _write(tmp_path / "assets" / "b" / "m.obj", TRI_OBJ.replace("v 1 0 0", "v 2 0 0"))
+    _write(tmp_path / "scenes" / "m.obj", TRI_OBJ.replace("v 1 0 0", "v 3 0 0"))
+    mesh = '<shape type="obj"><string name="filename" value="m.obj"/></shape>'
+
+    def xmax(paths):
+        body = "".join(f'<path value="{p}"/>' for p in paths) + mesh
+        desc = load_file(_write(tmp_path / "scenes" / "s.xml", _scene("2.0.0", body)))
+        return float(np.asarray(desc.shapes[0].positions)[:, 0].max())
+
+    assert xmax([]) == 3.0  # the scene's folder
+    assert xmax(["../assets/a"]) == 1.0
+    assert xmax(["../assets/a", "../assets/b"]) == 2.0  # the later <path> first
+    assert xmax([str(tmp_path / "assets" / "b")]) == 2.0  # absolute
+    # A name found in none of them: the error says where it looked last (the scene's folder).
+    body = '<path value="../assets/a"/>\n<shape type="obj"><string name="filename" value="nope.obj"/></shape>'
+    with pytest.raises(SceneError, match=r"s.xml:3: shape 'obj': mesh file not found: 'nope.obj'"):
+        load_file(_write(tmp_path / "scenes" / "s.xml", _scene("3.0.0", body)))
+
+
+def test_path_errors_carry_the_place(tmp_path):
+    with pytest.raises(SceneError, match=r"s.xml:3: <path>: folder 'missing' not found"):
+        load_file(_write(tmp_path / "s.xml", _scene("3.0.0", '\n<path value="missing"/>')))
+    with pytest.raises(SceneError, match=r"s.xml:2: <path>: unknown attribute 'name'"):
+        load_file(_write(tmp_path / "s.xml", _scene("3.0.0", '<path value="." name="x"/>')))
+    with pytest.raises(SceneError, match=r"s.xml:3: <path> is allowed only at the top level"):
+        load_file(_write(tmp_path / "s.xml", _scene("3.0.0", '<shape type="sphere">\n<path value="."/>\n'
+                                                               '</shape>')))
+
+
+# -- <include> ------------------------------------------------------------------
+
+
+def test_include_splices_the_included_scene(tmp_path):
+    """An included <scene>'s children join the including scene where the
+    <include> stands: its <default>s, its <path>s, its plugins; an included
+    non-scene root is that one element (here a bsdf nested in a shape)."""
+    _write(tmp_path / "inc" / "preamble.xml", _scene("2.0.0", '<default name="res" value="24"/>'))
+    _write(tmp_path / "inc" / "bsdf.xml", '<bsdf type="diffuse"><rgb name="reflectance" value="0.25"/></bsdf>')
+    _write(tmp_path / "inc" / "cam.xml", _scene("2.0.0", '<sensor type="perspective"><film type="hdrfilm">'
+                                                            '<integer name="width" value="$res"/>'
+                                                            '<integer name="height" value="$res"/></film></sensor>'))
+    body = """<include filename="inc/preamble.xml"/>
+<include filename="inc/cam.xml"/>
+<shape type="sphere"><include filename="inc/bsdf.xml"/></shape>"""
+    desc = load_file(_write(tmp_path / "s.xml", _scene("2.0.0", body)))
+    assert (desc.sensor.width, desc.sensor.height) == (24, 24)
+    assert desc.shapes[0].bsdf.reflectance == (0.25, 0.25, 0.25)
+    # The caller's value overrides the included <default>.
+    assert load_file(tmp_path / "s.xml", res=8).sensor.width == 8
+    # A <scene> included inside a plugin gives that plugin its children; a
+    # <path> there is not at the top level.
+    _write(tmp_path / "inc" / "parts.xml", _scene("2.0.0", '<float name="radius" value="3"/><bsdf type="null"/>'))
+    desc = load_file(_write(tmp_path / "s2.xml", _scene("3.0.0", '<shape type="sphere">'
+                                                                  '<include filename="inc/parts.xml"/></shape>')))
+    assert desc.shapes[0].radius == 3.0 and desc.shapes[0].bsdf.type == "null"
+    _write(tmp_path / "inc" / "path.xml", _scene("2.0.0", '<path value="."/>'))
+    with pytest.raises(SceneError, match=r"path.xml:2: <path> is allowed only at the top level"):
+        load_file(_write(tmp_path / "s3.xml", _scene("3.0.0", '<shape type="sphere">'
+                                                              '<include filename="inc/path.xml"/></shape>')))
+
+
+def test_errors_inside_included_files_name_that_file_and_line(tmp_path):
+    _write(tmp_path / "frag.xml", _scene("2.0.0", '<shape type="sphere">\n'
+                                                  '<float name="radius" value="-1"/>\n</shape>'))
+    with pytest.raises(SceneError) as info:
+        load_file(_write(tmp_path / "s.xml", _scene("3.0.0", '<include filename="frag.xml"/>')))
+    assert str(info.value).startswith(f"{tmp_path / 'frag.xml'}:3: shape 'sphere'"), str(info.value)
+    _write(tmp_path / "bad.xml", _scene("2.0.0", "<shape type='sphere'>"))
+    with pytest.raises(SceneError, match=r"bad.xml:\d+: malformed XML"):
+        load_file(_write(tmp_path / "s.xml", _scene("3.0.0", '<include filename="bad.xml"/>')))
+    with pytest.raises(SceneError, match=r"s.xml:3: <include>: file 'none.xml' not found"):
+        load_file(_write(tmp_path / "s.xml", _scene("3.0.0", '\n<include filename="none.xml"/>')))
+
+
+def test_include_cycles_are_refused(tmp_path):
+    _write(tmp_path / "a.xml", _scene("3.0.0", '<include filename="b.xml"/>'))
+    _write(tmp_path / "b.xml", _scene("3.0.0", '\n<include filename="a.xml"/>'))
+    with pytest.raises(SceneError) as info:
+        load_file(tmp_path / "a.xml")
+    msg = str(info.value)
+    assert msg.startswith(f"{tmp_path / 'b.xml'}:3: <include>: include cycle"), msg
+    assert f"{tmp_path / 'a.xml'}:2 includes" in msg and "already being read" in msg, msg
+    # A file including itself, through a symbolic link to it.
+    os.symlink(tmp_path / "c.xml", tmp_path / "c_link.xml")
+    _write(tmp_path / "c.xml", _scene("3.0.0", '<include filename="c_link.xml"/>'))
+    with pytest.raises(SceneError, match="include cycle"):
+        load_file(tmp_path / "c.xml")
+    # The same file twice, without a cycle, is fine (and ids then clash as they would written out).
+    _write(tmp_path / "sphere.xml", _scene("3.0.0", '<shape type="sphere"/>'))
+    _write(tmp_path / "twice.xml", _scene("3.0.0", '<include filename="sphere.xml"/><include filename="sphere.xml"/>'))
+    assert len(load_file(tmp_path / "twice.xml").shapes) == 2
+
+
+def test_include_depth_is_bounded(tmp_path):
+    for i in range(20):
+        _write(tmp_path / f"i{i}.xml", _scene("3.0.0", f'<include filename="i{i + 1}.xml"/>'))
+    _write(tmp_path / "i20.xml", _scene("3.0.0", ""))
+    with pytest.raises(SceneError, match="includes nested deeper than 15 levels"):
+        load_file(tmp_path / "i0.xml")
+
+
+def test_untrusted_include_and_path_stay_inside(tmp_path):
+    _write(tmp_path / "outside" / "frag.xml", _scene("3.0.0", '<shape type="sphere"/>'))
+    _write(tmp_path / "scene" / "frag.xml", _scene("3.0.0", '<shape type="sphere"/>'))
+    s = _write(tmp_path / "scene" / "s.xml", _scene("3.0.0", '<include filename="../outside/frag.xml"/>'))
+    assert len(load_file(s).shapes) == 1
+    with pytest.raises(SceneError, match="outside the scene's folder"):
+        load_file(s, base_dir_only=True)
+    s = _write(tmp_path / "scene" / "s.xml", _scene("3.0.0", '<path value="../outside"/>'))
+    with pytest.raises(SceneError, match="outside the scene's folder"):
+        load_file(s, base_dir_only=True)
+    s = _write(tmp_path / "scene" / "s.xml", _scene("3.0.0", '<include filename="frag.xml"/>'))
+    assert len(load_file(s, base_dir_only=True).shapes) == 1
+
+
+# -- moment ---------------------------------------------------------------------
+
+
+def test_moment_is_its_nested_integrator(tmp_path):
+    body = ('<integrator type="moment"><integrator type="volpath"><integer name="max_depth" value="6"/>'
+            '</integrator></integrator>')
+    desc = load_file(_write(tmp_path / "s.xml", _scene("2.0.0", body)))
+    assert desc.integrator.type == "volpath" and desc.integrator.params == {"max_depth": 6}
+    d = load_dict({"type": "scene", "i": {"type": "moment", "nested": {"type": "path", "max_depth": 2}}})
+    assert d.integrator.type == "path" and d.integrator.params == {"max_depth": 2}
+    two = '<integrator type="moment">\n<integrator type="path"/><integrator type="direct"/></integrator>'
+    with pytest.raises(SceneError, match=r"s.xml:2: integrator 'moment': needs exactly one nested integrator"):
+        load_file(_write(tmp_path / "s.xml", _scene("3.0.0", two)))
+    param = '<integrator type="moment">\n<integer name="max_depth" value="2"/><integrator type="path"/></integrator>'
+    with pytest.raises(SceneError, match=r"s.xml:3: integrator 'moment': unknown parameter 'max_depth'"):
+        load_file(_write(tmp_path / "s.xml", _scene("3.0.0", param)))
+    # The nested integrator's own checks keep their place.
+    bad = '<integrator type="moment"><integrator type="path">\n<integer name="max_depth" value="-5"/>' \
+          '</integrator></integrator>'
+    with pytest.raises(SceneError, match=r"s.xml:3: .*max_depth"):
+        load_file(_write(tmp_path / "s.xml", _scene("3.0.0", bad)))
+
+
+# -- film: crop window and sample_border ---------------------------------------------
+
+
+def _crop_scene(rfilter="box", **film):
+    cam = np.array([[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 5], [0, 0, 0, 1.0]])
+    floor = np.diag([3.0, 3.0, 1.0, 1.0]) @ np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, -2], [0, 0, 0, 1.0]])
+    rf = {"type": rfilter}
+    return rm.Scene(load_dict({
+        "type": "scene",
+        "ball": {"type": "sphere", "bsdf": {"type": "diffuse", "reflectance": [0.7, 0.5, 0.3]}},
+        "floor": {"type": "rectangle", "to_world": floor},
+        "glass": {"type": "sphere", "center": [1.2, 0.8, 1], "radius": 0.5, "bsdf": {"type": "dielectric"}},
+        "lamp": {"type": "point", "position": [0, 1, 4], "intensity": 20},
+        "cam": {"type": "perspective", "to_world": cam,
+                "film": {"type": "hdrfilm", "width": 16, "height": 12, "rfilter": rf, **film}}}))
+
+
+CROP = {"crop_offset_x": 3, "crop_offset_y": 2, "crop_width": 7, "crop_height": 5}
+WINDOW = (slice(2, 7), slice(3, 10))
+
+
+@pytest.mark.parametrize("integrator", ["path", "ptracer", "bdpt", "sppm"])
+def test_crop_is_the_window_of_the_full_render(integrator):
+    full = rm.render(_crop_scene(), integrator=integrator, spp=4, seed=3, threads=2)
+    crop = rm.render(_crop_scene(**CROP), integrator=integrator, spp=4, seed=3, threads=2)
+    assert crop.image.shape == (5, 7, 3) and crop.variance.shape == (5, 7, 3)
+    assert np.array_equal(crop.image, full.image[WINDOW])
+    assert np.array_equal(crop.variance, full.variance[WINDOW], equal_nan=True)
+    for k, img in crop.effects.items():
+        assert np.array_equal(img, full.effects[k][WINDOW]), k
+    assert crop.image.max() > 0  # the window sees the lit ball: the comparison compares something
+
+
+def test_crop_with_a_wider_filter_truncates_at_the_window():
+    """sample_border = false (Mitsuba's default): samples stay inside the crop
+    window, so pixels whose tent footprint crosses the window's edge differ
+    from the full render, and the rest are the same bytes."""
+    full = rm.render(_crop_scene("tent"), integrator="path", spp=4, seed=1, threads=2)
+    crop = rm.render(_crop_scene("tent", **CROP), integrator="path", spp=4, seed=1, threads=2)
+    win = full.image[WINDOW]
+    assert np.array_equal(crop.image[1:-1, 1:-1], win[1:-1, 1:-1])
+    assert not np.array_equal(crop.image[0], win[0])
+
+
+def test_crop_checks_and_sample_border(tmp_path):
+    desc = _crop_scene(**CROP).desc.sensor
+    assert (desc.width, desc.height, desc.crop_x, desc.crop_y, desc.crop_width, desc.crop_height) == \
+        (16, 12, 3, 2, 7, 5)
+    # Mitsuba's defaults: the full film (stored as 0: the full film whatever its size).
+    assert (_crop_scene().desc.sensor.crop_width, _crop_scene(crop_offset_x=0).desc.sensor.crop_width) == (0, 0)
+    with pytest.raises(SceneError, match=r"crop_offset_y \+ crop_height = 2 \+ 11 exceeds the film's height 12"):
+        _crop_scene(crop_offset_y=2, crop_height=11)
+    with pytest.raises(SceneError, match=r"crop_offset_x \+ crop_width = 4 \+ 16 exceeds"):
+        _crop_scene(crop_offset_x=4)  # crop_width defaults to the film's width, as in Mitsuba
+    # sample_border: no border for the box filter (as Mitsuba), refused for the others.
+    a = rm.render(_crop_scene(sample_border=True, **CROP), spp=2, threads=1)
+    b = rm.render(_crop_scene(**CROP), spp=2, threads=1)
+    assert np.array_equal(a.image, b.image)
+    film = ('<sensor type="perspective"><film type="hdrfilm">\n<boolean name="sample_border" value="true"/>'
+            '<rfilter type="gaussian"/></film></sensor>')
+    with pytest.raises(SceneError, match=r"s.xml:3: film 'hdrfilm': sample_border = true with the 'gaussian'"):
+        load_file(_write(tmp_path / "s.xml", _scene("3.0.0", film)))
+
+
+# -- the suite itself -----------------------------------------------------------------
+
+
+@pytest.mark.skipif(not (SUITE / "tests" / "scenes").is_dir(), reason="../shared/peers/mitsuba-data absent")
+def test_suite_scenes_get_past_the_format():
+    """Every scene of Mitsuba's suite now loads or stops at a plugin feature
+    (a SceneError naming it, at a file:line), never at the format: version,
+    <path>, <include>, moment."""
+    from radiometer.benchmarks.studies.mitsuba_suite import survey
+
+    rows = survey(SUITE)
+    assert len(rows) == 41
+    for r in rows:
+        assert not any(w in r["status"] for w in ("<scene>", "<path>", "<include>", "integrator 'moment'",
+                                                  "integrator type 'moment'")), r
+    assert sum(r["status"] == "loads" for r in rows) >= 4
