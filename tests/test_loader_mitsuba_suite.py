@@ -248,7 +248,7 @@ CROP = {"crop_offset_x": 3, "crop_offset_y": 2, "crop_width": 7, "crop_height": 
 WINDOW = (slice(2, 7), slice(3, 10))
 
 
-@pytest.mark.parametrize("integrator", ["path", "ptracer", "bdpt", "sppm"])
+@pytest.mark.parametrize("integrator", ["path", "ptracer", "bdpt", "sppm", "vcm", "bpm", "ppm"])
 def test_crop_is_the_window_of_the_full_render(integrator):
     full = rm.render(_crop_scene(), integrator=integrator, spp=4, seed=3, threads=2)
     crop = rm.render(_crop_scene(**CROP), integrator=integrator, spp=4, seed=3, threads=2)
