@@ -111,7 +111,8 @@ public:
         std::vector<PathVertex>& light = tl_light();
         EmissionSample es;
         const int max_vertices = max_depth_ < 0 ? INT_MAX : max_depth_;
-        VertexVisitor visit = [this, &scene](const std::vector<PathVertex>& p) { return reachable(scene, p); };
+        auto reach = [this, &scene](const std::vector<PathVertex>& p) { return reachable(scene, p); };
+        VertexVisitor visit(reach);
         if (!scene.emitters.empty()) ++stats.paths;
         if (!light_subpath(scene, sampler, max_vertices, rr_depth_, light, es, stats, &visit, false)) return;
         const float inv_pick = 1.f / emitter_pick_prob(scene);

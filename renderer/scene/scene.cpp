@@ -3,9 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <mutex>
 #include <stdexcept>
 #include <string>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 namespace rm {
 
@@ -204,12 +208,30 @@ void Scene::commit() {
     committed_ = true;
 }
 
-static void check_ray(const Ray& ray) {
+static bool ray_in_range(const Ray& ray) {
+#ifdef __SSE2__
+    // The same test on two 4-wide registers (o.x o.y o.z d.x | d.y d.z tmin
+    // tmax), a few instructions per intersection query instead of eight
+    // compare-and-branch pairs; an ordered <= is false for NaN.
+    static_assert(sizeof(Ray) == 8 * sizeof(float), "Ray: o, d, tmin, tmax");
+    float f[8];
+    std::memcpy(f, &ray, sizeof f);
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+    const __m128 a = _mm_and_ps(_mm_loadu_ps(f), abs_mask), b = _mm_and_ps(_mm_loadu_ps(f + 4), abs_mask);
+    const __m128 lim_a = _mm_set1_ps(kEmbreeRayLimit);
+    const __m128 lim_b = _mm_setr_ps(kEmbreeRayLimit, kEmbreeRayLimit, kInf, kInf);
+    return _mm_movemask_ps(_mm_and_ps(_mm_cmple_ps(a, lim_a), _mm_cmple_ps(b, lim_b))) == 0xf;
+#else
     auto ok = [](const Vec3& v) {
         return std::fabs(v.x) <= kEmbreeRayLimit && std::fabs(v.y) <= kEmbreeRayLimit &&
                std::fabs(v.z) <= kEmbreeRayLimit;
     };
-    if (ok(ray.o) && ok(ray.d) && !std::isnan(ray.tmin) && !std::isnan(ray.tmax)) return;
+    return ok(ray.o) && ok(ray.d) && !std::isnan(ray.tmin) && !std::isnan(ray.tmax);
+#endif
+}
+
+static void check_ray(const Ray& ray) {
+    if (ray_in_range(ray)) return;
     char buf[320];
     std::snprintf(buf, sizeof buf,
                   "a ray left what float32 ray tracing can represent (origin (%g, %g, %g), direction (%g, %g, %g); "

@@ -6,7 +6,7 @@
 #include <cmath>
 
 #include "render/parallel.h"
-#include "transport/subpath.h"
+#include "transport/subpath_walk.h"
 
 namespace rm {
 
@@ -50,6 +50,15 @@ struct Item {
     std::vector<uint32_t> path_end;  // photons stored by the item's paths 0..i (cumulative)
 };
 
+// The light walk's vertices, one buffer per thread (its capacity kept
+// from path to path), and one path traced into `out` with it.
+std::vector<PathVertex>& light_scratch() {
+    thread_local std::vector<PathVertex> v;
+    return v;
+}
+void trace_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path, uint64_t pass,
+                std::vector<Photon>& out, ThreadStats& stats, std::vector<PathVertex>& light);
+
 // Traces the paths [g0, g0 + n) in items of kItemPaths; returns false on cancel.
 bool trace_chunk(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass, uint64_t g0, uint64_t n,
                  std::vector<Item>& items, int threads, const std::function<bool()>& poll,
@@ -62,8 +71,9 @@ bool trace_chunk(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed,
         it.photons.clear();
         it.path_end.clear();
         uint64_t a = g0 + i * kItemPaths, b = std::min(g0 + n, a + kItemPaths);
+        std::vector<PathVertex>& light = light_scratch();
         for (uint64_t g = a; g < b; ++g) {
-            trace_photon_path(scene, spec, seed, g, pass, it.photons, tstats[t]);
+            trace_path(scene, spec, seed, g, pass, it.photons, tstats[t], light);
             it.path_end.push_back(uint32_t(it.photons.size()));
         }
     };
@@ -161,18 +171,21 @@ private:
     uint32_t medium_flags_ = 0;  // kPhotonVolumePath / kPhotonSubsurfacePath once the path scattered in a medium
 };
 
+void trace_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path, uint64_t pass,
+                std::vector<Photon>& out, ThreadStats& stats, std::vector<PathVertex>& light) {
+    Sampler sampler(mix64(seed + 0x70686f746f6eULL + spec.stream), path, pass);
+    PhotonStore store(spec, out, stats);
+    // A photon of depth d is vertex y_d: max_depth segments are max_depth + 1 vertices.
+    const int max_vertices = spec.max_depth < 0 ? INT_MAX : spec.max_depth + 1;
+    EmissionSample es;
+    light_subpath_with(scene, sampler, max_vertices, spec.rr_depth, light, es, stats, store, false);
+}
+
 }  // namespace
 
 void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path, uint64_t pass,
                        std::vector<Photon>& out, ThreadStats& stats) {
-    Sampler sampler(mix64(seed + 0x70686f746f6eULL + spec.stream), path, pass);
-    thread_local std::vector<PathVertex> light;
-    PhotonStore store(spec, out, stats);
-    VertexVisitor visit = [&store](const std::vector<PathVertex>& p) { return store(p); };
-    // A photon of depth d is vertex y_d: max_depth segments are max_depth + 1 vertices.
-    const int max_vertices = spec.max_depth < 0 ? INT_MAX : spec.max_depth + 1;
-    EmissionSample es;
-    light_subpath(scene, sampler, max_vertices, spec.rr_depth, light, es, stats, &visit, false);
+    trace_path(scene, spec, seed, path, pass, out, stats, light_scratch());
 }
 
 uint64_t photon_path_bound(uint64_t target) {

@@ -7,7 +7,7 @@
 // area densities of bidirectional MIS, the t = 1 connection to the sensor
 // and the effect class of a strategy's vertex string.
 #pragma once
-#include <functional>
+#include <type_traits>
 #include <vector>
 
 #include "transport/common.h"
@@ -90,8 +90,21 @@ float nee_over_emission(const Scene& scene, const PathVertex& y0, const PathVert
 // estimator does with the vertices of its walk as they come (photon
 // storage into the maps, photon_trace.cpp; a light tracer's check that a
 // requested class can still follow, ptracer.cpp). Returns false to end
-// the walk at that vertex.
-using VertexVisitor = std::function<bool(const std::vector<PathVertex>&)>;
+// the walk at that vertex. A non-owning reference to the estimator's
+// callable (a function_ref: one indirect call per vertex, no allocation or
+// type-erased copy); it binds only to a named object, which must outlive it.
+class VertexVisitor {
+public:
+    template <class F, class = std::enable_if_t<!std::is_same_v<std::remove_cv_t<F>, VertexVisitor>>>
+    explicit VertexVisitor(F& f)
+        : obj_(const_cast<void*>(static_cast<const void*>(&f))),
+          call_([](void* o, const std::vector<PathVertex>& p) { return bool((*static_cast<F*>(o))(p)); }) {}
+    bool operator()(const std::vector<PathVertex>& p) const { return call_(obj_, p); }
+
+private:
+    void* obj_;
+    bool (*call_)(void*, const std::vector<PathVertex>&);
+};
 
 // Extends `path` (its start vertex, the camera or the light, already in it)
 // from `ray` with throughput `beta`, up to max_vertices vertices in all.
