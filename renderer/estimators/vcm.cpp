@@ -444,11 +444,12 @@ private:
     void light_path(const Scene& scene, const VcmWeights& w, Sampler& sampler, std::vector<PathVertex>& light,
                     std::vector<VcmMis>& rec, ThreadStats& stats) const {
         rec.clear();
-        const VertexVisitor visit = [&](const std::vector<PathVertex>& p) {
+        auto update = [&](const std::vector<PathVertex>& p) {
             rec.resize(p.size());
             w.light_update(scene, p.data(), int(p.size()) - 1, rec.data());
             return true;
         };
+        const VertexVisitor visit(update);
         EmissionSample es;
         int max_light = max_depth_ < 0 ? INT_MAX : max_depth_;  // y0 .. y_{max_depth - 1}
         if (!light_subpath(scene, sampler, max_light, rr_depth_, light, es, stats, &visit)) {
@@ -475,10 +476,11 @@ private:
         cam.push_back(z0);
         int max_cam = max_depth_ < 0 ? INT_MAX : max_depth_ + 1;
         if (mode_ == Mode::Ppm) {
-            const VertexVisitor stop = [](const std::vector<PathVertex>& p) {
+            auto at_smooth = [](const std::vector<PathVertex>& p) {
                 const PathVertex& v = p.back();
                 return !(v.type == VType::Surface && v.bsdf->has_smooth());
             };
+            const VertexVisitor stop(at_smooth);
             random_walk(scene, sampler, sr.ray, sr.weight, TransportMode::Radiance, max_cam, rr_depth_, cam, stats,
                         &stop);
         } else {
