@@ -15,8 +15,10 @@ import radiometer as rm
 #     the tests' own sample sets),
 #   * the core Scene's seeded test hooks (trace_photons,
 #     medium_transmittance_samples).
-# It does not reach renders in a subprocess (the CLI tests: bytes and
-# messages, nothing statistical), hypothesis's examples (its own database and
+# It does not reach renders in a subprocess: the CLI tests (bytes and
+# messages, nothing statistical) and the bench harness's spawned workers
+# (a test that compares an in-process render with theirs asks for
+# `seeds_as_written`). Nor hypothesis's examples (its own database and
 # seed; the fuzz tests assert "clean error or valid scene", nothing
 # statistical) or the stored references (Mitsuba's EXRs: fixed data).
 SEED_OFFSET = int(os.environ.get("RADIOMETER_SEED_OFFSET", "0") or 0)
@@ -55,6 +57,12 @@ if SEED_OFFSET:
         return _default_rng(reroll(seed))
 
     np.random.default_rng = _rerolled_rng
+
+
+@pytest.fixture
+def seeds_as_written(monkeypatch):
+    """rm.render with the seeds as written, whatever RADIOMETER_SEED_OFFSET is."""
+    monkeypatch.setattr(rm, "render", getattr(rm.render, "__wrapped__", rm.render))
 
 
 # Two-stage rule. The suite runs hundreds of statistical tests, each at its

@@ -132,8 +132,10 @@ def test_smoke_run_records_every_job(smoke):
     assert cb["reference"]["kind"] == "mitsuba" and cb["metrics"]["relmse_floor"] > 0
 
 
-def test_same_seed_same_metrics(smoke):
-    """A job is deterministic: its seed fixes the image bit for bit."""
+def test_same_seed_same_metrics(smoke, seeds_as_written):
+    """A job is deterministic: its seed fixes the image bit for bit. (The
+    smoke run's jobs render in spawned workers, which see the seeds as
+    written under RADIOMETER_SEED_OFFSET too, so this rerun does.)"""
     root, run_id, recs = smoke
     rec = next(r for r in recs if r["scene"] == "area_lights_disk" and r["estimator"] == "path")
     job = {k: rec[k] for k in ("scene", "estimator", "integrator", "scene_params", "budget", "seed", "threads",
