@@ -82,13 +82,17 @@ SURFACE = {
 # -2.4 shrinking with budget: skew, not bias); 16 x 16 blocks (256 pixels x
 # 1024 samples each) pass 3 of 3 and see a 2 % bias in 2 of 3 seeds (the
 # reference's own noise, 10 % per pixel, limits what any budget can see).
+# Its power check is therefore 10 %: under fresh seed offsets 0-2 the mean z
+# at 1.0 ran from -1.94 to +0.51 and moved by -0.67 per 1 % of bias, so 2 %
+# was missed under 2 of 3 (5 % under 1 of 3) and 10 % is about 5 standard
+# units beyond the level (3.26) at the worst of them.
 MEDIA_CI = {
     "homogeneous_slab": {"spp": 512, "k": 4, "power": 1.01},
     "fog_room": {"spp": 1024, "k": 4, "power": 1.01},
     "vandehulst_slab": {"spp": 1 << 18, "k": 1, "power": 1.02},
     "translucent_slab": {"spp": 512, "k": 4, "power": 1.01},
     "translucent_object": {"spp": 512, "k": 4, "power": 1.01},
-    "volumetric_caustic": {"spp": 1024, "k": 16, "power": 1.02},
+    "volumetric_caustic": {"spp": 1024, "k": 16, "power": 1.10},
 }
 MEDIA = list(MEDIA_CI)
 
