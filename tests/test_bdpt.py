@@ -156,10 +156,13 @@ NO_CAUSTIC = ["emission", "direct", "indirect", "specular"]
 
 def test_area_light_mirror_ball_matches_path():
     """A mirror ball in view: the specular class (L .. S E) comes from
-    camera-side strategies only (s = 0, s = 1 and connections behind the mirror)."""
+    camera-side strategies only (s = 0, s = 1 and connections behind the mirror).
+    The specular class to 10 %: no variance is reported per class, and under
+    fresh seed offsets 1, 3, 4 its ratio bdpt / path was 0.967, 1.032, 1.036
+    (a spread of about 3 %; the 3 % once allowed failed 3 of 4 offsets)."""
     a, b = compare_with_path(small_scene(AREA, extra=MIRROR_BALL), 512, 512, where="area light + mirror ball",
                              effects=NO_CAUSTIC)
-    assert b.effects["specular"].mean() == pytest.approx(a.effects["specular"].mean(), rel=0.03)
+    assert b.effects["specular"].mean() == pytest.approx(a.effects["specular"].mean(), rel=0.10)
 
 
 def test_area_light_rough_glass_plastic_match_path():

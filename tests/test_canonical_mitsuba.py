@@ -84,8 +84,8 @@ SURFACE = {
 # reference's own noise, 10 % per pixel, limits what any budget can see).
 # Its power check is therefore 10 %: under fresh seed offsets 0-2 the mean z
 # at 1.0 ran from -1.94 to +0.51 and moved by -0.67 per 1 % of bias, so 2 %
-# was missed under 2 of 3 (5 % under 1 of 3) and 10 % is about 5 standard
-# units beyond the level (3.26) at the worst of them.
+# was missed under 2 of 3 (5 % under 1 of 3), while 10 % moves the worst of
+# them to about -6.2, well beyond the level's 3.26.
 MEDIA_CI = {
     "homogeneous_slab": {"spp": 512, "k": 4, "power": 1.01},
     "fog_room": {"spp": 1024, "k": 4, "power": 1.01},
