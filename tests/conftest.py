@@ -68,7 +68,7 @@ def seeds_as_written(monkeypatch):
 # Two-stage rule. The suite runs hundreds of statistical tests, each at its
 # own level (mostly alpha = 0.01 per test, or per family, as each file states),
 # so under fresh noise some test rejects by chance in most runs (measured:
-# docs/testing.md). A test item that fails with an AssertionError (in its
+# docs/false_alarms.md). A test item that fails with an AssertionError (in its
 # set-up or its body) is rerun, alone, in a fresh process under
 # CONFIRM_RUNS independent seed offsets (confirm_offset); it fails only if
 # every rerun fails too, and passes (with a note in the report) if one passes.

@@ -63,7 +63,9 @@ UNBIASED = {
     ("ptracer", "cornell_box"): (16, POWER),
     ("path", "glass_sphere_caustic"): (16, POWER),
     ("bdpt", "glass_sphere_caustic"): (16, POWER),
-    ("ptracer", "glass_sphere_caustic"): (16, 1.3),  # 20 %: t -5.8 to -7.1 (32 spp: -7.2)
+    # 20 %: t -5.8 to -7.1 (32 spp: -7.2); 30 %: t -7.0 and -7.4 under seed
+    # offsets 1 and 5, missed against the level (t about -7.3) in both.
+    ("ptracer", "glass_sphere_caustic"): (16, 1.5),
     ("path", "veach_mis"): (16, POWER),
     ("bdpt", "veach_mis"): (8, POWER),
     ("ptracer", "veach_mis"): (16, 1.2),  # 10 %: t > -6.6
