@@ -154,9 +154,15 @@ def pytest_runtest_protocol(item, nextitem):
     return True
 
 
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item, call):
+    rep = yield
+    rep.assertion_failed = call.excinfo is not None and call.excinfo.errisinstance(AssertionError)
+    return rep
+
+
 def _is_assertion(rep) -> bool:
-    crash = getattr(rep.longrepr, "reprcrash", None)
-    return crash is not None and crash.message.startswith("AssertionError")
+    return rep.failed and getattr(rep, "assertion_failed", False)
 
 
 def _first_line(rep) -> str:
