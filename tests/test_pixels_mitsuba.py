@@ -96,7 +96,13 @@ UNBIASED = {
 PM = {"global_photons": 20000, "caustic_photons": 20000, "gather_rays": 4}
 BIASED = {
     ("photonmapper", "cornell_box"): (2, PM, 1.5),
-    ("sppm", "cornell_box"): (8, {"photon_count": 10000}, 1.5),
+    # 16 passes: at 8 the test failed under 4 of 10 fresh seed offsets (1, 6,
+    # 7, 9: one pixel each, t -8.0 to -10.7, mostly the blue channel of the
+    # dark corner at rows 50-59, columns 45-47, where few photons land and
+    # the seeds' mean was 0.32 to 0.40 of the reference); at 16 under 1 of
+    # those 4 (offset 9, t -9.9 at (50, 47), ratio 0.40), the 50 % power
+    # check rejected in all 4.
+    ("sppm", "cornell_box"): (16, {"photon_count": 10000}, 1.5),
     ("photonmapper", "glass_sphere_caustic"): (2, PM, 1.5),
     ("sppm", "glass_sphere_caustic"): (8, {"photon_count": 10000}, 1.5),
 }
