@@ -246,10 +246,10 @@ def test_grid_medium_matches_homogeneous_volpath(tmp_path):
 #   while the image means pooled over 8 seeds x 1024 spp at 16 x 16 are
 #   0.994 / 0.997 / 0.997 of the reference (standard error 0.4 %; our
 #   volpath 0.999 / 0.998 / 0.993): a heavy tail, no bias measured. Its
-#   power check is 4 %: under fresh seed offsets 0-5 its mean z at 1.0 ran
-#   from +1.3 to -3.7 (the strongest channel), so 2 % was missed under 2 of
-#   6 (mean z -2.2, -3.1 against the level's 3.26), 4 % rejected under all
-#   (mean z -4.4 to -8.4).
+#   power check is 5 %: under fresh seed offsets 0-15 the 2 % check was
+#   missed under 10 of 16 (the strongest channel's mean z -1.3 to -3.2,
+#   against the level's 3.26), and each 1 % moves mean z by about -0.9, so
+#   5 % takes the weakest of them to about -4.0.
 # - fog_room: 7 % (seeds 1-4 at 64 spp: mean z +0.5 to +0.9 against the
 #   reference, -2.95 to -3.33 against it x 1.05, where the channel's
 #   mean-z level is |z| > 3.26: 5 % was rejected on 2 of 4 seeds).
@@ -260,7 +260,7 @@ MITSUBA = {
     "fog_room": {"spp": 64, "k": 4, "power": 1.07},
     "homogeneous_slab": {"spp": 64, "k": 4, "power": 1.02},
     "translucent_object": {"spp": 64, "k": 4, "power": 1.03},
-    "translucent_slab": {"spp": 64, "k": 8, "power": 1.04},
+    "translucent_slab": {"spp": 64, "k": 8, "power": 1.05},
     "volumetric_caustic": {"spp": 256, "k": 8, "power": 1.10},
 }
 
