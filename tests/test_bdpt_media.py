@@ -247,7 +247,7 @@ def test_grid_medium_matches_homogeneous_volpath(tmp_path):
 #   0.994 / 0.997 / 0.997 of the reference (standard error 0.4 %; our
 #   volpath 0.999 / 0.998 / 0.993): a heavy tail, no bias measured. Its
 #   power check is 5 %: under fresh seed offsets 0-15 the 2 % check was
-#   missed under 10 of 16 (the strongest channel's mean z -1.3 to -3.2,
+#   missed under 9 of 16 (the strongest channel's mean z -1.3 to -3.2,
 #   against the level's 3.26), and each 1 % moves mean z by about -0.9, so
 #   5 % takes the weakest of them to about -4.0.
 # - fog_room: 7 % (seeds 1-4 at 64 spp: mean z +0.5 to +0.9 against the
