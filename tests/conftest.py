@@ -74,9 +74,10 @@ def seeds_as_written(monkeypatch):
 # every rerun fails too, and passes (with a note in the report) if one passes.
 # A test whose chance of rejecting under H0 is p (<= its stated level when
 # the level is right) then fails by chance with probability p^(1 +
-# CONFIRM_RUNS): with p = 0.01 that is 1e-6 per item, 1e-3 over the ~1,000
-# statistical items, so the suite's family-wise false-alarm rate is well
-# under 1 % even where a test's true p is a few times its nominal level. A real
+# CONFIRM_RUNS): with p = 0.01 that is 1e-6 per item, 5e-4 over the ~550
+# items that run a hypothesis test (docs/false_alarms.md), so the suite's
+# family-wise false-alarm rate stays under 1 % while every item's true p is
+# below about 0.1 (p^3 = 1e-3). A real
 # error that a test rejects with probability q (its power) still fails it
 # with probability q^(1 + CONFIRM_RUNS): each power check (a small injected
 # error, deterministic under the seeds written) is unchanged. The reruns cost
