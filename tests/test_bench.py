@@ -132,8 +132,10 @@ def test_smoke_run_records_every_job(smoke):
     assert cb["reference"]["kind"] == "mitsuba" and cb["metrics"]["relmse_floor"] > 0
 
 
-def test_same_seed_same_metrics(smoke):
-    """A job is deterministic: its seed fixes the image bit for bit."""
+def test_same_seed_same_metrics(smoke, seeds_as_written):
+    """A job is deterministic: its seed fixes the image bit for bit. (The
+    smoke run's jobs render in spawned workers, which see the seeds as
+    written under RADIOMETER_SEED_OFFSET too, so this rerun does.)"""
     root, run_id, recs = smoke
     rec = next(r for r in recs if r["scene"] == "area_lights_disk" and r["estimator"] == "path")
     job = {k: rec[k] for k in ("scene", "estimator", "integrator", "scene_params", "budget", "seed", "threads",
@@ -321,29 +323,77 @@ def test_chromium_check_catches_a_broken_page(tmp_path):
 # -- per-effect references ----------------------------------------------------------
 
 
-def test_effect_reference_is_used_only_when_its_total_passes(tmp_path, smoke):
+# The bias injected into a per-effect reference to test its rejection path.
+EFFECT_REF_BIAS = 1.03
+
+
+def test_effect_reference_is_used_only_when_its_total_passes(tmp_path, smoke, monkeypatch):
     """A per-effect reference of a Mitsuba-referenced scene is our path
     tracer's run; it is used only if its total passes the z-test against
-    Mitsuba. 512 spp of the glass sphere (seeded, so the same image every
-    time) passes; the smoke matrix's 16 spp Cornell box does not (its
-    heavy-tailed pixels at 16 spp are off by more than their own variance
-    says), so the smoke run's Cornell jobs have no per-effect metrics."""
+    Mitsuba. 512 spp of the glass sphere passes and is used. The rejection
+    path is tested with a known error, not with noise: the same render with
+    its total (image, every effect layer) scaled by EFFECT_REF_BIAS (3 %,
+    the variance by its square) must fail the z-test, stay on disk with
+    accepted = 0, and leave the scene's jobs without a per-effect reference,
+    the failed z-test named as the reason. The smoke run's Cornell box jobs
+    follow their 16 spp reference's verdict, whichever it is (a chance
+    outcome at that budget)."""
+    import dataclasses
+
     import numpy as np
 
     import radiometer as rm
     from radiometer.benchmarks import effect_refs
+    from radiometer.benchmarks.matrix import Job
     from radiometer.reference_scenes import registry as scenes
 
-    spec = scenes.get("glass_sphere_caustic")
-    out = tmp_path / "glass.exr"
-    meta = effect_refs.make("glass_sphere_caustic", dict(spec.fixed_params), 512, out, threads=1)
+    scene = "glass_sphere_caustic"
+    params = dict(scenes.get(scene).fixed_params)
+    renders = []
+    render = rm.render
+
+    def kept(*args, **kwargs):
+        renders.append(render(*args, **kwargs))
+        return renders[-1]
+
+    def biased(*args, **kwargs):  # the render above, its total EFFECT_REF_BIAS too bright
+        r, f = renders[0], EFFECT_REF_BIAS
+        return dataclasses.replace(r, image=r.image * f, variance=r.variance * f * f,
+                                   effects={k: v * f for k, v in r.effects.items()})
+
+    def job():
+        return Job(scene, "path", {"type": "path"}, params, {"spp": 4}, 0, 1)
+
+    good, bad = tmp_path / "good", tmp_path / "bad"
+    monkeypatch.setattr(rm, "render", kept)
+    meta = effect_refs.make(scene, params, 512, effect_refs.ref_path(good, scene, params, 512), threads=1)
     assert meta["accepted"] == 1, meta["ztest"]
-    e = rm.read_exr(out)
+    e = rm.read_exr(effect_refs.ref_path(good, scene, params, 512))
     assert e.effects["caustic"].max() > 0
     np.testing.assert_allclose(sum(e.effects.values()), e.image, rtol=1e-4, atol=1e-6)
+    monkeypatch.setattr(rm, "render", biased)
+    meta = effect_refs.make(scene, params, 512, effect_refs.ref_path(bad, scene, params, 512), threads=1)
+    missed = f"a {EFFECT_REF_BIAS - 1:.0%} bias in the reference went undetected:\n"
+    assert meta["accepted"] == 0, missed + meta["ztest"]
+    assert "FAIL" in meta["ztest"]
+    monkeypatch.setattr(rm, "render", render)
+    # ensure() takes both from its cache (no render) and uses only the one that passed.
+    j_good, j_bad = job(), job()
+    notes = effect_refs.ensure(good, [j_good], spp_override=512, log=lambda *a: None)
+    assert j_good.effect_ref == str(effect_refs.ref_path(good, scene, params, 512)) and j_good.effect_note is None
+    assert "passed" in notes[scene]
+    notes = effect_refs.ensure(bad, [j_bad], spp_override=512, log=lambda *a: None)
+    assert j_bad.effect_ref is None and "failed the z-test" in j_bad.effect_note
+    assert "rejected" in notes[scene] and "FAIL" in notes[scene]
+    assert len(renders) == 1
     root, run_id, recs = smoke
-    for r in recs:
-        if r["scene"] == "cornell_box":
-            assert r["effect_metrics"] == {} and "failed the z-test" in r["reference"]["effects"]
     refs = list((root / "refs").glob("cornell_box-*.exr"))
-    assert len(refs) == 1 and int(rm.read_exr(refs[0]).metadata["accepted"]) == 0
+    assert len(refs) == 1
+    accepted = int(rm.read_exr(refs[0]).metadata["accepted"])
+    cornell = [r for r in recs if r["scene"] == "cornell_box"]
+    assert cornell
+    for r in cornell:
+        if accepted:
+            assert r["effect_metrics"] and "passed" in r["reference"]["effects"], r["reference"]
+        else:
+            assert r["effect_metrics"] == {} and "failed the z-test" in r["reference"]["effects"], r["reference"]

@@ -20,9 +20,14 @@ def test_exr_round_trip_keeps_every_layer_and_metadata(tmp_path, small_cornell):
     for k in rm.EFFECTS:
         np.testing.assert_array_equal(back.effects[k], res.effects[k])
     assert back.metadata["spp"] == 4
-    assert back.metadata["seed"] == 3
+    assert back.metadata["seed"] == res.seed  # 3, or what RADIOMETER_SEED_OFFSET made of it
     assert back.metadata["seconds"] == pytest.approx(res.seconds, rel=0, abs=0)
     assert back.metadata["scene"] == "cornell"
+    # OpenEXR's header ints are 32-bit; a seed goes up to 2^64 and comes back exact.
+    wide = tmp_path / "wide.exr"
+    rm.write_exr(wide, res, seed=(1 << 64) - 1, small=-(1 << 31))
+    assert rm.read_exr(wide).metadata["seed"] == (1 << 64) - 1
+    assert rm.read_exr(wide).metadata["small"] == -(1 << 31)
     assert '"type": "path"' in back.metadata["integrator"]
 
 

@@ -144,6 +144,13 @@ MITSUBA = {
     # of the reference at 64 spp, 0.984 at 128), and path on
     # volumetric_caustic passes 3 % (image mean 1.0016) and rejects only 5 %
     # (the 2 of 3 seeds above). Both are sized at the edge of their budgets.
+    # Power checks sized under fresh noise (seed offsets, docs/false_alarms.md):
+    # path on translucent_slab 2 % (1 % was missed under offset 2 and both
+    # its reruns: the strongest channel's mean z -2.98 against 3.26; 2 %
+    # reaches -5.8 to -8.6); bdpt on translucent_slab 5 % (2 % was missed
+    # under 9 of offsets 0-15; each 1 % moves mean z by about -0.9);
+    # path on volumetric_caustic 10 % (mean z at 1.0 from -1.94 to +0.51
+    # under offsets 0-2, -0.67 per 1 %: 2 % was missed under 2 of 3).
     # ptracer (the registry's exclusions: the torus of translucent_object
     # and the glass sphere of volumetric_caustic, each seen only through a
     # smooth boundary): volumetric_caustic's reference noise allows 5 % at
@@ -153,11 +160,11 @@ MITSUBA = {
     "homogeneous_slab": {"spp": 512, "k": 4, "power": 1.01},
     "fog_room": {"spp": 1024, "k": 4, "power": 1.01,
                  "per": {"bdpt": {"spp": 64, "power": 1.07}, "ptracer": {"spp": 512, "power": 1.02}}},
-    "translucent_slab": {"spp": 512, "k": 4, "power": 1.01, "seed": 1,
-                         "per": {"bdpt": {"spp": 64, "k": 8, "power": 1.02}}},
+    "translucent_slab": {"spp": 512, "k": 4, "power": 1.02, "seed": 1,
+                         "per": {"bdpt": {"spp": 64, "k": 8, "power": 1.05}}},
     "translucent_object": {"spp": 512, "k": 4, "power": 1.01,
                            "per": {"bdpt": {"spp": 64, "power": 1.03}, "ptracer": {"spp": 1024, "power": 1.02}}},
-    "volumetric_caustic": {"spp": 1024, "k": 16, "power": 1.02, "seed": 1,
+    "volumetric_caustic": {"spp": 1024, "k": 16, "power": 1.10, "seed": 1,
                            "per": {"bdpt": {"spp": 256, "k": 8, "power": 1.10},
                                    "ptracer": {"spp": 1024, "k": 8, "power": 1.05}}},
     # One pixel (an irradiance meter): a plain z-test, 2^18 samples (at that

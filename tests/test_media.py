@@ -238,7 +238,10 @@ def test_beer_lambert_reference_scene():
         n = img.shape[0] * img.shape[1]
         mean = img.mean(axis=(0, 1)).astype(np.float64)
         se = np.sqrt(var.sum(axis=(0, 1), dtype=np.float64)) / n
-        for scale, must_pass in ((1.0, True), (1.01, False)):
+        # Power: 1 %, 2 % behind tau 2, where 1024 samples of p = exp(-2)
+        # resolve 0.34 % (1 % is 2.9 standard errors, against the level's
+        # 2.93: missed under seed offset 1, mean z 2.74).
+        for scale, must_pass in ((1.0, True), (1.02 if tau >= 2 else 1.01, False)):
             p = 2 * norm.sf(np.abs(mean - scale * math.exp(-tau)) / se)
             assert bool(np.all(p >= ALPHA / 3)) == must_pass, (
                 f"tau {tau}: box mean {mean} +- {se} vs {scale} x exp(-tau) = {scale * math.exp(-tau):.5f}")

@@ -251,10 +251,13 @@ def test_sppm_error_and_bias_fall_along_the_curve(name, photon_count):
     32 x 32 for the Cornell box and 64 x 64 for the caustic scene, against
     Mitsuba's reference, downsampled 2x2 where needed with the box filter
     both share... the Cornell box's Gaussian filter differs at 32, so its
-    reference is our own `path` at 32 x 32): the RMS error of single
-    renders falls strictly at each step, and the bias (the seeds' mean
-    image against the reference, RMS over 8x8 blocks) falls from 4 to 64
-    passes."""
+    reference is our own `path` at 32 x 32): the mean absolute error of
+    single renders falls strictly at each step, and the bias (the seeds'
+    mean image against the reference, RMS over 8x8 blocks) falls from 4 to
+    64 passes. Mean absolute, not RMS: the caustic scene's RMS is carried by
+    a few fireflies and rose from one step to the next under 3 of 5 fresh
+    seed offsets (0.087, 0.101, 0.082; 0.100, 0.199, 0.098; ...), while its
+    mean absolute error fell by at least 25 % per step under all 5."""
     spec = registry.get(name)
     max_depth = registry.max_depth(spec)
     res_px = 32 if name == "cornell_box" else 64
@@ -270,10 +273,10 @@ def test_sppm_error_and_bias_fall_along_the_curve(name, photon_count):
         r = rm.render(scene, integrator={"type": "sppm", "max_depth": max_depth, "photon_count": photon_count},
                       spp=64, seed=s, checkpoints=cps)
         runs.append([np.asarray(c[2], np.float64) for c in r.checkpoints])
-    err = [np.mean([np.sqrt(((run[i] - ref) ** 2).mean()) for run in runs]) for i in range(3)]
+    err = [np.mean([np.abs(run[i] - ref).mean() for run in runs]) for i in range(3)]
     bias = [np.sqrt(((blocks(np.mean([run[i] for run in runs], 0), 8) - blocks(ref, 8)) ** 2).mean())
             for i in range(3)]
-    assert err[0] > err[1] > err[2], f"{name}: RMS error along 4, 16, 64 passes: {err}"
+    assert err[0] > err[1] > err[2], f"{name}: mean absolute error along 4, 16, 64 passes: {err}"
     assert bias[2] < bias[0], f"{name}: bias along 4, 16, 64 passes: {bias}"
 
 

@@ -62,7 +62,9 @@ UNBIASED = {
     ("ptracer", "cornell_box"): (16, POWER),
     ("path", "glass_sphere_caustic"): (16, POWER),
     ("bdpt", "glass_sphere_caustic"): (16, POWER),
-    ("ptracer", "glass_sphere_caustic"): (16, 1.3),  # 20 %: t -5.8 to -7.1 (32 spp: -7.2)
+    # 20 %: t -5.8 to -7.1 (32 spp: -7.2); 30 %: t -7.0 and -7.4 under seed
+    # offsets 1 and 5, missed against the level (t about -7.3) in both.
+    ("ptracer", "glass_sphere_caustic"): (16, 1.5),
     ("path", "veach_mis"): (16, POWER),
     ("bdpt", "veach_mis"): (8, POWER),
     ("ptracer", "veach_mis"): (16, 1.2),  # 10 %: t > -6.6
@@ -93,7 +95,13 @@ UNBIASED = {
 PM = {"global_photons": 20000, "caustic_photons": 20000, "gather_rays": 4}
 BIASED = {
     ("photonmapper", "cornell_box"): (2, PM, 1.5),
-    ("sppm", "cornell_box"): (8, {"photon_count": 10000}, 1.5),
+    # 16 passes: at 8 the test failed under 4 of 10 fresh seed offsets (1, 6,
+    # 7, 9: one pixel each, t -8.0 to -10.7, mostly the blue channel of the
+    # dark corner at rows 50-59, columns 45-47, where few photons land and
+    # the seeds' mean was 0.32 to 0.40 of the reference); at 16 under 1 of
+    # those 4 (offset 9, t -9.9 at (50, 47), ratio 0.40), the 50 % power
+    # check rejected in all 4.
+    ("sppm", "cornell_box"): (16, {"photon_count": 10000}, 1.5),
     ("photonmapper", "glass_sphere_caustic"): (2, PM, 1.5),
     ("sppm", "glass_sphere_caustic"): (8, {"photon_count": 10000}, 1.5),
 }

@@ -107,6 +107,9 @@ def write_exr(path, result=None, *, image=None, variance=None, effects=None, lay
         if isinstance(v, float):
             # OpenEXR header floats are single precision: keep doubles exact as text.
             v = repr(v)
+        if isinstance(v, int) and not -(1 << 31) <= v < 1 << 31:
+            # OpenEXR header ints are 32-bit (a seed goes up to 2^64): keep wider ones exact as text.
+            v = str(v)
         if not isinstance(v, (str, int)):
             v = json.dumps(v)
         header[_META_PREFIX + k] = v
@@ -167,9 +170,12 @@ def read_exr(path) -> ExrImage:
         if isinstance(k, str) and k.startswith(_META_PREFIX):
             key = k[len(_META_PREFIX):]
             if isinstance(v, str):
-                try:  # floats were stored as their repr, to keep double precision
-                    v = float(v)
-                except ValueError:
-                    pass
+                # ints wider than 32 bits and floats were stored as text, to keep them exact
+                for kind in (int, float):
+                    try:
+                        v = kind(v)
+                        break
+                    except ValueError:
+                        pass
             out.metadata[key] = v
     return out
