@@ -26,7 +26,11 @@ std::unique_ptr<Integrator> make_path(ParamReader& p);
 [[maybe_unused]] const bool kRegistered = register_estimator([] {
     EstimatorInfo e;
     e.name = "path";
-    e.aliases = {"volpath"};
+    // Mitsuba 3's `volpathmis` is its volumetric path tracer with spectral
+    // MIS (Miller, Georgiev and Jarosz 2019), which volpath.cpp's loop is
+    // too (hero channel, one-sample balance heuristic over the channels),
+    // with the same parameters (max_depth, rr_depth, hide_emitters).
+    e.aliases = {"volpath", "volpathmis"};
     e.doc =
         "unidirectional path tracing with next event estimation and MIS (Kajiya 1986; Veach 1997, ch. 9); "
         "media through volpath's loop";
