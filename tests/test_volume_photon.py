@@ -201,47 +201,70 @@ def _rms(e):
 #                    1000: -5.8 +- 6.3 % / -3.1 +- 1.1 %
 #                   16000: -2.1 +- 1.7 % / -1.3 +- 1.3 %
 #                  128000: -1.5 +- 1.5 % / -0.9 +- 0.9 %
-# RMS over seeds and halves 6.5 %, 2.3 %, 1.8 % (10.3 % against a reference
-# 10 % too bright). The bottom half (the floor's lit disc and the fog above
-# it) shows the bias itself: negative (the estimate's sphere reaches past
-# the floor and walls, where no fog is, and blurs the lit cone) and
-# shrinking.
+# The bottom half (the floor's lit disc and the fog above it) shows the
+# bias itself: negative (the estimate's sphere reaches past the floor and
+# walls, where no fog is, and blurs the lit cone) and shrinking.
+# The camera pass's own noise is heavy-tailed (light sampling of the spot
+# light from fog right beside it: a 1 / d^2 tail), and the same for every
+# map size with the same seed: over seeds 0-17, seed 15's bottom half is
+# +46 to +49 % at every budget and seed 5's top +13 to +14 % at 16000 and
+# 128000 photons. An RMS over 3 seeds (the test's statistic before) was
+# 1.8 % at 128000 photons for seeds 0-2 but 5.2 % and 8.3 % under fresh
+# seed offsets 2 and 3. So the statistic is the median over 6 seeds and both
+# halves of |relative error|, which such spikes do not move: at 128000
+# photons 2.0 / 2.0 / 1.2 % for seeds 0-5 / 6-11 / 12-17, at 1000 photons
+# 4.5 / 8 / 5.2 %; against a reference 10 % too bright about 8 %.
 FOG_TOL = 0.04
 FOG_BUDGETS = (1000, 16000, 128000)
+FOG_SEEDS = range(6)
+
+
+def _median_abs(e):
+    return float(np.median(np.abs(e)))
 
 
 def test_fog_room_error_falls_against_mitsuba(fog_mitsuba):
+    """The volume map's error against Mitsuba falls as the map grows, to
+    within FOG_TOL (median |error| over seeds and halves, see above). The
+    bottom half's bias (-3.1 % at 1000 photons, -0.9 % at 128000) is below
+    what 6 seeds at 8 spp resolve under fresh noise, so the test asks for
+    the total error to fall, not the bias alone."""
     scene, ref = fog_mitsuba
-    renders = {n: [rm.render(scene, integrator=_pm(volume_photons=n), spp=8, seed=s) for s in (0, 1, 2)]
+    renders = {n: [rm.render(scene, integrator=_pm(volume_photons=n), spp=8, seed=s) for s in FOG_SEEDS]
                for n in FOG_BUDGETS}
     for rs in renders.values():
         assert_clean(rs[0], "fog_room")
     err = _errors(renders, ref, _halves)
-    rms = {n: _rms(e) for n, e in err.items()}
+    med = {n: _median_abs(e) for n, e in err.items()}
     lo, hi = FOG_BUDGETS[0], FOG_BUDGETS[-1]
-    assert rms[hi] <= FOG_TOL, rms
-    assert rms[lo] > rms[hi], f"the error must fall as the volume map grows: {rms}"
-    bias = {n: float(e[:, 1].mean()) for n, e in err.items()}
-    assert abs(bias[hi]) < abs(bias[lo]), f"the bottom half's bias must shrink: {bias}"
+    assert med[hi] <= FOG_TOL, med
+    assert med[lo] > med[hi], f"the error must fall as the volume map grows: {med}"
     # Power: the same tolerance rejects the estimator without multiple
     # scattering (no volume map) and a reference 10 % too bright.
     none = _errors({0: [rm.render(scene, integrator=_pm(volume_photons=0), spp=8, seed=0)]}, ref, _halves)
-    assert _rms(none[0]) > 5 * FOG_TOL
-    assert _rms(_errors({hi: renders[hi]}, 1.1 * ref, _halves)[hi]) > FOG_TOL
+    assert _median_abs(none[0]) > 5 * FOG_TOL
+    assert _median_abs(_errors({hi: renders[hi]}, 1.1 * ref, _halves)[hi]) > FOG_TOL
 
 
 def test_fog_room_classes_match_volpath(fog_ref):
     """Light that scattered in the fog is filed under `volume`, also when a
     surface photon of the global map carried it (L V D E), as volpath files
-    it: each class's image mean within 6 % of volpath's (measured: direct
-    +0.8 %, indirect +2.6 %, volume +0.7 %)."""
+    it: each class's image mean, the median over 5 seeds, within 8 % of
+    volpath's. Measured over seeds 0-11 (one render each): direct -1.8 to
+    +2.3 %, indirect -11.3 to +7.5 %, volume -3.4 to +7.6 % (the 4096 spp
+    volpath reference's own volume class moves by up to 4.7 % between
+    seeds: the same 1 / d^2 tail as above); medians of seeds 0-4 / 5-9:
+    indirect +2.6 / -1.4 %, volume +0.2 / +5.9 %. Light filed in the
+    wrong class moves two classes by far more: multiple scattering in the
+    fog is 38 to 54 % of the image (the estimator without a volume map,
+    measured above)."""
     scene, ref = fog_ref
-    res = rm.render(scene, integrator=_pm(volume_photons=64000), spp=8, seed=0)
+    rs = [rm.render(scene, integrator=_pm(volume_photons=64000), spp=8, seed=s) for s in range(5)]
     for k in ("direct", "indirect", "volume"):
-        a, b = float(res.effects[k].mean()), float(ref.effects[k].mean())
-        assert abs(a / b - 1) < 0.06, (k, a, b)
+        ratio = float(np.median([float(r.effects[k].mean()) for r in rs])) / float(ref.effects[k].mean())
+        assert abs(ratio - 1) < 0.08, (k, ratio)
     for k in ("caustic", "specular", "subsurface", "emission"):
-        assert not res.effects[k].any(), k
+        assert not any(r.effects[k].any() for r in rs), k
 
 
 def test_fog_room_global_map_seen_directly(fog_mitsuba):
