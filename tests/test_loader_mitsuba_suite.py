@@ -248,8 +248,16 @@ CROP = {"crop_offset_x": 3, "crop_offset_y": 2, "crop_width": 7, "crop_height": 
 WINDOW = (slice(2, 7), slice(3, 10))
 
 
+# Merging-only estimators get enough light paths per iteration that the
+# window is lit whatever the seed (at the default, the pixel count, some
+# seeds left it black under fresh seed offsets: merges are found by chance).
+MERGE_ONLY = {"light_paths": 8192}
+
+
 @pytest.mark.parametrize("integrator", ["path", "ptracer", "bdpt", "sppm", "vcm", "bpm", "ppm"])
 def test_crop_is_the_window_of_the_full_render(integrator):
+    if integrator in ("bpm", "ppm"):
+        integrator = dict(MERGE_ONLY, type=integrator)
     full = rm.render(_crop_scene(), integrator=integrator, spp=4, seed=3, threads=2)
     crop = rm.render(_crop_scene(**CROP), integrator=integrator, spp=4, seed=3, threads=2)
     assert crop.image.shape == (5, 7, 3) and crop.variance.shape == (5, 7, 3)
