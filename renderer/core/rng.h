@@ -41,20 +41,49 @@ inline uint64_t mix64(uint64_t z) {
     return z ^ (z >> 31);
 }
 
-// Sampler: thin wrapper so integrators ask for 1D/2D samples by name.
+// Where sample values come from when they are not the independent PCG
+// stream: a sampler with structure across samples (stratified, Sobol) or
+// Metropolis' primary sample space, whose values are mutated between
+// samples. `dim` counts the values the path has drawn so far (a 2D draw
+// takes two), so a source sees the path's dimensions in the order the
+// estimator consumes them.
+class SampleSource {
+public:
+    virtual ~SampleSource() = default;
+    virtual float get_1d(uint32_t dim) = 0;
+    virtual Vec2 get_2d(uint32_t dim) { return {get_1d(dim), get_1d(dim + 1)}; }
+};
+
+// Sampler: what estimators ask for 1D/2D samples. By default the
+// independent PCG stream of (seed, pixel, sample); given a SampleSource
+// (not owned; it outlives the sampler) the values come from it instead.
+// The independent stream pays one predictable branch per draw for that.
 class Sampler {
 public:
     Sampler(uint64_t seed, uint64_t pixel, uint64_t sample_index)
         : rng_(mix64(seed ^ mix64(sample_index + 0x632be59bd9b4e019ULL)), mix64(pixel + (seed << 1))) {}
-    float next_1d() { return rng_.next_float(); }
+    explicit Sampler(SampleSource* source) : source_(source) {}
+    float next_1d() {
+        if (source_) return source_->get_1d(dim_++);
+        return rng_.next_float();
+    }
     Vec2 next_2d() {
+        if (source_) {
+            Vec2 v = source_->get_2d(dim_);
+            dim_ += 2;
+            return v;
+        }
         float a = rng_.next_float();
         float b = rng_.next_float();
         return {a, b};
     }
+    // Values drawn so far through a source (0 for the independent stream).
+    uint32_t dimension() const { return dim_; }
 
 private:
     Pcg32 rng_;
+    SampleSource* source_ = nullptr;
+    uint32_t dim_ = 0;
 };
 
 }  // namespace rm
