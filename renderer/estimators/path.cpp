@@ -15,6 +15,7 @@
 #include "estimators/volpath.h"
 #include "render/registry.h"
 #include "transport/common.h"
+#include "transport/scatter_origin.h"
 #include "transport/dipole_step.h"
 
 namespace rm {
@@ -70,7 +71,7 @@ public:
         PathClass pc;
         float prev_pdf_w = 0.f;
         bool prev_delta = true;
-        Vec3 prev_p;
+        ScatterOrigin prev;  // the vertex the current ray left (scatter_origin.h)
         BsdfContext ctx;
         for (int depth = 0;; ++depth) {
             // 1. Find the next vertex.
@@ -82,9 +83,11 @@ public:
 
             // 2. Emission reached by the previous BSDF sample (or the camera ray),
             //    weighted against next event estimation unless that sample was delta.
-            if (count_emission && mask[cls])
-                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_p, prev_pdf_w,
-                                    out);
+            if (count_emission && mask[cls]) {
+                float pdf_w = prev_pdf_w;
+                if (hit && !prev_delta && scene.shapes[it.shape]->emitter >= 0) pdf_w = prev.pdf_to(it.p, prev_pdf_w);
+                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev.p, pdf_w, out);
+            }
             if (!hit) break;
             const Shape& shape = *scene.shapes[it.shape];
 
@@ -131,9 +134,8 @@ public:
             if (bsdf->flags() != kNull) pc.push(bs.is_delta);
             prev_pdf_w = bs.pdf_w;
             prev_delta = bs.is_delta;
+            prev.set(it, wi, bsdf);
             ray = it.spawn(it.to_world(bs.wo));
-            // MIS densities of what this ray hits are taken from where it starts.
-            prev_p = ray.o;
 
             // 6. Russian roulette (Mitsuba's rule, common.h).
             if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta) * eta_scale,
