@@ -96,8 +96,8 @@ public:
                 if (!is_black(le)) {
                     // Both densities from it.p, as estimate_direct's (scatter_origin.h).
                     float w = bs.is_delta ? 1.f
-                                          : mis_emission_hit(scene, e, it.p, &hit2, r.d, origin.pdf_to(hit2.p, bs.pdf_w),
-                                                             light_frac_, bsdf_frac_);
+                                          : mis_emission_hit(scene, e, it.p, &hit2, r.d,
+                                                             origin.pdf_to(hit2.p, bs.pdf_w), light_frac_, bsdf_frac_);
                     c += le * w;
                 }
             }

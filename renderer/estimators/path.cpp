@@ -15,8 +15,8 @@
 #include "estimators/volpath.h"
 #include "render/registry.h"
 #include "transport/common.h"
-#include "transport/scatter_origin.h"
 #include "transport/dipole_step.h"
+#include "transport/scatter_origin.h"
 
 namespace rm {
 
