@@ -232,5 +232,24 @@ def render_error_budget(res) -> dict:
     if getattr(res, "effect_variance", None) is not None:
         effects = {e: se(v) for e, v in res.effect_variance.items() if np.any(np.asarray(res.effects[e]) != 0)}
     return {"noise": {"image_mean_se": se(res.variance), "effects_mean_se": effects},
+            "rounding": rounding_term(res),
             "how": {"noise": "standard error of the image mean per channel, sqrt(sum of per-pixel variances) / "
-                             "pixels; per effect from the film's per-effect variances (render(effect_variance=True))"}}
+                             "pixels; per effect from the film's per-effect variances (render(effect_variance=True))",
+                    "rounding": ROUNDING_HOW}}
+
+
+# The film sums samples in float64 and hands the image out in float32; the
+# samples themselves are float32 arithmetic. The first two are bounded here
+# (Higham 2002, sec. 4.2: a recursive sum of n terms is within (n - 1) u of
+# the exact sum of its terms, u = 2^-53, relative to the sum of magnitudes;
+# rounding to float32 is within 2^-24 relative). The third has no useful
+# a-priori bound: tests/test_effect_variance.py measures it on the closed
+# furnace, whose every sample is exact in real arithmetic.
+ROUNDING_HOW = ("relative bounds: float64 accumulation of spp samples per pixel, (spp - 1) 2^-53 (Higham 2002, "
+                "sec. 4.2); float32 image storage 2^-24; the samples' own float32 arithmetic is measured by the "
+                "test suite on the exact furnace (within one float32 ulp of 0.875 at max_depth 3), not bounded")
+
+
+def rounding_term(res) -> dict:
+    spp = max(int(getattr(res, "spp", 0) or 0), 1)
+    return {"accumulation_rel_bound": float((spp - 1) * 2.0 ** -53), "storage_rel_bound": float(2.0 ** -24)}
