@@ -35,6 +35,8 @@ from __future__ import annotations
 
 import math
 
+from typing import Optional
+
 import numpy as np
 
 TERMS = ("noise", "bias", "reference")
@@ -233,7 +235,9 @@ def render_error_budget(res) -> dict:
         effects = {e: se(v) for e, v in res.effect_variance.items() if np.any(np.asarray(res.effects[e]) != 0)}
     return {"noise": {"image_mean_se": se(res.variance), "effects_mean_se": effects},
             "rounding": rounding_term(res),
-            "how": {"noise": "standard error of the image mean per channel, sqrt(sum of per-pixel variances) / "
+            "truncation": truncation_term(res),
+            "how": {"truncation": TRUNCATION_HOW,
+                    "noise": "standard error of the image mean per channel, sqrt(sum of per-pixel variances) / "
                              "pixels; per effect from the film's per-effect variances (render(effect_variance=True))",
                     "rounding": ROUNDING_HOW}}
 
@@ -253,3 +257,40 @@ ROUNDING_HOW = ("relative bounds: float64 accumulation of spp samples per pixel,
 def rounding_term(res) -> dict:
     spp = max(int(getattr(res, "spp", 0) or 0), 1)
     return {"accumulation_rel_bound": float((spp - 1) * 2.0 ** -53), "storage_rel_bound": float(2.0 ** -24)}
+
+
+TRUNCATION_HOW = ("the light max_depth cuts off, per channel, as a mean over the image, estimated in the same render: "
+                  "a fraction truncation_probe of the paths that max_depth stops go on past it with Russian roulette, "
+                  "weighted 1 / fraction, into a tally of their own (the image is unchanged); mean and standard error "
+                  "over the render's camera samples. 0 with an unbounded max_depth; None where the estimator (or "
+                  "its media loop) does not probe")
+
+
+def truncation_term(res) -> Optional[dict]:
+    """The truncation term of res.error_budget: the image mean's missing
+    light (per channel, its standard error, and relative to the image
+    mean), from the render's truncation probe; None where it has none."""
+    from .. import estimators
+
+    spec = dict(getattr(res, "integrator", None) or {})
+    st = getattr(res, "stats", None) or {}
+    params = estimators().get(spec.get("type"), {}).get("params", {})
+    if "truncation_probe" not in params:
+        return None
+
+    def value(name):
+        return spec.get(name, params[name]["default"]) if name in params else None
+
+    if value("max_depth") == -1:
+        return {"missing_mean": [0.0] * 3, "missing_se": [0.0] * 3, "relative": [0.0] * 3, "probes": 0,
+                "exact": True}
+    if "truncated_sum" not in st or value("truncation_probe") == 0 or getattr(st.get("features"), "has_media", False):
+        return None
+    img = np.asarray(res.image, np.float64)
+    n = max(int(res.spp) * img.shape[0] * img.shape[1], 2)  # camera samples, each on one pixel with weight 1
+    mean = np.asarray(st["truncated_sum"], np.float64) / n
+    var = np.maximum(np.asarray(st["truncated_sq_sum"], np.float64) / n - mean ** 2, 0.0) / (n - 1)
+    img_mean = img.reshape(-1, 3).mean(axis=0)
+    rel = np.divide(mean, img_mean, out=np.zeros(3), where=img_mean > 0)
+    return {"missing_mean": [float(x) for x in mean], "missing_se": [float(x) for x in np.sqrt(var)],
+            "relative": [float(x) for x in rel], "probes": int(st.get("truncation_probes", 0)), "exact": False}

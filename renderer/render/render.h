@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "render/integrator.h"
@@ -43,6 +44,16 @@ struct PhotonMapStats {
     uint64_t max_paths = 0;      // the give-up bound on paths (photon_trace.h; 0 for sppm's)
 };
 
+// An array an estimator keeps for Python beyond the images (res.arrays):
+// a cache's records, precomputed transfer vectors; row-major, `columns`
+// naming the last axis where it has names (res.stats[NAME + "_columns"]).
+struct OutputArray {
+    std::string name;
+    std::vector<int> shape;
+    std::vector<float> data;
+    std::vector<std::string> columns;
+};
+
 struct RenderOutput {
     int width = 0, height = 0, spp = 0;
     double seconds = 0;
@@ -63,6 +74,11 @@ struct RenderOutput {
     std::vector<Checkpoint> checkpoints;
     ThreadStats stats;
     std::vector<PhotonMapStats> photon_maps;
+    // What an estimator reports of its own: named figures for res.stats
+    // (one value becomes a number, several a list: Metropolis' acceptance
+    // per chain, a solver's residual) and arrays for res.arrays.
+    std::vector<std::pair<std::string, std::vector<double>>> estimator_stats;
+    std::vector<OutputArray> arrays;
     int threads = 0;
     double setup_seconds = 0;
 };
