@@ -292,5 +292,9 @@ def truncation_term(res) -> Optional[dict]:
     var = np.maximum(np.asarray(st["truncated_sq_sum"], np.float64) / n - mean ** 2, 0.0) / (n - 1)
     img_mean = img.reshape(-1, 3).mean(axis=0)
     rel = np.divide(mean, img_mean, out=np.zeros(3), where=img_mean > 0)
-    return {"missing_mean": [float(x) for x in mean], "missing_se": [float(x) for x in np.sqrt(var)],
-            "relative": [float(x) for x in rel], "probes": int(st.get("truncation_probes", 0)), "exact": False}
+    probes = int(st.get("truncation_probes", 0))
+    # No path probed (none reached max_depth, or none drawn at this budget):
+    # nothing seen missing, and no standard error to say how little.
+    se = [float(x) for x in np.sqrt(var)] if probes > 0 else None
+    return {"missing_mean": [float(x) for x in mean], "missing_se": se, "relative": [float(x) for x in rel],
+            "probes": probes, "exact": False}
