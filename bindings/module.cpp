@@ -640,6 +640,7 @@ PYBIND11_MODULE(_core, m) {
                 maps[py::str(pm.name)] = d;
             }
             st["photon_maps"] = maps;
+            for (const auto& kv : out.extra_stats) st[py::str(kv.first)] = kv.second;
             r["stats"] = st;
             py::list cps;
             for (auto& c : out.checkpoints)

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "render/integrator.h"
@@ -63,6 +64,8 @@ struct RenderOutput {
     std::vector<Checkpoint> checkpoints;
     ThreadStats stats;
     std::vector<PhotonMapStats> photon_maps;
+    // Named figures of an estimator's own (radiosity's solver), for res.stats.
+    std::vector<std::pair<std::string, double>> extra_stats;
     int threads = 0;
     double setup_seconds = 0;
 };
