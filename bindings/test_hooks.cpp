@@ -5,8 +5,8 @@
 #include <pybind11/functional.h>
 
 #include "bindings.h"
-#include "estimators/radiosity/radiosity.h"
 #include "convert.h"
+#include "estimators/radiosity/radiosity.h"
 #include "render/memory.h"
 #include "render/registry.h"
 #include "scene/scene.h"
@@ -240,7 +240,8 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
             return d;
         },
         py::arg("scene"), py::arg("integrator"), py::arg("threads") = 1,
-        "test hook: radiosity's solved patches (centre, normal, corners (P, 12), area, shape) and per element (2p front, 2p + 1 "
+        "test hook: radiosity's solved patches (centre, normal, corners (P, 12), area, shape) and per element (2p "
+        "front, 2p + 1 "
         "back) the emitted, direct and indirect radiosity, with the solver's stats");
 
     // The unused-parameter check of a factory that reads only `reads`:

@@ -19,7 +19,6 @@ per-patch solutions).
 from __future__ import annotations
 
 import argparse
-import math
 import time
 
 import numpy as np

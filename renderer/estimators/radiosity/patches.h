@@ -40,9 +40,9 @@ struct Patch {
     static constexpr int kMaxCorners = 16;
     int nv = 0;                // corners in `v` (3 .. kMaxCorners)
     Vec3d v[kMaxCorners];      // corner polygon, world space (curved edges as chains of chords)
-    Vec3d c, n;     // a point on the patch (its centre) and the front normal there
-    double area = 0;        // exact area of the surface piece
-    double poly_scale = 1;  // area / area of the corner polygon (curved patches: > 1)
+    Vec3d c, n;                // a point on the patch (its centre) and the front normal there
+    double area = 0;           // exact area of the surface piece
+    double poly_scale = 1;     // area / area of the corner polygon (curved patches: > 1)
     uint32_t first_point = 0;  // its k sample points in PatchMesh::pts / nrm
 };
 
@@ -57,8 +57,8 @@ struct PatchMesh {
     struct ShapeCut {
         int kind = 0;  // 0 mesh, 1 sphere, 2 disk
         int base = 0;
-        int n1 = 0, n2 = 0;                        // sphere: z bands, phi sectors; disk: rings, sectors
-        std::vector<int> tri_n, tri_base;          // mesh: subdivision and first patch of each triangle (-1: none)
+        int n1 = 0, n2 = 0;                // sphere: z bands, phi sectors; disk: rings, sectors
+        std::vector<int> tri_n, tri_base;  // mesh: subdivision and first patch of each triangle (-1: none)
     };
     std::vector<ShapeCut> cuts;
 };

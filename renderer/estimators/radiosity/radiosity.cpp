@@ -235,8 +235,8 @@ void RadiosityIntegrator::setup(const Scene& scene, Solution& sol) const {
 // element i: A_j times the mean over j's points y_t of the point-to-polygon
 // factor to i's polygon, each times the visibility of one ray to a point
 // of i (paired by index).
-double RadiosityIntegrator::receiver_estimate(const Scene& scene, const Solution& sol, size_t j, size_t i,
-                                              float scale, uint64_t& rays) const {
+double RadiosityIntegrator::receiver_estimate(const Scene& scene, const Solution& sol, size_t j, size_t i, float scale,
+                                              uint64_t& rays) const {
     const PatchMesh& M = sol.mesh;
     const Element &ei = sol.el[i], &ej = sol.el[j];
     const Patch &pi = M.patches[size_t(ei.patch)], &pj = M.patches[size_t(ej.patch)];
@@ -572,8 +572,9 @@ RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions&
             .greater_than(0.0)
             .less_than(1.0),
         max_depth_param(),
-        ParamSpec::integer("gather_rays", 8, "final-gather rays per camera sample ('gather')").at_least(1).at_most(
-            4096),
+        ParamSpec::integer("gather_rays", 8, "final-gather rays per camera sample ('gather')")
+            .at_least(1)
+            .at_most(4096),
     };
     e.caps.driver = Driver::OwnPasses;
     e.caps.bias = Bias::Biased;
