@@ -64,11 +64,12 @@ def test_energy_balance(max_depth):
 def test_escaped_power_matches_analytic_rect():
     """The books against an independent answer: under the rectangle light
     at max_depth 2 (one shot) the power escaping is the emitted power times
-    1 - F(light -> floor), F from Lambert's closed form integrated over the
-    floor (80 x 80 Gauss-Legendre nodes per unit... on the 6 x 6 floor);
-    the floor absorbs 1 - rho of the rest and keeps rho unshot. Measured
-    relative error of the escaped power 2e-4 (max_patches 600); bound 2e-3,
-    and a 1 % error in F is rejected."""
+    1 - F(light -> floor), F = 0.9431 from Lambert's closed form integrated
+    over the 6 x 6 floor (60 x 60 Gauss-Legendre nodes per unit cell); the
+    floor absorbs 1 - rho of the rest and keeps rho unshot. Measured
+    relative error of the escaped power -7.7e-4, -3.4e-4, -1.2e-4 at
+    max_patches 150, 600, 2400; bound 2e-3 at 600, and a 1 % error in F is
+    rejected."""
     xml = al.RECT_XML
     p = al.scene_params(xml)
     scene = rm.load_file(xml, res=8)
@@ -190,21 +191,29 @@ def test_configuration_factor_matches_analytic(light):
 
 
 def _cornell_error(max_patches):
+    """Relative L1 error of the per-patch display against the Mitsuba
+    reference, without the light and a 2-pixel border (its edge is
+    camera-sample noise under the gaussian filter)."""
     params = dict(registry.get("cornell_box").fixed_params)
     scene = rm.load_file(CORNELL, **params)
-    ref = references.reference("cornell_box", params)
+    ref = references.reference("cornell_box", params).image.astype(np.float64)
+    light = ref.max(axis=2) > 2.0
+    for _ in range(2):
+        light = light | np.roll(light, 1, 0) | np.roll(light, -1, 0) | np.roll(light, 1, 1) | np.roll(light, -1, 1)
     res = rm.render(scene, integrator={"type": "radiosity", "display": "patch", "max_patches": max_patches,
-                                       "max_depth": params["max_depth"]}, spp=4, seed=2)
+                                       "max_depth": params["max_depth"]}, spp=16, seed=2)
     assert_clean(res, f"cornell {max_patches}")
-    return float(np.abs(res.image - ref.image).mean() / ref.image.mean())
+    keep = ~light
+    return float(np.abs(res.image - ref)[keep].mean() / ref[keep].mean())
 
 
 def test_cornell_more_patches_less_error():
-    """The per-patch display's relative L1 error against the Mitsuba
-    reference falls as the patch count grows (measured 0.41 at 60 and
-    0.19 at 600 patches; the study has the slope)."""
-    coarse, fine = _cornell_error(60), _cornell_error(600)
-    assert fine < 0.7 * coarse, (coarse, fine)
+    """The per-patch display's error against the Mitsuba reference falls
+    as the patch count grows (measured at 64 spp in the study
+    benchmarks/studies/radiosity_convergence.py: 0.357 at max_patches 50,
+    0.101 at 400; log-log slope -0.57 up to 3200)."""
+    coarse, fine = _cornell_error(50), _cornell_error(400)
+    assert fine < 0.8 * coarse, (coarse, fine)
 
 
 def test_refuses_non_diffuse_and_non_area():
