@@ -15,9 +15,10 @@ least-squares fit of log(error) on log(patches): for a piecewise-constant
 solution, first order in the patch size h, so about -1/2 in the patch count
 where the error is smooth, less steep where shadow boundaries and corners
 (the classic artefacts: shadow leaks under the boxes, Mach bands at patch
-edges) dominate. Writes benchmarks/results/radiosity_convergence.json and
-.png (error against patches, and the error maps of the coarsest and finest
-per-patch solutions).
+edges) dominate. Writes benchmarks/results/radiosity_convergence.json,
+.png (error against patches, with matplotlib), radiosity_convergence_maps.png
+(the per-patch images at 50 and 400 patches beside their error maps and the
+reference) and the EXR images of the coarsest and finest meshes.
 """
 from __future__ import annotations
 
@@ -33,6 +34,27 @@ from radiometer.exr import write_exr
 from radiometer.reference_scenes import references, registry
 
 
+def error_maps(png, scene, ref, md, counts=(50, 400), spp=16):
+    """A PNG (PIL) of the per-patch display at each of `counts` beside its
+    signed relative error (red: too bright, blue: too dark, saturated at
+    +-50 %), and the reference, tone-mapped x / (1 + x), 4 x enlarged."""
+    from PIL import Image
+
+    def tone(x):
+        return np.clip(x / (1 + x), 0, 1) ** (1 / 2.2)
+
+    tiles = []
+    for n in counts:
+        res = rm.render(scene, integrator={"type": "radiosity", "display": "patch", "max_patches": n, "max_depth": md},
+                        spp=spp, seed=1)
+        img = res.image.astype(np.float64)
+        e = np.clip(((img - ref) / np.maximum(ref, 0.02)).mean(axis=2), -0.5, 0.5) / 0.5
+        tiles += [tone(img), np.stack([np.clip(e, 0, 1), np.zeros_like(e), np.clip(-e, 0, 1)], axis=-1)]
+    tiles.append(tone(ref))
+    im = np.concatenate(tiles, axis=1)
+    Image.fromarray((im * 255).astype(np.uint8)).resize((im.shape[1] * 4, im.shape[0] * 4), Image.NEAREST).save(png)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--patches", default="50,100,200,400,800,1600,3200")
@@ -40,6 +62,8 @@ def main(argv=None):
     ap.add_argument("--gather-spp", type=int, default=64)
     ap.add_argument("--gather-rays", type=int, default=8)
     ap.add_argument("--out", default=str(record.default_path("radiosity_convergence")))
+    ap.add_argument("--maps-only", action="store_true",
+                    help="only write the error-map figure radiosity_convergence_maps.png beside --out")
     args = ap.parse_args(argv)
     counts = [int(c) for c in args.patches.split(",")]
     spec = registry.get("cornell_box")
@@ -47,6 +71,11 @@ def main(argv=None):
     scene = rm.load_file(spec.xml, **params)
     ref = references.reference("cornell_box", params).image.astype(np.float64)
     md = int(params["max_depth"])
+    maps_png = Path(args.out).with_name("radiosity_convergence_maps.png")
+    if args.maps_only:
+        error_maps(maps_png, scene, ref, md)
+        print(f"wrote {maps_png}")
+        return
     light = ref.max(axis=2) > 2.0
     for _ in range(2):  # dilate by 2 pixels
         light = light | np.roll(light, 1, 0) | np.roll(light, -1, 0) | np.roll(light, 1, 1) | np.roll(light, -1, 1)
@@ -143,6 +172,7 @@ def main(argv=None):
     for n in (min(raw), max(raw)):
         write_exr(Path(args.out).with_name(f"radiosity_convergence_patch_{n}.exr"), image=raw[n].astype(np.float32),
                   layers={"error": (raw[n] - ref).astype(np.float32)})
+    error_maps(maps_png, scene, ref, md)
     out = record.write("radiosity_convergence", record.params_of(args),
                        {"rows": rows, "slopes": slopes, "furnace": furnace,
                         "path_baseline": {"spp": args.spp, "rel_l1": path_l1, "rel_l1_all": path_all,
