@@ -46,7 +46,7 @@
 // 5. Display (`display`): "patch" shows B / pi of the element a camera
 //    ray hits (piecewise constant: the mesh, shadow leaks and Mach bands
 //    show); "gather" renders emission and direct light as `direct` does
-//    (light sampling, unbiased) and the indirect light by `gather_rays`
+//    (`direct_samples` light samples, unbiased) and the indirect light by `gather_rays`
 //    cosine-sampled rays per sample that read the solution's reflected
 //    radiosity where they land (the final gather of Reichert 1992 and
 //    Lischinski, Tampieri and Greenberg 1993).
@@ -149,7 +149,7 @@ public:
     struct Config {
         std::string display;
         double patch_size = 0;
-        int max_patches = 1000, ff_samples = 2, max_depth = -1, gather_rays = 8;
+        int max_patches = 1000, ff_samples = 2, max_depth = -1, gather_rays = 8, direct_samples = 8;
         double residual = 1e-3;
     };
     explicit RadiosityIntegrator(Config c) : c_(std::move(c)) {}
@@ -494,8 +494,10 @@ void RadiosityIntegrator::shade(const Scene& scene, const Solution& sol, Sampler
     if (c_.max_depth == 1 || sh.bsdf < 0) return;
     const Bsdf& bsdf = *scene.bsdfs[size_t(sh.bsdf)];
     const Vec3 wi = it.to_local(it.wi);
-    Color direct = estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f);  // draws 4
-    if (mask[kDirect]) out.add(kDirect, direct);
+    Color direct(0.f);
+    for (int d = 0; d < c_.direct_samples; ++d)
+        direct += estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f);  // draws 4 each
+    if (mask[kDirect]) out.add(kDirect, direct / float(c_.direct_samples));
     if (!(c_.max_depth < 0 || c_.max_depth >= 3)) return;
     BsdfContext ctx;
     Color acc(0.f);
@@ -572,6 +574,7 @@ RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions&
             .greater_than(0.0)
             .less_than(1.0),
         max_depth_param(),
+        ParamSpec::integer("direct_samples", 8, "light samples per camera sample ('gather')").at_least(1).at_most(4096),
         ParamSpec::integer("gather_rays", 8, "final-gather rays per camera sample ('gather')")
             .at_least(1)
             .at_most(4096),
@@ -588,6 +591,7 @@ RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions&
         c.residual = p.get_float("residual");
         c.max_depth = p.get_int("max_depth");
         c.gather_rays = p.get_int("gather_rays");
+        c.direct_samples = p.get_int("direct_samples");
         return std::make_unique<RadiosityIntegrator>(c);
     };
     return e;
