@@ -517,31 +517,13 @@ void RadiosityIntegrator::shade(const Scene& scene, const Solution& sol, Sampler
     if (mask[kIndirect]) out.add(kIndirect, acc / float(c_.gather_rays));
 }
 
-// The camera passes, through the camera driver.
-class RadiosityView final : public Integrator {
-public:
-    RadiosityView(const RadiosityIntegrator& r, const Solution& sol) : r_(r), sol_(sol) {
-        type = r.type;
-        caps = r.caps;
-        caps.driver = Driver::Camera;
-        mask = r.mask;
-    }
-    void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
-                ThreadStats& stats) const override {
-        r_.shade(scene, sol_, sampler, ray, out, stats);
-    }
-
-private:
-    const RadiosityIntegrator& r_;
-    const Solution& sol_;
-};
-
 RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
     check_scene(scene);
     PassLoop loop(scene, opts, poll);
     Solution sol;
     if (!solve(loop, sol)) return loop.cancelled_output();
-    RadiosityView view(*this, sol);
+    CameraView view(*this, [&](const Scene& sc, Sampler& sampler, const Ray& ray, EffectRadiance& o,
+                               ThreadStats& stats) { shade(sc, sol, sampler, ray, o, stats); });
     RenderOutput out = render_camera_paths(loop, view);
     out.stats.shadow_rays += sol.rays;
     out.extra_stats = sol.stats();
