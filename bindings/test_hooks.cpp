@@ -6,6 +6,7 @@
 
 #include "bindings.h"
 #include "convert.h"
+#include "estimators/radiosity/radiosity.h"
 #include "render/memory.h"
 #include "render/registry.h"
 #include "scene/scene.h"
@@ -208,6 +209,40 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
         py::arg("mutation") = 0,
         "test hook: vcm's recursive MIS weights of every technique of each sampled path, the brute-force ones, "
         "technique codes, per-path sums and the pairs' own weights");
+
+    m.def(
+        "radiosity_solution",
+        [](const Scene& scene, const IntegratorDesc& idesc, int threads) {
+            if (!scene.committed()) throw py::value_error("radiosity_solution: scene is not committed");
+            std::unique_ptr<Integrator> r = make_integrator(idesc, all_effects());
+            RadiositySolution sol;
+            {
+                py::gil_scoped_release nogil;
+                sol = radiosity_solution(scene, *r, threads);
+            }
+            auto arr = [](const std::vector<double>& v, py::ssize_t cols) {
+                py::array_t<double> a({py::ssize_t(v.size()) / cols, cols});
+                std::copy(v.begin(), v.end(), a.mutable_data());
+                return a;
+            };
+            py::dict d;
+            d["centre"] = arr(sol.centre, 3);
+            d["normal"] = arr(sol.normal, 3);
+            d["corners"] = arr(sol.corners, 12);
+            d["area"] = py::array_t<double>(sol.area.size(), sol.area.data());
+            d["shape"] = py::array_t<int>(sol.shape.size(), sol.shape.data());
+            d["emitted"] = arr(sol.emitted, 3);
+            d["direct"] = arr(sol.direct, 3);
+            d["indirect"] = arr(sol.indirect, 3);
+            py::dict st;
+            for (const auto& kv : sol.stats) st[py::str(kv.first)] = kv.second;
+            d["stats"] = st;
+            return d;
+        },
+        py::arg("scene"), py::arg("integrator"), py::arg("threads") = 1,
+        "test hook: radiosity's solved patches (centre, normal, corners (P, 12), area, shape) and per element (2p "
+        "front, 2p + 1 "
+        "back) the emitted, direct and indirect radiosity, with the solver's stats");
 
     // The unused-parameter check of a factory that reads only `reads`:
     // resolves `params` for estimator `type` against its declaration, reads

@@ -163,6 +163,10 @@ def render(path, estimator, spp, seed, max_depth=None, rr_depth=None, **params):
         except ValueError as e:
             if estimator in REFUSES_INFINITE and "at infinity" in str(e) and "emitter" in str(e):
                 raise Refused(str(e)) from None
+            # Estimators limited to some materials (radiosity: diffuse BSDFs,
+            # area emitters) refuse the others by name in check_scene.
+            if any(f"integrator '{estimator}' cannot render {w} '" in str(e) for w in ("shape", "emitter")):
+                raise Refused(str(e)) from None
             raise
     return _cache[key]
 

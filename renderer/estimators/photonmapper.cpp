@@ -722,28 +722,6 @@ void PhotonMapper::radiance_media(const Scene& scene, const Maps& maps, Sampler&
     }
 }
 
-namespace {
-
-// The camera passes of photonmapper, through the camera driver.
-class PhotonMapperPass final : public Integrator {
-public:
-    PhotonMapperPass(const PhotonMapper& pm, const Maps& maps) : pm_(pm), maps_(maps) {
-        type = pm.type;
-        caps = pm.caps;
-        caps.driver = Driver::Camera;
-    }
-    void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
-                ThreadStats& stats) const override {
-        pm_.radiance(scene, maps_, sampler, ray, out, stats);
-    }
-
-private:
-    const PhotonMapper& pm_;
-    const Maps& maps_;
-};
-
-}  // namespace
-
 RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
     // 1. Pass 1, the photon maps: the loop's setup, whose time counts
     //    against a time budget (and in the checkpoints' seconds).
@@ -754,8 +732,8 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     ThreadStats pstats;
     if (!photon_pass(loop, maps, info, pstats)) return loop.cancelled_output();
     // 2. Pass 2, the camera passes, through the camera driver.
-    PhotonMapperPass pass(*this, maps);
-    pass.mask = mask;
+    CameraView pass(*this, [&](const Scene& sc, Sampler& sampler, const Ray& ray, EffectRadiance& o,
+                               ThreadStats& stats) { radiance(sc, maps, sampler, ray, o, stats); });
     RenderOutput out = render_camera_paths(loop, pass);
     // 3. The photon passes' counters and maps.
     out.stats.merge(pstats);

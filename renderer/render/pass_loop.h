@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <utility>
 #include <vector>
 
 #include "render/parallel.h"
@@ -137,6 +138,28 @@ inline bool keep_finite(ThreadStats& stats, const Color& a, const Color& b = Col
         ++stats.inf_samples;
     return false;
 }
+
+// The camera passes of an estimator with passes of its own (photonmapper
+// after its photon maps, radiosity after its solve), through the camera
+// driver: `owner`'s name, capabilities (driver: camera) and effect mask,
+// each camera ray handed to `shade`.
+class CameraView final : public Integrator {
+public:
+    using Shade = std::function<void(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&)>;
+    CameraView(const Integrator& owner, Shade shade) : shade_(std::move(shade)) {
+        type = owner.type;
+        caps = owner.caps;
+        caps.driver = Driver::Camera;
+        mask = owner.mask;
+    }
+    void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
+                ThreadStats& stats) const override {
+        shade_(scene, sampler, ray, out, stats);
+    }
+
+private:
+    Shade shade_;
+};
 
 // The camera driver on a loop (camera_driver.cpp): `integrator`'s sample()
 // along filter-importance-sampled camera rays, tile by tile; photonmapper

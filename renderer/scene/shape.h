@@ -58,6 +58,8 @@ public:
     Vec3 bbox_min() const override { return lo_; }
     Vec3 bbox_max() const override { return hi_; }
     size_t triangle_count() const { return indices_.size() / 3; }
+    // Corner j (0..2) of triangle f, world space (the patches of radiosity).
+    Vec3 corner(size_t f, int j) const { return vertex(indices_[3 * f + size_t(j)]); }
 
 private:
     Vec3 vertex(uint32_t i) const { return {pos_[3 * i], pos_[3 * i + 1], pos_[3 * i + 2]}; }

@@ -1,0 +1,616 @@
+// `radiosity`: the finite-element solution of the rendering equation on
+// diffuse scenes (Goral, Torrance, Greenberg and Battaile 1984), solved by
+// progressive refinement (Cohen, Chen, Wallace and Greenberg 1988,
+// "A Progressive Refinement Approach to Fast Radiosity Image Generation"),
+// and displayed either per patch or by a final gather from the solution.
+//
+// 1. Patches (patches.h): every shape cut to a target edge length
+//    (`patch_size`, or the size that gives about `max_patches`). Each
+//    patch has two elements, its front and back side, each with the
+//    albedo of its BSDF on that side (pi f(n, n)) and its emitted
+//    radiosity E = pi Le (area emitters emit on the front only).
+// 2. Form factors: the whole matrix, before the shooting (Cohen et al.
+//    1988 compute a row per shot to save memory; here the rows must be
+//    balanced together, step 3). As Wallace, Elmquist and Haines 1989 ("A
+//    Ray Tracing Algorithm for Progressive Radiosity") a factor is
+//    evaluated at the receiver's sample points y_t: the form factor from
+//    the differential area at y_t to the other element's polygon in closed
+//    form (Lambert's formula in vector form, Baum, Rushmeier and Winget
+//    1989, "Improving Radiosity Solutions Through the Use of Analytically
+//    Determined Form-Factors", eq. 5: F = 1 / (2 pi) sum_e beta_e
+//    n . Gamma_e, the polygon first clipped to y's upper half-space),
+//    times the visibility of one ray from y_t to a point of the other
+//    element (Embree). Curved patches (sphere, disk) scale their corner
+//    polygon's factor by area / polygon area. G_ij = A_i F_ij is the mean
+//    of the estimates from both ends, so reciprocity (G symmetric) holds
+//    exactly.
+// 3. Conservation: an element from which at most 1 % of `kEscapeRays`
+//    stratified cosine rays (and a ring at the horizon) leave the scene is
+//    closed; the closed rows are balanced
+//    to sum_j F_ij = 1 by a symmetric diagonal scaling of G (Sinkhorn-
+//    Knopp, symmetric form), which keeps reciprocity, so a closed scene
+//    neither loses nor gains power to form-factor error, and a uniform
+//    closed furnace has the exact constant solution. An open row is only
+//    capped at 1; its remainder 1 - sum_j F_ij escapes.
+// 4. Shooting (Cohen et al. 1988, fig. 3): the element with the most
+//    unshot power dPhi_i shoots it: each receiver j gets dPhi_i F_ij, keeps
+//    rho_j of it as new radiosity and unshot power and absorbs the rest;
+//    1 - sum_j F_ij escapes. Stops when the unshot power left is at most
+//    `residual` times the emitted power. With a finite `max_depth` the
+//    shooting goes by generations instead (Jacobi: every element shoots
+//    the power of bounce g before any of bounce g + 1), so that the
+//    solution holds exactly the paths of at most max_depth segments.
+//    The books: emitted = absorbed + escaped + unshot, to rounding
+//    (res.stats: emitted_power, absorbed_power, escaped_power,
+//    unshot_power, residual, shots).
+// 5. Display (`display`): "patch" shows B / pi of the element a camera
+//    ray hits (piecewise constant: the mesh, shadow leaks and Mach bands
+//    show); "gather" renders emission and direct light as `direct` does
+//    (`direct_samples` light samples, unbiased) and the indirect light by `gather_rays`
+//    cosine-sampled rays per sample that read the solution's reflected
+//    radiosity where they land (the final gather of Reichert 1992 and
+//    Lischinski, Tampieri and Greenberg 1993).
+// Effect classes: emission (E seen directly), direct (one reflection of
+// the emission: the solution's first bounce, or light sampling under
+// "gather"), indirect (the rest). Bias: discretisation (patch size, the
+// form-factor points), the residual and, under "gather", only in the
+// indirect class: declared biased.
+#include "estimators/radiosity/radiosity.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "core/warp.h"
+#include "estimators/radiosity/patches.h"
+#include "render/pass_loop.h"
+#include "render/registry.h"
+#include "transport/common.h"
+
+namespace rm {
+
+namespace {
+
+constexpr double kPiD = 3.14159265358979323846;
+constexpr int kEscapeRays = 256;  // per element, over its sample points (plus a ring at the horizon)
+
+Vec3d unit(const Vec3d& v) {
+    double l = length(v);
+    return l > 0 ? v * (1.0 / l) : Vec3d();
+}
+Vec3d mul(const Vec3d& a, const Vec3d& b) { return {a.x * b.x, a.y * b.y, a.z * b.z}; }
+double avg(const Vec3d& c) { return (c.x + c.y + c.z) / 3.0; }
+Color to_color(const Vec3d& c) { return Color(float(c.x), float(c.y), float(c.z)); }
+
+// The form factor from the differential area at y (unit normal ny) to the
+// polygon v[0..nv) (Baum et al. 1989, eq. 5), the polygon first clipped to
+// the half-space in front of y (Sutherland-Hodgman with one plane).
+double point_polygon_factor(const Vec3d& y, const Vec3d& ny, const Vec3d* v, int nv) {
+    Vec3d c[Patch::kMaxCorners + 2];
+    int nc = 0;
+    for (int i = 0; i < nv; ++i) {
+        const Vec3d &a = v[i], &b = v[(i + 1) % nv];
+        double da = dot(a - y, ny), db = dot(b - y, ny);
+        if (da >= 0) c[nc++] = a;
+        if ((da >= 0) != (db >= 0)) c[nc++] = a + (b - a) * (da / (da - db));
+    }
+    if (nc < 3) return 0.0;
+    double sum = 0;
+    for (int i = 0; i < nc; ++i) {
+        Vec3d ua = unit(c[i] - y), ub = unit(c[(i + 1) % nc] - y);
+        Vec3d cr = cross(ua, ub);
+        double l = length(cr);
+        if (!(l > 1e-14)) continue;  // a zero-length or collinear edge
+        sum += std::atan2(l, dot(ua, ub)) * dot(cr, ny) / l;
+    }
+    double f = std::fabs(sum) / (2.0 * kPiD);
+    return std::isfinite(f) ? std::min(f, 1.0) : 0.0;
+}
+
+struct Element {
+    int patch = -1;
+    int side = 0;  // 0 front, 1 back
+    Vec3d rho, E;  // albedo, emitted radiosity (pi Le)
+    bool shoots() const { return rho.x > 0 || rho.y > 0 || rho.z > 0 || E.x > 0 || E.y > 0 || E.z > 0; }
+};
+
+struct Solution {
+    PatchMesh mesh;
+    std::vector<Element> el;
+    // Reflected radiosity by bounce: direct (1), indirect (2 .. max_depth - 2,
+    // or all >= 2 when unbounded), last (max_depth - 1 when that is >= 2).
+    std::vector<Vec3d> Bd, Bi, Blast;
+    std::vector<double> G, esc;  // form factors F_ij (row i: i * N + j), escaping fraction of each row
+    std::vector<char> closed;    // rows from which no escape ray left the scene
+    int balance_iterations = 0;
+    double emitted = 0, absorbed = 0, escaped = 0, unshot = 0, residual = 0;
+    uint64_t shots = 0, rays = 0;
+    double seconds = 0, patch_size = 0;
+    std::vector<std::pair<std::string, double>> stats() const {
+        return {{"patches", double(mesh.patches.size())},
+                {"elements", double(el.size())},
+                {"patch_size", patch_size},
+                {"shots", double(shots)},
+                {"balance_iterations", double(balance_iterations)},
+                {"closed_rows", double(std::count(closed.begin(), closed.end(), char(1)))},
+                {"form_factor_rays", double(rays)},
+                {"residual", residual},
+                {"emitted_power", emitted},
+                {"absorbed_power", absorbed},
+                {"escaped_power", escaped},
+                {"unshot_power", unshot},
+                {"solve_seconds", seconds}};
+    }
+};
+
+class RadiosityIntegrator final : public Integrator {
+public:
+    struct Config {
+        std::string display;
+        double patch_size = 0;
+        int max_patches = 1000, ff_samples = 2, max_depth = -1, gather_rays = 8, direct_samples = 8;
+        double residual = 1e-3;
+    };
+    explicit RadiosityIntegrator(Config c) : c_(std::move(c)) {}
+
+    void check_scene(const Scene& scene) const override {
+        for (const auto& s : scene.shapes) {
+            if (s->bsdf < 0) continue;
+            const Bsdf& b = *scene.bsdfs[size_t(s->bsdf)];
+            if (b.flags() != kDiffuseReflection)
+                throw std::invalid_argument("integrator 'radiosity' cannot render shape '" + s->id +
+                                            "': its BSDF is not diffuse (radiosity solves diffuse reflection "
+                                            "only; use 'path' or 'bdpt')");
+        }
+        for (const auto& e : scene.emitters)
+            if (e->is_delta() || e->is_infinite() || e->is_environment())
+                throw std::invalid_argument("integrator 'radiosity' cannot render emitter '" + e->id +
+                                            "': only area emitters (on shapes) are patches; use 'path' or "
+                                            "'bdpt'");
+    }
+    void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
+        throw std::logic_error("integrator 'radiosity' renders through its own driver");
+    }
+    RenderOutput drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const override;
+    // Meshes and solves; false when cancelled.
+    bool solve(PassLoop& loop, Solution& sol) const;
+    void shade(const Scene& scene, const Solution& sol, Sampler& sampler, const Ray& ray, EffectRadiance& out,
+               ThreadStats& stats) const;
+
+private:
+    void setup(const Scene& scene, Solution& sol) const;
+    double receiver_estimate(const Scene& scene, const Solution& sol, size_t j, size_t i, float scale,
+                             uint64_t& rays) const;
+    // The form-factor matrix (sol.G: F_ij at i * N + j), escape fractions; false when cancelled.
+    bool form_factors(PassLoop& loop, Solution& sol, std::vector<uint64_t>& rays) const;
+    Config c_;
+};
+
+void RadiosityIntegrator::setup(const Scene& scene, Solution& sol) const {
+    double size = c_.patch_size;
+    if (size > 0) {
+        size_t n = count_patches(scene, size);
+        if (n > size_t(c_.max_patches))
+            throw std::invalid_argument("integrator 'radiosity': patch_size " + std::to_string(size) + " makes " +
+                                        std::to_string(n) + " patches, more than max_patches " +
+                                        std::to_string(c_.max_patches) + "; raise max_patches or patch_size");
+    } else {
+        size = patch_size_for(scene, size_t(c_.max_patches));
+    }
+    sol.patch_size = size;
+    sol.mesh = build_patches(scene, size, c_.ff_samples);
+    const size_t P = sol.mesh.patches.size();
+    sol.el.resize(2 * P);
+    BsdfContext ctx;
+    for (size_t p = 0; p < P; ++p) {
+        const Patch& q = sol.mesh.patches[p];
+        const Shape& sh = *scene.shapes[size_t(q.shape)];
+        for (int side = 0; side < 2; ++side) {
+            Element& e = sol.el[2 * p + size_t(side)];
+            e.patch = int(p);
+            e.side = side;
+            const float z = side ? -1.f : 1.f;
+            if (sh.bsdf >= 0) {
+                Color f = scene.bsdfs[size_t(sh.bsdf)]->eval(ctx, Vec3(0, 0, z), Vec3(0, 0, z));
+                e.rho = Vec3d(f * kPi);
+            }
+            if (sh.emitter >= 0) {
+                Interaction it;
+                it.p = q.c.f();
+                it.n = q.n.f();
+                it.sh = Frame(it.n);
+                Color le = scene.emitters[size_t(sh.emitter)]->eval(it, it.n * z);
+                e.E = Vec3d(le * kPi);
+            }
+        }
+    }
+    size_t N = sol.el.size();
+    sol.Bd.assign(N, Vec3d());
+    sol.Bi.assign(N, Vec3d());
+    sol.Blast.assign(N, Vec3d());
+}
+
+// The receiver-side estimate of A_j F_ji for element j receiving from
+// element i: A_j times the mean over j's points y_t of the point-to-polygon
+// factor to i's polygon, each times the visibility of one ray to a point
+// of i (paired by index).
+double RadiosityIntegrator::receiver_estimate(const Scene& scene, const Solution& sol, size_t j, size_t i, float scale,
+                                              uint64_t& rays) const {
+    const PatchMesh& M = sol.mesh;
+    const Element &ei = sol.el[i], &ej = sol.el[j];
+    const Patch &pi = M.patches[size_t(ei.patch)], &pj = M.patches[size_t(ej.patch)];
+    const double si = ei.side ? -1.0 : 1.0, sj = ej.side ? -1.0 : 1.0;
+    const Vec3d ni = pi.n * si;
+    const int k = M.k;
+    auto eps_at = [&](const Vec3d& p) { return 1e-5f * scale + 4e-6f * max_component(abs(p.f())) + 1e-30f; };
+    double acc = 0;
+    for (int s = 0; s < k; ++s) {
+        const Vec3d& y = M.pts[pj.first_point + uint32_t(s)];
+        const Vec3d ny = M.nrm[pj.first_point + uint32_t(s)] * sj;
+        if (!(dot(y - pi.c, ni) > 0)) continue;  // behind the shooter's side
+        double f = point_polygon_factor(y, ny, pi.v, pi.nv);
+        if (!(f > 0)) continue;
+        const uint32_t xs = uint32_t((size_t(s) + i + j) % size_t(k));
+        const Vec3d& x = M.pts[pi.first_point + xs];
+        const Vec3d nx = M.nrm[pi.first_point + xs] * si;
+        Vec3d o = y + ny * double(eps_at(y)), to = x + nx * double(eps_at(x));
+        Vec3d d = to - o;
+        double dist = length(d);
+        ++rays;
+        if (dist > 0) {
+            Ray r;
+            r.o = o.f();
+            r.d = (d * (1.0 / dist)).f();
+            r.tmin = 0.f;
+            r.tmax = float(dist) * (1.f - 1e-5f);
+            if (scene.occluded(r)) continue;
+        }
+        acc += f;
+    }
+    double g = acc / k * pi.poly_scale * pj.area;
+    return std::isfinite(g) ? g : 0.0;
+}
+
+bool RadiosityIntegrator::form_factors(PassLoop& loop, Solution& sol, std::vector<uint64_t>& rays) const {
+    const Scene& scene = loop.scene();
+    const PatchMesh& M = sol.mesh;
+    const size_t N = sol.el.size();
+    Vec3 c;
+    float R;
+    scene.bounding_sphere(c, R);
+    sol.G.assign(N * N, 0.0);
+    sol.closed.assign(N, 0);
+    // Symmetric by construction: G_ij = G_ji = the mean of the two
+    // receiver-side estimates of A_i F_ij = A_j F_ji (reciprocity exact).
+    bool done = loop.parallel_for(N, [&](size_t i, int t) {
+        const Element& ei = sol.el[i];
+        for (size_t j = i + 1; j < N; ++j) {
+            if (sol.el[j].patch == ei.patch) continue;
+            // The estimate whose points sample the smaller element (its
+            // error shrinks with the sampled element's size; the other
+            // end's polygon is integrated exactly); equal areas: the mean.
+            const double ai = M.patches[size_t(ei.patch)].area, aj = M.patches[size_t(sol.el[j].patch)].area;
+            double g;
+            if (aj < ai * (1 - 1e-9))
+                g = receiver_estimate(scene, sol, j, i, R, rays[size_t(t)]);
+            else if (ai < aj * (1 - 1e-9))
+                g = receiver_estimate(scene, sol, i, j, R, rays[size_t(t)]);
+            else
+                g = 0.5 * (receiver_estimate(scene, sol, j, i, R, rays[size_t(t)]) +
+                           receiver_estimate(scene, sol, i, j, R, rays[size_t(t)]));
+            sol.G[i * N + j] = g;
+        }
+        // Escape test: stratified cosine-distributed rays from i's points.
+        const Patch& pi = M.patches[size_t(ei.patch)];
+        const double si = ei.side ? -1.0 : 1.0;
+        const int k = M.k;
+        int q = std::max(1, int(std::lround(std::sqrt(double(kEscapeRays) / k))));
+        int cast = 0, escaped = 0;
+        for (int s = 0; s < k; ++s) {
+            const Vec3d& x = M.pts[pi.first_point + uint32_t(s)];
+            Vec3 nx = (M.nrm[pi.first_point + uint32_t(s)] * si).f();
+            Frame fr(nx);
+            // q x q cosine-distributed directions, then a ring just above the
+            // horizon (where a cell-centred grid never looks: an open
+            // scene's light may leave only at grazing angles).
+            for (int a = 0; a < q + 1; ++a)
+                for (int b = 0; b < q; ++b) {
+                    Vec3 w;
+                    if (a < q) {
+                        w = fr.to_world(warp::square_to_cosine_hemisphere(Vec2((a + 0.5f) / q, (b + 0.5f) / q)));
+                    } else {
+                        float phi = 2.f * kPi * (b + 0.5f) / q, ct = 0.02f, st = std::sqrt(1.f - ct * ct);
+                        w = fr.to_world(Vec3(st * std::cos(phi), st * std::sin(phi), ct));
+                    }
+                    Ray r;
+                    r.o = (x + Vec3d(nx) * double(1e-5f * R + 4e-6f * max_component(abs(x.f())))).f();
+                    r.d = w;
+                    ++rays[size_t(t)];
+                    ++cast;
+                    if (!scene.occluded(r)) ++escaped;
+                }
+        }
+        // Closed: at most 1 % of the rays left (rays slipping through the
+        // seams between touching shapes must not open a closed box).
+        sol.closed[i] = escaped * 100 <= cast ? 1 : 0;
+    });
+    if (!done) return false;
+    for (size_t i = 0; i < N; ++i)
+        for (size_t j = i + 1; j < N; ++j) sol.G[j * N + i] = sol.G[i * N + j];
+    // Closed rows (nothing escapes from the element) must pass on all of
+    // their power: symmetric diagonal scaling G -> D G D (Knight 2008, "The
+    // Sinkhorn-Knopp algorithm", the symmetric iteration d <- sqrt(d t /
+    // (G d))) until sum_j G_ij = A_i on every closed row; the symmetry,
+    // and with it reciprocity, stays. Open rows keep d_i = 1.
+    std::vector<double> d(N, 1.0), Gd(N);
+    auto area = [&](size_t i) { return M.patches[size_t(sol.el[i].patch)].area; };
+    for (int it = 0; it < 300; ++it, ++sol.balance_iterations) {
+        double worst = 0;
+        for (size_t i = 0; i < N; ++i) {
+            double sum = 0;
+            const double* row = &sol.G[i * N];
+            for (size_t j = 0; j < N; ++j) sum += row[j] * d[j];
+            Gd[i] = sum;
+            if (sol.closed[i] && sum > 0) worst = std::max(worst, std::fabs(d[i] * sum / area(i) - 1.0));
+        }
+        if (worst < 1e-12) break;
+        for (size_t i = 0; i < N; ++i)
+            if (sol.closed[i] && Gd[i] > 0) d[i] = std::sqrt(d[i] * area(i) / Gd[i]);
+    }
+    for (size_t i = 0; i < N; ++i)
+        for (size_t j = 0; j < N; ++j) sol.G[i * N + j] *= d[i] * d[j];
+    // Form factors F_ij = G_ij / A_i; an open row summing over 1 (estimation
+    // error) is scaled to 1; the rest of a row escapes.
+    sol.esc.assign(N, 0.0);
+    for (size_t i = 0; i < N; ++i) {
+        double* row = &sol.G[i * N];
+        double S = 0;
+        const double inv = 1.0 / area(i);
+        for (size_t j = 0; j < N; ++j) S += (row[j] *= inv);
+        if (S > 1.0) {
+            for (size_t j = 0; j < N; ++j) row[j] /= S;
+            S = 1.0;
+        }
+        sol.esc[i] = std::max(0.0, 1.0 - S);
+    }
+    return true;
+}
+
+bool RadiosityIntegrator::solve(PassLoop& loop, Solution& sol) const {
+    auto t0 = std::chrono::steady_clock::now();
+    setup(loop.scene(), sol);
+    const size_t N = sol.el.size();
+    const double bytes = double(N) * double(N) * sizeof(double);
+    if (bytes > 3e9)
+        throw std::invalid_argument("integrator 'radiosity': " + std::to_string(sol.mesh.patches.size()) +
+                                    " patches need " + std::to_string(bytes / 1e9) +
+                                    " GB of form factors; lower max_patches or raise patch_size");
+    std::vector<uint64_t> rays(size_t(loop.threads()), 0);
+    if (!form_factors(loop, sol, rays)) return false;
+    std::vector<Vec3d> unshot_e(N), unshot_r(N);
+    double emitted = 0;
+    for (size_t i = 0; i < N; ++i) {
+        const Patch& p = sol.mesh.patches[size_t(sol.el[i].patch)];
+        unshot_e[i] = sol.el[i].E * p.area;
+        emitted += avg(unshot_e[i]);
+    }
+    sol.emitted = emitted;
+    double absorbed = 0, escaped = 0;
+    // Shoots element i's unshot power (emitted part pe, reflected pr) into
+    // the next unshot pool `next` and the radiosity bin of each receiver.
+    auto shoot = [&](size_t i, const Vec3d& pe, const Vec3d& pr, std::vector<Vec3d>& next,
+                     std::vector<Vec3d>& bin_r) -> bool {
+        const double* row = &sol.G[i * N];
+        ++sol.shots;
+        const Vec3d P = pe + pr;
+        escaped += avg(P) * sol.esc[i];
+        for (size_t j = 0; j < N; ++j) {
+            double f = row[j];
+            if (f == 0) continue;
+            const Element& ej = sol.el[j];
+            const double Aj = sol.mesh.patches[size_t(ej.patch)].area;
+            Vec3d got = P * f, kept = mul(got, ej.rho);
+            absorbed += avg(got) - avg(kept);
+            next[j] = next[j] + kept;
+            sol.Bd[j] = sol.Bd[j] + mul(pe * f, ej.rho) * (1.0 / Aj);
+            bin_r[j] = bin_r[j] + mul(pr * f, ej.rho) * (1.0 / Aj);
+        }
+        return true;
+    };
+    const double target = c_.residual * emitted;
+    if (c_.max_depth < 0) {
+        // Progressive refinement: the most unshot power first (ties: lowest index).
+        const uint64_t max_shots = uint64_t(std::max<size_t>(1000, 200 * N));
+        while (sol.shots < max_shots) {
+            size_t best = N;
+            double best_p = 0, left = 0;
+            for (size_t i = 0; i < N; ++i) {
+                double p = avg(unshot_e[i]) + avg(unshot_r[i]);
+                left += p;
+                if (p > best_p) best_p = p, best = i;
+            }
+            if (best == N || left <= target) break;
+            Vec3d pe = unshot_e[best], pr = unshot_r[best];
+            unshot_e[best] = unshot_r[best] = Vec3d();
+            if (!shoot(best, pe, pr, unshot_r, sol.Bi)) return false;
+        }
+    } else {
+        // Generations: bounce g's power all shot before bounce g + 1's.
+        // Power of bounce g (0: emission) lands in bounce g + 1's bin:
+        // 1 direct, 2 .. D - 2 indirect, D - 1 last; D - 1 is the last shot.
+        std::vector<Vec3d> cur = unshot_e, next(N);
+        unshot_e.assign(N, Vec3d());
+        for (int g = 0; g + 1 <= c_.max_depth - 1; ++g) {
+            double left = 0;
+            for (size_t i = 0; i < N; ++i) left += avg(cur[i]);
+            if (left <= target && g > 0) break;
+            next.assign(N, Vec3d());
+            std::vector<Vec3d>& bin = (g + 1 == c_.max_depth - 1 && g + 1 >= 2) ? sol.Blast : sol.Bi;
+            for (size_t i = 0; i < N; ++i) {
+                if (avg(cur[i]) <= 0) continue;
+                bool ok = g == 0 ? shoot(i, cur[i], Vec3d(), next, bin) : shoot(i, Vec3d(), cur[i], next, bin);
+                if (!ok) return false;
+            }
+            cur.swap(next);
+        }
+        unshot_r = cur;
+    }
+    double left = 0;
+    for (size_t i = 0; i < N; ++i) left += avg(unshot_e[i]) + avg(unshot_r[i]);
+    sol.absorbed = absorbed;
+    sol.escaped = escaped;
+    sol.unshot = left;
+    sol.residual = emitted > 0 ? left / emitted : 0.0;
+    for (uint64_t r : rays) sol.rays += r;
+    sol.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return true;
+}
+
+void RadiosityIntegrator::shade(const Scene& scene, const Solution& sol, Sampler& sampler, const Ray& ray,
+                                EffectRadiance& out, ThreadStats& stats) const {
+    ++stats.rays;
+    ++stats.paths;
+    Interaction it;
+    if (!scene.intersect(ray, it)) return;  // no environment: refused by check_scene
+    auto element = [&](const Interaction& h) -> int {
+        int p = sol.mesh.locate(scene, h);
+        if (p < 0) return -1;
+        return 2 * p + (dot(h.wi, h.n) >= 0.f ? 0 : 1);
+    };
+    if (c_.display == "patch") {
+        int e = element(it);
+        if (e < 0) return;
+        const float inv_pi = kInvPi;
+        if (mask[kEmission]) out.add(kEmission, to_color(sol.el[size_t(e)].E) * inv_pi);
+        if (c_.max_depth < 0 || c_.max_depth >= 2)
+            if (mask[kDirect]) out.add(kDirect, to_color(sol.Bd[size_t(e)]) * inv_pi);
+        if (mask[kIndirect]) out.add(kIndirect, to_color(sol.Bi[size_t(e)] + sol.Blast[size_t(e)]) * inv_pi);
+        return;
+    }
+    // Final gather: emission and direct light as `direct`, indirect from the solution.
+    const Shape& sh = *scene.shapes[size_t(it.shape)];
+    if (sh.emitter >= 0 && mask[kEmission]) out.add(kEmission, scene.emitters[size_t(sh.emitter)]->eval(it, it.wi));
+    if (c_.max_depth == 1 || sh.bsdf < 0) return;
+    const Bsdf& bsdf = *scene.bsdfs[size_t(sh.bsdf)];
+    const Vec3 wi = it.to_local(it.wi);
+    Color direct(0.f);
+    for (int d = 0; d < c_.direct_samples; ++d)
+        direct += estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f);  // draws 4 each
+    if (mask[kDirect]) out.add(kDirect, direct / float(c_.direct_samples));
+    if (!(c_.max_depth < 0 || c_.max_depth >= 3)) return;
+    BsdfContext ctx;
+    Color acc(0.f);
+    for (int g = 0; g < c_.gather_rays; ++g) {
+        float u1 = sampler.next_1d();
+        Vec2 u2 = sampler.next_2d();
+        BsdfSample bs = bsdf.sample(ctx, wi, u1, u2);
+        if (is_black(bs.weight) || bs.is_delta) continue;
+        Ray r = it.spawn(it.to_world(bs.wo));
+        Interaction h;
+        ++stats.rays;
+        if (!scene.intersect(r, h)) continue;
+        int e = element(h);
+        if (e < 0) continue;
+        acc += bs.weight * to_color(sol.Bd[size_t(e)] + sol.Bi[size_t(e)]) * kInvPi;
+    }
+    if (mask[kIndirect]) out.add(kIndirect, acc / float(c_.gather_rays));
+}
+
+RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
+    check_scene(scene);
+    PassLoop loop(scene, opts, poll);
+    Solution sol;
+    if (!solve(loop, sol)) return loop.cancelled_output();
+    CameraView view(*this, [&](const Scene& sc, Sampler& sampler, const Ray& ray, EffectRadiance& o,
+                               ThreadStats& stats) { shade(sc, sol, sampler, ray, o, stats); });
+    RenderOutput out = render_camera_paths(loop, view);
+    out.stats.shadow_rays += sol.rays;
+    for (auto& [name, v] : sol.stats()) out.estimator_stats.push_back({name, {v}});
+    out.seconds = loop.elapsed();
+    return out;
+}
+
+[[maybe_unused]] const bool kRegistered = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "radiosity";
+    e.doc =
+        "radiosity (Goral et al. 1984; progressive refinement, Cohen et al. 1988): diffuse scenes cut into "
+        "patches, form factors in closed form with ray-cast visibility, displayed per patch or by a final gather";
+    e.params = {
+        ParamSpec::string("display", "gather",
+                          "'patch': each patch's radiosity / pi; 'gather': emission and direct light by light "
+                          "sampling, indirect light gathered from the solution")
+            .one_of({"patch", "gather"}),
+        ParamSpec::real("patch_size", 0.0, "target patch edge length in scene units (0: from max_patches)")
+            .at_least(0.0),
+        ParamSpec::integer("max_patches", 1000,
+                           "patch budget: the patch size that gives at most this many (with patch_size > 0: a "
+                           "bound on the count)")
+            .at_least(1)
+            .at_most(16000),
+        ParamSpec::integer("ff_samples", 2, "form-factor points per patch side (m: m^2 points, each one ray)")
+            .at_least(1)
+            .at_most(4),
+        ParamSpec::real("residual", 1e-3, "stop when the unshot power is at most this fraction of the emitted")
+            .greater_than(0.0)
+            .less_than(1.0),
+        max_depth_param(),
+        ParamSpec::integer("direct_samples", 8, "light samples per camera sample ('gather')").at_least(1).at_most(4096),
+        ParamSpec::integer("gather_rays", 8, "final-gather rays per camera sample ('gather')")
+            .at_least(1)
+            .at_most(4096),
+    };
+    e.caps.driver = Driver::OwnPasses;
+    e.caps.bias = Bias::Biased;
+    e.caps.effects = effect_mask({kEmission, kDirect, kIndirect});
+    e.factory = [](ParamReader& p) {
+        RadiosityIntegrator::Config c;
+        c.display = p.get_string("display");
+        c.patch_size = p.get_float("patch_size");
+        c.max_patches = p.get_int("max_patches");
+        c.ff_samples = p.get_int("ff_samples");
+        c.residual = p.get_float("residual");
+        c.max_depth = p.get_int("max_depth");
+        c.gather_rays = p.get_int("gather_rays");
+        c.direct_samples = p.get_int("direct_samples");
+        return std::make_unique<RadiosityIntegrator>(c);
+    };
+    return e;
+}());
+
+}  // namespace
+
+RadiositySolution radiosity_solution(const Scene& scene, const Integrator& integrator, int threads) {
+    const auto* r = dynamic_cast<const RadiosityIntegrator*>(&integrator);
+    if (!r) throw std::invalid_argument("radiosity_solution: integrator '" + integrator.type + "' is not radiosity");
+    r->check_scene(scene);
+    RenderOptions opts;
+    opts.threads = threads;
+    PassLoop loop(scene, opts, [](uint64_t, uint64_t) { return true; });
+    Solution sol;
+    if (!r->solve(loop, sol)) throw std::runtime_error("radiosity_solution: cancelled");
+    RadiositySolution out;
+    for (const Patch& p : sol.mesh.patches) {
+        for (const Vec3d* v : {&p.c, &p.n}) {
+            std::vector<double>& dst = v == &p.c ? out.centre : out.normal;
+            dst.insert(dst.end(), {v->x, v->y, v->z});
+        }
+        for (int c = 0; c < 4; ++c) {  // the first 3 corners and the last (exact for triangles)
+            const Vec3d& v = p.v[c < 3 ? std::min(c, p.nv - 1) : p.nv - 1];
+            out.corners.insert(out.corners.end(), {v.x, v.y, v.z});
+        }
+        out.area.push_back(p.area);
+        out.shape.push_back(p.shape);
+    }
+    for (size_t e = 0; e < sol.el.size(); ++e) {
+        out.emitted.insert(out.emitted.end(), {sol.el[e].E.x, sol.el[e].E.y, sol.el[e].E.z});
+        out.direct.insert(out.direct.end(), {sol.Bd[e].x, sol.Bd[e].y, sol.Bd[e].z});
+        Vec3d ind = sol.Bi[e] + sol.Blast[e];
+        out.indirect.insert(out.indirect.end(), {ind.x, ind.y, ind.z});
+    }
+    out.stats = sol.stats();
+    return out;
+}
+
+}  // namespace rm
