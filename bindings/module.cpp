@@ -295,6 +295,7 @@ PYBIND11_MODULE(_core, m) {
             py::arg("threads") = 0);
 
     bind_test_hooks(m, scene_class);
+    bind_prt(m);
 
     // ---- Components, vectorised for statistical tests (chi-square etc.).
     py::class_<Bsdf>(m, "Bsdf")
@@ -640,7 +641,15 @@ PYBIND11_MODULE(_core, m) {
                 maps[py::str(pm.name)] = d;
             }
             st["photon_maps"] = maps;
+            py::dict est;
+            for (const auto& kv : out.estimator_stats) est[py::str(kv.first)] = kv.second;
+            st["estimator"] = est;
             r["stats"] = st;
+            py::dict arrays;
+            for (OutputArray& a : out.arrays)
+                arrays[py::str(a.name)] =
+                    to_numpy(std::move(a.data), std::vector<py::ssize_t>(a.shape.begin(), a.shape.end()));
+            r["arrays"] = arrays;
             py::list cps;
             for (auto& c : out.checkpoints)
                 cps.append(py::make_tuple(c.spp, c.seconds, to_numpy(std::move(c.image), {H, W, 3}),

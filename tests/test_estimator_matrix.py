@@ -11,7 +11,8 @@ The cell (estimator, scene):
 
 - Skipped, naming the capability, when the scene needs one the estimator
   does not declare (`media` for a scene with participating media, `dipole`
-  for one with a dipole BSSRDF), and, naming the reason, when the scene's
+  for one with a dipole BSSRDF), with the estimator's own refusal when its
+  check of the scene refuses it (radiometer.refusal), and, naming the reason, when the scene's
   reference cannot judge what the estimator renders (a partial estimator on
   a Mitsuba scene, whose reference is only the total, unless the registry
   declares the pixels to leave out for it; a biased or consistent one on a
@@ -237,6 +238,11 @@ def _skip_reason(est, spec, scene):
     for feature, cap in NEEDS.items():
         if scene.features.get(feature) and not caps[cap]:
             return f"{est} does not declare capability '{cap}' ({spec.name} has {feature[4:]})"
+    # The estimator's own refusal, by name (prt: lights not at infinity,
+    # non-diffuse BSDFs), the message render() would raise.
+    why = rm.refusal(scene, {"type": est})
+    if why:
+        return f"{est} refuses {spec.name}: {why}"
     return None
 
 

@@ -60,6 +60,10 @@ class RenderResult:
     # render_error_budget): the standard error of the image mean, and per
     # effect where effect_variance was kept.
     error_budget: dict = field(default_factory=dict)
+    # Arrays an estimator keeps beyond the images, by name (prt: its
+    # per-pixel transfer "prt_transfer" and the lighting's SH coefficients
+    # "prt_light"; radiometer.prt.Transfer relights from them).
+    arrays: dict = field(default_factory=dict)
 
     def write_exr(self, path, **metadata):
         from .exr import write_exr
@@ -129,6 +133,20 @@ def _effects_mask(effects):
     return mask
 
 
+def refusal(scene, integrator) -> Optional[str]:
+    """None, or why the estimator refuses `scene` by its own check (the
+    message render() would raise: prt's local lights or non-diffuse BSDFs),
+    without rendering. Media and dipoles are the capabilities'
+    (radiometer.estimators()), not checked here."""
+    from . import _core
+    from .scene import Scene
+
+    if not isinstance(scene, Scene):
+        raise TypeError(f"refusal: expected a radiometer Scene, got {type(scene).__name__}")
+    spec = _integrator_desc(integrator, scene.desc.integrator)
+    return _core.check_scene(scene.core(), _core_integrator(spec))
+
+
 def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0,
            threads: int = 0, checkpoints=None, effects=None,
            progress: Optional[Callable[[int, int], None]] = None, effect_variance: bool = False) -> RenderResult:
@@ -190,7 +208,8 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
                           seconds=r["seconds"], stats=stats, checkpoints=list(r["checkpoints"]), integrator=spec,
                           seed=int(seed), strategies=dict(r["strategies"]),
                           strategies_unweighted=dict(r["strategies_unweighted"]),
-                          effect_variance=None if r["effect_variance"] is None else dict(r["effect_variance"]))
+                          effect_variance=None if r["effect_variance"] is None else dict(r["effect_variance"]),
+                          arrays=dict(r["arrays"]))
     from .analysis.verdict import render_error_budget
 
     result.error_budget = render_error_budget(result)

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "render/integrator.h"
@@ -43,6 +44,14 @@ struct PhotonMapStats {
     uint64_t max_paths = 0;      // the give-up bound on paths (photon_trace.h; 0 for sppm's)
 };
 
+// An array an estimator keeps for Python beyond the images (prt: its
+// per-pixel transfer vectors and the lighting's SH coefficients), row-major.
+struct OutputArray {
+    std::string name;
+    std::vector<int> shape;
+    std::vector<float> data;
+};
+
 struct RenderOutput {
     int width = 0, height = 0, spp = 0;
     double seconds = 0;
@@ -63,6 +72,10 @@ struct RenderOutput {
     std::vector<Checkpoint> checkpoints;
     ThreadStats stats;
     std::vector<PhotonMapStats> photon_maps;
+    // What an estimator keeps of its own: arrays (res.arrays) and named
+    // figures (res.stats["estimator"]).
+    std::vector<OutputArray> arrays;
+    std::vector<std::pair<std::string, double>> estimator_stats;
     int threads = 0;
     double setup_seconds = 0;
 };
