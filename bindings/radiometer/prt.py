@@ -5,7 +5,7 @@ under new distant lighting, without precomputing its transfer again.
     tr = rm.prt.Transfer(res)       # keeps the per-pixel transfer vectors
     relit = tr.relight({"type": "envmap", "filename": "sky.exr", "scale": 2})
     relit.image, relit.effects      # (H, W, 3): what prt renders under that lighting
-    relit.seconds                   # {"project": ..., "dot": ...}
+    relit.seconds                   # {"load": ..., "project": ..., "dot": ...}
 
 The new lighting is an emitter dict (constant, envmap, directional; Mitsuba
 3's, as load_dict takes them), a dict of several (a scene dict without
@@ -15,7 +15,7 @@ directly, an (n, 3) array of RGB values (index l (l + 1) + m, core/sh.h).
 the lighting, so one precomputation shows the band-limit error of every
 k <= bands. The image is the render's own for the render's lighting: the
 same dot product, the same clamping of each effect at 0 (the projected
-lighting can ring negative), in float64 here.
+lighting can ring negative), in float32 here (float64 sums in the render).
 """
 from __future__ import annotations
 
@@ -36,7 +36,9 @@ class Relit:
     coefficients: np.ndarray  # (bands^2, 3) the lighting's SH coefficients used
     bands: int
     clamped: int  # values of effect images clamped at 0 (negative band-limited light)
-    seconds: dict = field(default_factory=dict)  # "project" (the lighting's projection), "dot" (the relighting)
+    # "load" (an emitter dict made a scene: the envmap read), "project" (its
+    # SH projection), "dot" (the relighting)
+    seconds: dict = field(default_factory=dict)
 
 
 class Transfer:
@@ -54,6 +56,10 @@ class Transfer:
         self.bands = math.isqrt(n)
         self.env_samples = int(res.integrator.get("env_samples", 64))
         self.spp = res.spp
+        # Per channel, contiguous (pixels x effects, coefficients): one
+        # matrix-vector product each relights it.
+        h, w, e, _, n = self.transfer.shape
+        self._by_channel = [np.ascontiguousarray(self.transfer[..., c, :]).reshape(h * w * e, n) for c in range(3)]
 
     @property
     def nbytes(self) -> int:
@@ -61,27 +67,36 @@ class Transfer:
 
     def coefficients(self, env, bands=None) -> np.ndarray:
         """The SH coefficients (bands^2, 3) of `env` (see the module's doc)."""
-        from . import _core
+        return self._project(self._lighting(env), bands)
+
+    def _lighting(self, env):
+        """`env` as SH coefficients (an array) or a committed core scene."""
         from .scene import Scene
 
-        bands = self.bands if bands is None else int(bands)
-        n = bands * bands
         if isinstance(env, np.ndarray) or isinstance(env, (list, tuple)):
             a = np.asarray(env, dtype=np.float64)
             if a.ndim != 2 or a.shape[1] != 3 or math.isqrt(a.shape[0]) ** 2 != a.shape[0]:
                 raise ValueError(f"relight: SH coefficients must have shape (k^2, 3), got {a.shape}")
-            out = np.zeros((n, 3))
-            k = min(n, a.shape[0])
-            out[:k] = a[:k]
-            return out
+            return a
         if isinstance(env, dict):
             from . import load_dict
 
-            d = dict(env) if env.get("type") == "scene" else {"type": "scene", "light": env}
-            env = load_dict(d)
+            env = load_dict(dict(env) if env.get("type") == "scene" else {"type": "scene", "light": env})
         if not isinstance(env, Scene):
             raise TypeError(f"relight: expected an emitter dict, a Scene or an (n, 3) array, got {type(env).__name__}")
-        return np.asarray(_core.sh_project(env.core(), bands, max(self.env_samples, bands)), dtype=np.float64)
+        return env.core()
+
+    def _project(self, lighting, bands=None) -> np.ndarray:
+        from . import _core
+
+        bands = self.bands if bands is None else int(bands)
+        n = bands * bands
+        if isinstance(lighting, np.ndarray):
+            out = np.zeros((n, 3))
+            k = min(n, lighting.shape[0])
+            out[:k] = lighting[:k]
+            return out
+        return np.asarray(_core.sh_project(lighting, bands, max(self.env_samples, bands)), dtype=np.float64)
 
     def relight(self, env, bands=None, clamp=True) -> Relit:
         """The image under the lighting `env`, from the kept transfer."""
@@ -89,14 +104,15 @@ class Transfer:
         if not 1 <= bands <= self.bands:
             raise ValueError(f"relight: bands must be in 1..{self.bands} (the transfer's), got {bands}")
         t0 = time.perf_counter()
-        L = self.coefficients(env, bands)
+        lighting = self._lighting(env)
+        tp = time.perf_counter()
+        L = self._project(lighting, bands)
         t1 = time.perf_counter()
         n = bands * bands
-        T = self.transfer[..., :n]
-        # One matrix-vector product per channel: (H W E, n) @ (n,).
-        out = np.empty(T.shape[:-1], dtype=np.float64)
+        h, w, e = self.transfer.shape[:3]
+        out = np.empty((h, w, e, 3), dtype=np.float64)
         for c in range(3):
-            out[..., c] = T[..., c, :] @ L[:, c]
+            out[..., c] = (self._by_channel[c][:, :n] @ L[:, c].astype(np.float32)).reshape(h, w, e)
         clamped = int((out < 0).sum()) if clamp else 0
         if clamp:
             np.maximum(out, 0.0, out=out)
@@ -104,4 +120,4 @@ class Transfer:
         image = out.sum(axis=2).astype(np.float32)
         t2 = time.perf_counter()
         return Relit(image=image, effects=effects, coefficients=L, bands=bands, clamped=clamped,
-                     seconds={"project": t1 - t0, "dot": t2 - t1})
+                     seconds={"load": tp - t0, "project": t1 - tp, "dot": t2 - t1})
