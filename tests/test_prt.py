@@ -57,16 +57,16 @@ def real_sh_scipy(dirs, bands):
     theta = np.arccos(np.clip(d[:, 2], -1, 1))
     phi = np.arctan2(d[:, 1], d[:, 0])
     out = np.zeros((len(d), bands * bands))
-    for l in range(bands):
-        for m in range(-l, l + 1):
-            y = special.sph_harm_y(l, abs(m), theta, phi)
+    for deg in range(bands):
+        for m in range(-deg, deg + 1):
+            y = special.sph_harm_y(deg, abs(m), theta, phi)
             if m > 0:
                 v = math.sqrt(2) * (-1) ** m * y.real
             elif m < 0:
                 v = math.sqrt(2) * (-1) ** m * y.imag
             else:
                 v = y.real
-            out[:, l * (l + 1) + m] = v
+            out[:, deg * (deg + 1) + m] = v
     return out
 
 
@@ -222,8 +222,8 @@ def test_rotating_the_lighting_rotates_the_coefficients(tmp_path):
     D = sh_rotation(R, bands)
     np.testing.assert_allclose(LR, D @ L, atol=2e-4)
     # Band energies sum_m L_lm^2 are rotation invariant.
-    for l in range(bands):
-        b = slice(l * l, (l + 1) ** 2)
+    for deg in range(bands):
+        b = slice(deg * deg, (deg + 1) ** 2)
         np.testing.assert_allclose((LR[b] ** 2).sum(0), (L[b] ** 2).sum(0), rtol=1e-3, atol=1e-7)
     # Power: the inverse rotation is told apart.
     assert np.abs(LR - sh_rotation(R.T, bands) @ L).max() > 100 * 2e-4
@@ -270,10 +270,11 @@ def test_nine_coefficient_irradiance_against_quadrature(which, tmp_path):
             # by |A_l| ||L_l|| sqrt((2l + 1) / 4 pi) (the addition theorem),
             # with A_l of R&H's eq. 8 (Abramowitz and Stegun for the Legendre terms).
             bound = np.zeros(3)
-            for l in range(4, 9, 2):
-                A = 2 * np.pi * (-1) ** (l // 2 - 1) / ((l + 2) * (l - 1)) * math.factorial(l) / (
-                    2 ** l * math.factorial(l // 2) ** 2)
-                bound += abs(A) * np.linalg.norm(L[l * l:(l + 1) ** 2], axis=0) * math.sqrt((2 * l + 1) / (4 * np.pi))
+            for deg in range(4, 9, 2):
+                A = 2 * np.pi * (-1) ** (deg // 2 - 1) / ((deg + 2) * (deg - 1)) * math.factorial(deg) / (
+                    2 ** deg * math.factorial(deg // 2) ** 2)
+                band = np.linalg.norm(L[deg * deg:(deg + 1) ** 2], axis=0)
+                bound += abs(A) * band * math.sqrt((2 * deg + 1) / (4 * np.pi))
             err = np.abs(closed - exact)
             assert np.all(err <= bound * 1.5 + 2e-4), (err, bound)
             assert np.all(err / exact < 0.03)  # R&H: a few per cent at most
@@ -378,8 +379,9 @@ def test_low_frequency_lighting_matches_path_within_the_band_limit(tmp_path):
         # same transfer at kmax bands (the same samples: the noise cancels,
         # what is left is the band limit between k and kmax).
         m = b.image.mean()
-        rows.append((k, float(np.sqrt(((img - b.image) ** 2).mean())) / m, float(np.sqrt(((img - full) ** 2).mean())) / m,
-                     float(bound.max()) / m))
+        rms_path = float(np.sqrt(((img - b.image) ** 2).mean())) / m
+        rms_full = float(np.sqrt(((img - full) ** 2).mean())) / m
+        rows.append((k, rms_path, rms_full, float(bound.max()) / m))
     noise = float(np.sqrt((a.variance + b.variance).mean())) / b.image.mean()
     print(f"\nrelative to the image mean; noise of prt - path, RMS: {noise:.4f}")
     print("bands  RMS prt_k - path  RMS prt_k - prt_8  bound ||T|| ||L - L_k||")

@@ -33,7 +33,6 @@ import argparse
 import resource
 import statistics
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -156,12 +155,12 @@ def main(argv=None):
         out=args.out)
     print(f"precompute: {res.seconds:.2f} s at {args.bands} bands, {args.spp} spp, {args.res}^2; transfer "
           f"{tr.nbytes / 2 ** 20:.2f} MiB, peak RSS {rss_mib:.0f} MiB")
-    print(f"{'environment':18s} {'load ms':>8s} {'project ms':>10s} {'dot ms':>7s} {'prt relMSE':>11s} {'ref floor':>10s} "
-          f"{'path s @ equal':>14s}")
+    print(f"{'environment':18s} {'load ms':>8s} {'project ms':>10s} {'dot ms':>7s} {'prt relMSE':>11s} "
+          f"{'ref floor':>10s} {'path s @ equal':>14s}")
     for r in rows:
         teq = "-" if r["path_seconds_equal_error"] is None else f"{r['path_seconds_equal_error']:.2f}"
-        print(f"{r['environment']:18s} {r['load_ms']:8.2f} {r['project_ms']:10.2f} {r['dot_ms']:7.2f} {r['prt_relmse']:11.2e} "
-              f"{r['ref_floor_relmse']:10.2e} {teq:>14s}")
+        print(f"{r['environment']:18s} {r['load_ms']:8.2f} {r['project_ms']:10.2f} {r['dot_ms']:7.2f} "
+              f"{r['prt_relmse']:11.2e} {r['ref_floor_relmse']:10.2e} {teq:>14s}")
     print("lobe sky, relMSE by bands: " + ", ".join(f"{b['bands']}: {b['relmse']:.2e}" for b in by_bands))
     print(f"wrote {out}")
 
