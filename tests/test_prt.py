@@ -39,8 +39,7 @@ from scipy import stats as st
 
 import radiometer as rm
 from radiometer import _core
-from radiometer.exr import write_exr
-from radiometer.prt import Transfer
+from radiometer.prt import Transfer, latlong_envmap
 
 STRESS = Path(__file__).resolve().parents[1] / "reference_scenes" / "stress"
 ALBEDO_FLOOR = [0.7, 0.6, 0.5]
@@ -90,18 +89,8 @@ def random_dirs(n, seed):
 # --- lighting -----------------------------------------------------------------
 
 
-def envmap_file(path, fn, w=256, h=129):
-    """A lat-long EXR whose grid vertex (i, j) holds fn at its direction,
-    in Mitsuba's parametrisation (renderer/scene/emitter.cpp EnvMapEmitter):
-    (sin phi sin theta, cos theta, -cos phi sin theta), phi = 2 pi (i + 1/2) / w,
-    theta = pi j / (h - 1); the envmap's bilinear lookup then reproduces fn
-    to the grid's interpolation error."""
-    u = (np.arange(w) + 0.5) / w
-    v = np.arange(h) / (h - 1)
-    P, T = np.meshgrid(2 * np.pi * u, np.pi * v)
-    d = np.stack([np.sin(P) * np.sin(T), np.cos(T), -np.cos(P) * np.sin(T)], -1)
-    write_exr(path, image=fn(d.reshape(-1, 3)).reshape(h, w, 3).astype(np.float32))
-    return path
+def envmap_file(path, fn):
+    return Path(latlong_envmap(path, fn))
 
 
 def quadratic(d):

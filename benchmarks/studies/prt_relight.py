@@ -40,8 +40,8 @@ import numpy as np
 import radiometer as rm
 from radiometer.analysis.metrics import relmse, relmse_floor, time_to_error
 from radiometer.benchmarks.studies import record
-from radiometer.exr import write_exr
-from radiometer.prt import Transfer
+from radiometer.loader.transforms import _look_at
+from radiometer.prt import Transfer, latlong_envmap
 
 SUN = np.array([0.3, 0.8, 0.5]) / np.linalg.norm([0.3, 0.8, 0.5])
 
@@ -59,32 +59,14 @@ def quadratic_sky(d):
     return np.stack([1.0 + 0.3 * x + 0.2 * z * z, 0.8 + 0.4 * y + 0.3 * x * y, 0.6 - 0.3 * z + 0.2 * x * z], -1)
 
 
-def envmap(path, fn, w=256, h=129):
-    """A lat-long EXR in Mitsuba's parametrisation (as tests/test_prt.py's)."""
-    u, v = (np.arange(w) + 0.5) / w, np.arange(h) / (h - 1)
-    P, T = np.meshgrid(2 * np.pi * u, np.pi * v)
-    d = np.stack([np.sin(P) * np.sin(T), np.cos(T), -np.cos(P) * np.sin(T)], -1)
-    write_exr(path, image=fn(d.reshape(-1, 3)).reshape(h, w, 3).astype(np.float32))
-    return str(path)
-
-
-def lookat(o, t, up):
-    o, t, up = (np.asarray(x, float) for x in (o, t, up))
-    d = (t - o) / np.linalg.norm(t - o)
-    left = np.cross(up, d)
-    left /= np.linalg.norm(left)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, np.cross(d, left), d, o
-    return m
-
-
 def scene(lights: dict, res: int):
     d = {"type": "scene", **lights,
          "floor": {"type": "rectangle", "to_world": np.diag([2.0, 2.0, 1.0, 1.0]),
                    "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.6, 0.5]}}},
          "ball": {"type": "sphere", "center": [0.0, 0.0, 0.5], "radius": 0.5,
                   "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.3, 0.6, 0.8]}}},
-         "cam": {"type": "perspective", "fov": 45, "to_world": lookat([0, -3.2, 2.4], [0, 0, 0.3], (0, 0, 1)),
+         "cam": {"type": "perspective", "fov": 45,
+                 "to_world": _look_at([0, -3.2, 2.4], [0, 0, 0.3], (0, 0, 1), "prt_relight"),
                  "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}}}
     return rm.load_dict(d)
 
@@ -92,10 +74,13 @@ def scene(lights: dict, res: int):
 def environments(tmp: Path) -> dict:
     rot = np.array([[np.cos(2.1), -np.sin(2.1), 0], [np.sin(2.1), np.cos(2.1), 0], [0, 0, 1]])
     const = {"type": "constant", "radiance": {"type": "rgb", "value": [0.8, 0.9, 1.0]}}
+    def sky(name, fn):
+        return {"light": {"type": "envmap", "filename": latlong_envmap(tmp / f"{name}.exr", fn)}}
+
     return {
-        "lobe_sky": {"light": {"type": "envmap", "filename": envmap(tmp / "lobe.exr", lobe_sky(SUN))}},
-        "lobe_sky_rotated": {"light": {"type": "envmap", "filename": envmap(tmp / "lobe_r.exr", lobe_sky(rot @ SUN))}},
-        "quadratic_sky": {"light": {"type": "envmap", "filename": envmap(tmp / "quad.exr", quadratic_sky)}},
+        "lobe_sky": sky("lobe", lobe_sky(SUN)),
+        "lobe_sky_rotated": sky("lobe_r", lobe_sky(rot @ SUN)),
+        "quadratic_sky": sky("quad", quadratic_sky),
         "constant": {"light": const},
         "constant_and_sun": {"light": const, "sun": {"type": "directional", "direction": [-0.4, 0.3, -0.85],
                                                      "irradiance": {"type": "rgb", "value": [2.0, 1.8, 1.5]}}},

@@ -41,6 +41,23 @@ class Relit:
     seconds: dict = field(default_factory=dict)
 
 
+def latlong_envmap(path, fn, width=256, height=129):
+    """Writes an EXR for Mitsuba 3's `envmap` whose grid vertex (i, j) holds
+    fn(d) at its direction d, in Mitsuba's parametrisation
+    (renderer/scene/emitter.cpp EnvMapEmitter): d = (sin phi sin theta,
+    cos theta, -cos phi sin theta), phi = 2 pi (i + 1/2) / width, theta =
+    pi j / (height - 1); the envmap's bilinear lookup then gives fn to the
+    grid's interpolation error. fn maps (N, 3) directions to (N, 3) RGB.
+    Returns the path as a string."""
+    from .exr import write_exr
+
+    u, v = (np.arange(width) + 0.5) / width, np.arange(height) / (height - 1)
+    P, T = np.meshgrid(2 * np.pi * u, np.pi * v)
+    d = np.stack([np.sin(P) * np.sin(T), np.cos(T), -np.cos(P) * np.sin(T)], -1)
+    write_exr(path, image=np.asarray(fn(d.reshape(-1, 3)), np.float32).reshape(height, width, 3))
+    return str(path)
+
+
 class Transfer:
     """The transfer of one prt render: (H, W, effect, channel, coefficient)
     float32 in `.transfer`, the render's lighting in `.light`."""
