@@ -463,7 +463,7 @@ def test_refusals_name_what_is_refused():
         rm.render(glossy, integrator="prt", spp=1)
     scene = ball_on_floor(CONSTANT, res=4)
     for bad, param in (({"transfer": "ambient"}, "transfer"), ({"bands": 0}, "bands"),
-                       ({"bands": 5, "env_samples": 4}, "env_samples")):
+                       ({"env_samples": 0}, "env_samples"), ({"bounces": -1}, "bounces")):
         with pytest.raises(rm.SceneError, match=param):
             rm.render(scene, integrator={"type": "prt", **bad}, spp=1)
     with pytest.raises(ValueError, match="local light"):

@@ -37,6 +37,7 @@
 // Parameters: the registration below.
 #include "estimators/prt.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -318,12 +319,12 @@ private:
 };
 
 RenderOutput PrtIntegrator::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
-    check_scene(scene);
     const Sensor& s = *scene.sensor;
     check_memory(type, s.width, s.height,
                  {{"transfer vectors (" + std::to_string(sh_count(bands_)) + " coefficients x 3 channels x 3 effects)",
                    double(s.crop_w) * double(s.crop_h) * Passes::bytes_per_pixel(bands_), "bands or the resolution"},
                   output_memory(opts, s.width, s.height)});
+    check_scene(scene);
     auto t0 = std::chrono::steady_clock::now();
     std::vector<Color> light = project_distant_lighting(scene, bands_, env_samples_);
     double project_seconds = seconds_since(t0);
@@ -351,7 +352,8 @@ RenderOutput PrtIntegrator::drive(const Scene& scene, const RenderOptions& opts,
             .at_least(0)
             .at_most(64),
         ParamSpec::integer("env_samples", 64,
-                           "Gauss-Legendre nodes in cos theta (times 2 in phi) projecting an environment onto SH")
+                           "Gauss-Legendre nodes in cos theta (times 2 in phi) projecting an environment onto SH; "
+                           "at least `bands` are used")
             .at_least(1)
             .at_most(4096),
         hide_emitters_param(),
@@ -366,10 +368,8 @@ RenderOutput PrtIntegrator::drive(const Scene& scene, const RenderOptions& opts,
         Transfer tr = t == "unshadowed" ? Transfer::Unshadowed
                                         : (t == "shadowed" ? Transfer::Shadowed : Transfer::Interreflected);
         int bounces = p.get_int("bounces");
-        int env_samples = p.get_int("env_samples");
-        if (env_samples < bands)
-            p.fail("env_samples", "env_samples = " + std::to_string(env_samples) + " must be at least bands = " +
-                                      std::to_string(bands) + " (the quadrature is exact up to band env_samples - 1)");
+        // The quadrature is exact for bands < its node count: at least `bands` nodes.
+        int env_samples = std::max(p.get_int("env_samples"), bands);
         return std::make_unique<PrtIntegrator>(bands, tr, bounces, env_samples, p.get_bool("hide_emitters"));
     };
     return e;
