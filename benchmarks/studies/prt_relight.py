@@ -25,7 +25,8 @@ Measured:
 
     python -m radiometer.benchmarks.studies.prt_relight [--res 64] [--spp 256] [--bands 6] [--ref-spp 2048]
 
-Writes benchmarks/results/prt_relight.json (studies/record.py) and prints a table.
+Writes benchmarks/results/prt_relight.json (studies/record.py) and .png (the
+scene relit under each environment, prt above path's reference), and prints a table.
 """
 from __future__ import annotations
 
@@ -87,6 +88,32 @@ def environments(tmp: Path) -> dict:
     }
 
 
+def save_png(panels, path):
+    """One scene relit under each environment: prt (from the one transfer)
+    above, the path reference below, each column at its reference's exposure."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from radiometer.analysis.metrics import display_exposure
+    from radiometer.tonemap import to_srgb
+
+    fig, axes = plt.subplots(2, len(panels), figsize=(2.4 * len(panels), 5.2), squeeze=False)
+    for k, (name, relit, ref) in enumerate(panels):
+        ev = display_exposure(ref)
+        axes[0, k].imshow(to_srgb(relit, ev))
+        axes[0, k].set_title(f"{name}\nprt, relit", fontsize=8)
+        axes[1, k].imshow(to_srgb(ref, ev))
+        axes[1, k].set_title("path reference", fontsize=8)
+        for a in axes[:, k]:
+            a.set_xticks([])
+            a.set_yticks([])
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--res", type=int, default=64)
@@ -110,7 +137,7 @@ def main(argv=None):
                 res = r
         rss_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         tr = Transfer(res)
-        rows = []
+        rows, panels = [], []
         for name, lights in envs.items():
             sc = scene(lights, args.res)
             ref = rm.render(sc, integrator={"type": "path", "max_depth": 3}, spp=args.ref_spp, seed=100)
@@ -122,6 +149,7 @@ def main(argv=None):
                             checkpoints=True)
             curve = [(s, t, relmse(img, ref.image)) for s, t, img, _ in pth.checkpoints if t > 0]
             t_eq = time_to_error(curve, err)
+            panels.append((name, relit.image, ref.image))
             rows.append({"environment": name, "load_ms": 1e3 * statistics.median(t["load"] for t in times),
                          "project_ms": 1e3 * statistics.median(t["project"] for t in times),
                          "dot_ms": 1e3 * statistics.median(t["dot"] for t in times), "prt_relmse": err,
@@ -137,7 +165,7 @@ def main(argv=None):
         "environments": rows, "lobe_sky_by_bands": by_bands,
         "note": "relMSE against a path reference at --ref-spp (its own noise floor beside it); "
                 "path_seconds_equal_error: wall time for path to reach prt's relMSE (None: not within --path-spp)"},
-        out=args.out)
+        out=args.out, plot=lambda png: save_png(panels, png))
     print(f"precompute: {res.seconds:.2f} s at {args.bands} bands, {args.spp} spp, {args.res}^2; transfer "
           f"{tr.nbytes / 2 ** 20:.2f} MiB, peak RSS {rss_mib:.0f} MiB")
     print(f"{'environment':18s} {'load ms':>8s} {'project ms':>10s} {'dot ms':>7s} {'prt relMSE':>11s} "
