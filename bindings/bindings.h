@@ -12,4 +12,8 @@ void bind_estimators(pybind11::module_& m);
 // Test-only hooks into production code (test_hooks.cpp).
 void bind_test_hooks(pybind11::module_& m, pybind11::class_<Scene>& scene);
 
+// Spherical harmonics (core/sh.h), the projection of a scene's distant
+// lighting (estimators/prt.h) and an estimator's refusal of a scene (prt.cpp).
+void bind_prt(pybind11::module_& m);
+
 }  // namespace rm::bind

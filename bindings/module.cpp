@@ -295,6 +295,7 @@ PYBIND11_MODULE(_core, m) {
             py::arg("threads") = 0);
 
     bind_test_hooks(m, scene_class);
+    bind_prt(m);
 
     // ---- Components, vectorised for statistical tests (chi-square etc.).
     py::class_<Bsdf>(m, "Bsdf")

@@ -9,7 +9,7 @@ __version__ = "0.1.0"
 from .scene_desc import SceneError
 from .loader import SceneWarning
 from .registry import estimators
-from .render import EFFECTS, RenderCancelled, RenderResult, render
+from .render import EFFECTS, RenderCancelled, RenderResult, refusal, render
 from .scene import Scene
 
 
@@ -44,4 +44,4 @@ def read_exr(path):
 
 
 __all__ = ["load_file", "load_dict", "render", "estimators", "write_exr", "read_exr", "Scene", "SceneError",
-           "SceneWarning", "RenderResult", "RenderCancelled", "EFFECTS", "__version__"]
+           "SceneWarning", "RenderResult", "RenderCancelled", "refusal", "EFFECTS", "__version__"]

@@ -62,7 +62,9 @@ class RenderResult:
     error_budget: dict = field(default_factory=dict)
     # Arrays an estimator keeps beyond the images, by name (numpy, float32;
     # the names of an array's last axis, where it has them, in
-    # stats[NAME + "_columns"]).
+    # stats[NAME + "_columns"]): prt's per-pixel transfer "prt_transfer" and
+    # the lighting's SH coefficients "prt_light" (radiometer.prt.Transfer
+    # relights from them).
     arrays: dict = field(default_factory=dict)
 
     def write_exr(self, path, **metadata):
@@ -131,6 +133,20 @@ def _effects_mask(effects):
     if not any(mask):
         raise ValueError("effects: empty list; name at least one effect class")
     return mask
+
+
+def refusal(scene, integrator) -> Optional[str]:
+    """None, or why the estimator refuses `scene` by its own check (the
+    message render() would raise: prt's local lights or non-diffuse BSDFs),
+    without rendering. Media and dipoles are the capabilities'
+    (radiometer.estimators()), not checked here."""
+    from . import _core
+    from .scene import Scene
+
+    if not isinstance(scene, Scene):
+        raise TypeError(f"refusal: expected a radiometer Scene, got {type(scene).__name__}")
+    spec = _integrator_desc(integrator, scene.desc.integrator)
+    return _core.check_scene(scene.core(), _core_integrator(spec))
 
 
 def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0,

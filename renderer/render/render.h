@@ -45,7 +45,7 @@ struct PhotonMapStats {
 };
 
 // An array an estimator keeps for Python beyond the images (res.arrays):
-// a cache's records, precomputed transfer vectors; row-major, `columns`
+// a cache's records, prt's transfer vectors; row-major, `columns`
 // naming the last axis where it has names (res.stats[NAME + "_columns"]).
 struct OutputArray {
     std::string name;
