@@ -73,7 +73,9 @@ public:
         Vec3 prev_p;
         BsdfContext ctx;
         for (int depth = 0;; ++depth) {
-            // 1. Find the next vertex.
+            // 1. Find the next vertex (its draws start at the bounce's own
+            //    dimensions, for structured samplers: rng.h).
+            sampler.start_bounce(depth);
             Interaction it;
             ++stats.rays;
             bool hit = scene.intersect(ray, it);
