@@ -18,15 +18,26 @@ uint32_t reverse_bits32(uint32_t v) {
 }
 
 // Direction numbers of Sobol dimension 2 (Joe and Kuo's row "2 1 0 1"):
-// v_k = m_k / 2^k, m_1 = 1, m_k = 2 m_{k-1} xor m_{k-1}, as 32-bit fractions.
+// v_k = m_k / 2^k, m_1 = 1, m_k = 2 m_{k-1} xor m_{k-1}, as 32-bit fractions;
+// kept, bit-reversed (as owen_reversed takes them), as the xor of the v_k of
+// every byte value at each of the index's four bytes, so a point takes four
+// lookups instead of a loop over its bits.
 struct Sobol2Directions {
-    std::array<uint32_t, 32> v{};
+    std::array<std::array<uint32_t, 256>, 4> byte{};
     Sobol2Directions() {
+        std::array<uint32_t, 32> v{};
         uint64_t m = 1;
         for (int k = 1; k <= 32; ++k) {
             if (k > 1) m = (m << 1) ^ m;
             v[size_t(k - 1)] = uint32_t(m << (32 - k));
         }
+        for (int b = 0; b < 4; ++b)
+            for (uint32_t x = 0; x < 256; ++x) {
+                uint32_t acc = 0;
+                for (int k = 0; k < 8; ++k)
+                    if (x >> k & 1u) acc ^= v[size_t(8 * b + k)];
+                byte[size_t(b)][x] = reverse_bits32(acc);
+            }
     }
 };
 const Sobol2Directions kSobol2;
@@ -55,6 +66,29 @@ float stratum_value(uint32_t stratum, float offset, uint32_t n) {
     return std::min(float((double(stratum) + double(offset)) / double(n)), 0x1.fffffep-1f);
 }
 
+// Sobol dimension 2 of index i, bit-reversed.
+uint32_t sobol2_reversed(uint32_t i) {
+    const auto& t = kSobol2.byte;
+    return t[0][i & 255u] ^ t[1][(i >> 8) & 255u] ^ t[2][(i >> 16) & 255u] ^ t[3][i >> 24];
+}
+
+// Burley 2020, Section 3: a hash in which every bit depends only on the
+// bits below it (adds and multiplies carry upwards), applied to the
+// reversed bits of a value, is a nested uniform scramble of its digits from
+// the top. Takes the reversed bits, returns the scrambled value.
+uint32_t owen_reversed(uint32_t x, uint32_t seed) {
+    x += seed;
+    x ^= x * 0x6c50b47cu;
+    x ^= x * 0xb82f1e52u;
+    x ^= x * 0xc7afe638u;
+    x ^= x * 0x8d22f6e6u;
+    return reverse_bits32(x);
+}
+
+// A uniform integer in [0, n) from the top 32 bits of a hash (multiply and
+// shift, no division).
+uint32_t below(uint64_t hash, uint32_t n) { return uint32_t((uint64_t(uint32_t(hash >> 32)) * n) >> 32); }
+
 uint64_t morton2(uint32_t x, uint32_t y) {
     auto spread = [](uint64_t v) {
         v &= 0xffffffffULL;
@@ -82,7 +116,7 @@ uint64_t zorder_scramble(uint64_t m, int bits, uint64_t key) {
         int at = b - 2;
         uint32_t digit = uint32_t(m >> at) & 3u;
         uint64_t above = (at + 2 >= 64) ? 0 : (m >> (at + 2));
-        uint32_t p = uint32_t(mix64((above | (uint64_t(at + 1) << 58)) ^ key) % 24u);
+        uint32_t p = below(mix64((above | (uint64_t(at + 1) << 58)) ^ key), 24u);
         out |= uint64_t(kPerm4.p[p][digit]) << at;
     }
     if (b == 1) out |= (m & 1u) ^ (mix64((m >> 1) ^ key) & 1u);
@@ -97,26 +131,9 @@ int ceil_log2(uint64_t n) {
 
 }  // namespace
 
-uint32_t sobol_u32(uint32_t i, int dim) {
-    if (dim == 0) return reverse_bits32(i);
-    uint32_t v = 0;
-    for (int k = 0; i; ++k, i >>= 1)
-        if (i & 1u) v ^= kSobol2.v[size_t(k)];
-    return v;
-}
+uint32_t sobol_u32(uint32_t i, int dim) { return reverse_bits32(dim == 0 ? i : sobol2_reversed(i)); }
 
-uint32_t owen_scramble(uint32_t v, uint32_t seed) {
-    // Burley 2020, Section 3: a hash in which every bit depends only on the
-    // bits below it (adds and multiplies carry upwards), applied to the
-    // reversed bits, is a nested uniform scramble of the digits from the top.
-    uint32_t x = reverse_bits32(v);
-    x += seed;
-    x ^= x * 0x6c50b47cu;
-    x ^= x * 0xb82f1e52u;
-    x ^= x * 0xc7afe638u;
-    x ^= x * 0x8d22f6e6u;
-    return reverse_bits32(x);
-}
+uint32_t owen_scramble(uint32_t v, uint32_t seed) { return owen_reversed(reverse_bits32(v), seed); }
 
 uint32_t permute_index(uint32_t i, uint32_t n, uint64_t key) {
     if (n <= 1) return 0;
@@ -144,7 +161,8 @@ uint32_t permute_index(uint32_t i, uint32_t n, uint64_t key) {
         i = (i * ((k0 >> 3) | 1u)) & w;
         i ^= i >> s1;
     } while (i >= n);
-    return uint32_t((uint64_t(i) + (mix64(key) >> 20)) % n);
+    i += below(mix64(key), n);
+    return i >= n ? i - n : i;
 }
 
 const char* sampler_names() { return "independent, stratified, multijitter, sobol, zsobol"; }
@@ -233,12 +251,12 @@ float PixelSampleSource::get_1d(uint32_t dim) {
             return stratum_value(stratum, plan_.jitter_ ? hash_float(h, j_) : 0.5f, plan_.n_);
         }
         case SamplerType::Sobol: {
-            uint32_t idx = owen_scramble(j_, uint32_t(h));  // Burley's shuffle
-            return to_float(owen_scramble(sobol_u32(idx, 0), uint32_t(h >> 32)));
+            uint32_t idx = owen_scramble(j_, uint32_t(h));           // Burley's shuffle
+            return to_float(owen_reversed(idx, uint32_t(h >> 32)));  // dimension 1 reversed is the index
         }
         case SamplerType::ZSobol: {
             uint64_t idx = zorder_scramble(zindex_, plan_.zbits_ + plan_.log2_n_, h);
-            return to_float(owen_scramble(sobol_u32(uint32_t(idx), 0), uint32_t(h >> 32)));
+            return to_float(owen_reversed(uint32_t(idx), uint32_t(h >> 32)));
         }
         case SamplerType::Independent:
             break;
@@ -248,9 +266,10 @@ float PixelSampleSource::get_1d(uint32_t dim) {
 
 Vec2 PixelSampleSource::get_2d(uint32_t dim) {
     const uint64_t h = dim_key(dim);
-    const uint64_t h1 = mix64(h + 1), h2 = mix64(h + 2);
+    const uint64_t h1 = mix64(h + 1);
     switch (plan_.type_) {
         case SamplerType::Stratified: {
+            const uint64_t h2 = mix64(h + 2);
             uint32_t p = permute_index(j_, plan_.n_, h);
             uint32_t cx = p % plan_.res_x_, cy = p / plan_.res_x_;
             float jx = plan_.jitter_ ? hash_float(h1, j_) : 0.5f, jy = plan_.jitter_ ? hash_float(h2, j_) : 0.5f;
@@ -261,6 +280,7 @@ Vec2 PixelSampleSource::get_2d(uint32_t dim) {
             // within it sub-cell (sy, sx) of the n x m grid of the cell, with
             // the sub-cell permutations shared by every row and column, so
             // both projections are stratified into N (N-rooks).
+            const uint64_t h2 = mix64(h + 2);
             const uint32_t m = plan_.res_x_, n = plan_.res_y_;
             uint32_t s = permute_index(j_, plan_.n_, h);
             uint32_t col = s % m, row = s / m;
@@ -272,13 +292,13 @@ Vec2 PixelSampleSource::get_2d(uint32_t dim) {
         }
         case SamplerType::Sobol: {
             uint32_t idx = owen_scramble(j_, uint32_t(h));
-            return {to_float(owen_scramble(sobol_u32(idx, 0), uint32_t(h1))),
-                    to_float(owen_scramble(sobol_u32(idx, 1), uint32_t(h2)))};
+            return {to_float(owen_reversed(idx, uint32_t(h >> 32))),
+                    to_float(owen_reversed(sobol2_reversed(idx), uint32_t(h1)))};
         }
         case SamplerType::ZSobol: {
             uint32_t idx = uint32_t(zorder_scramble(zindex_, plan_.zbits_ + plan_.log2_n_, h));
-            return {to_float(owen_scramble(sobol_u32(idx, 0), uint32_t(h1))),
-                    to_float(owen_scramble(sobol_u32(idx, 1), uint32_t(h2)))};
+            return {to_float(owen_reversed(idx, uint32_t(h >> 32))),
+                    to_float(owen_reversed(sobol2_reversed(idx), uint32_t(h1)))};
         }
         case SamplerType::Independent:
             break;
