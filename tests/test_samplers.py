@@ -314,6 +314,7 @@ def test_scene_file_and_dict_choose_the_sampler(tmp_path):
     r = rm.render(s, seed=1)
     assert r.stats["sampler"] == "multijitter" and r.spp == 9
     assert rm.render(s, seed=1, sampler="sobol").stats["sampler"] == "sobol"
+    assert rm.render(s, seed=1, sampler={"type": "ldsampler"}).stats["sampler"] == "sobol"  # Mitsuba's name
     xml = tmp_path / "s.xml"
     xml.write_text('<scene version="3.0.0"><integrator type="path"/><shape type="sphere"><bsdf type="diffuse"/>'
                    '<emitter type="area"/></shape><sensor type="perspective"><film type="hdrfilm">'
@@ -341,7 +342,7 @@ def test_estimators_with_their_own_streams_warn():
 
 
 @pytest.mark.parametrize("spec, names", [
-    ("ldsampler", ["ldsampler", "not implemented"]),
+    ("orthogonal", ["orthogonal", "not implemented"]),
     ("halton", ["halton", "zsobol"]),
     ({"type": "sobol", "jitter": True}, ["'jitter'", "sobol"]),
     ({"type": "stratified", "sample_count": 0}, ["sample_count", "stratified"]),
@@ -360,7 +361,7 @@ def test_bad_sampler_in_render_names_it(spec, names):
 
 
 @pytest.mark.parametrize("sampler, names", [
-    ({"type": "ldsampler"}, ["ldsampler"]),
+    ({"type": "orthogonal"}, ["orthogonal"]),
     ({"type": "sobol", "jitter": False}, ["jitter"]),
     ({"type": "stratified", "sample_count": 0}, ["sample_count"]),
     ({"type": "stratified", "jitter": 3}, ["jitter"]),

@@ -14,6 +14,10 @@ zsobol       sample_count, seed: one Owen-scrambled Sobol sequence over the
              film, pixels in hierarchically shuffled Z order (Ahmed and
              Wonka 2020), which spreads the error as blue noise; N rounded
              up to a power of two.
+ldsampler    Mitsuba 3's name for a scrambled, shuffled (0, 2)-sequence per
+             pixel, padded (Kollig and Keller 2002): rendered by `sobol`, the
+             same construction (Sobol's first two dimensions are a (0, 2)-
+             sequence) with Owen scrambling.
 
 sample_count sets the scene's default spp, and N, the number of samples a
 pixel's pattern is built for, is the render's spp (sample_count under a time
@@ -38,10 +42,13 @@ SAMPLER_PARAMS = {
     "multijitter": ("sample_count", "seed", "jitter"),
     "sobol": ("sample_count", "seed"),
     "zsobol": ("sample_count", "seed"),
+    "ldsampler": ("sample_count", "seed"),
 }
+# Names rendered by another sampler of the table.
+ALIASES = {"ldsampler": "sobol"}
 SAMPLER_NAMES = tuple(SAMPLER_PARAMS)
 # Mitsuba 3 samplers not implemented here, named in the error.
-MITSUBA_ONLY = ("orthogonal", "ldsampler")
+MITSUBA_ONLY = ("orthogonal",)
 MAX_SAMPLE_COUNT = 1 << 24
 
 
@@ -67,7 +74,7 @@ def resolve_sampler(spec, scene_sampler: dict) -> dict:
         raise SceneError(f"sampler: a dict needs a 'type' string, got {t!r}")
     if t not in SAMPLER_PARAMS:
         raise unknown_sampler(t)
-    out = {"type": t, "sample_count": scene_sampler.get("sample_count", 4), "jitter": True}
+    out = {"type": ALIASES.get(t, t), "sample_count": scene_sampler.get("sample_count", 4), "jitter": True}
     for k, v in params.items():
         if k not in SAMPLER_PARAMS[t]:
             raise SceneError(f"sampler '{t}': unknown parameter '{k}' (takes: {', '.join(SAMPLER_PARAMS[t])})")
