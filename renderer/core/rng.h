@@ -65,7 +65,7 @@ class Sampler {
 public:
     Sampler(uint64_t seed, uint64_t pixel, uint64_t sample_index)
         : rng_(mix64(seed ^ mix64(sample_index + 0x632be59bd9b4e019ULL)), mix64(pixel + (seed << 1))) {}
-    explicit Sampler(SampleSource* source) : source_(source), stride_(source->bounce_stride()) {}
+    explicit Sampler(SampleSource* source) : source_(source), stride_(source ? source->bounce_stride() : 0) {}
     float next_1d() {
         if (source_) return source_->get_1d(dim_++);
         return rng_.next_float();
