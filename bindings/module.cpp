@@ -537,7 +537,8 @@ PYBIND11_MODULE(_core, m) {
     m.def(
         "render",
         [](const Scene& scene, const IntegratorDesc& idesc, std::vector<bool> effects, int spp, double seconds,
-           uint64_t seed, int threads, std::vector<int> checkpoints, py::object progress, bool effect_variance) {
+           uint64_t seed, int threads, std::vector<int> checkpoints, py::object progress, bool effect_variance,
+           const std::string& sampler, int sample_count, bool jitter) {
             if (!scene.committed()) throw py::value_error("render: scene is not committed");
             EffectMask mask;
             if (effects.size() != size_t(kNumEffects)) throw py::value_error("render: effects mask needs 7 entries");
@@ -550,6 +551,9 @@ PYBIND11_MODULE(_core, m) {
             opts.threads = threads;
             opts.checkpoints = std::move(checkpoints);
             opts.effect_variance = effect_variance;
+            opts.sampler.type = sampler;
+            opts.sampler.sample_count = sample_count;
+            opts.sampler.jitter = jitter;
             bool interrupted = false;
             std::unique_ptr<py::error_already_set> callback_error;
             // Runs on the calling thread with the GIL re-acquired: checks for
@@ -619,6 +623,7 @@ PYBIND11_MODULE(_core, m) {
             r["cancelled"] = out.cancelled;
             r["interrupted"] = interrupted;
             r["threads"] = out.threads;
+            r["sampler"] = out.sampler;
             py::dict st;
             st["rays"] = out.stats.rays;
             st["shadow_rays"] = out.stats.shadow_rays;
@@ -667,5 +672,6 @@ PYBIND11_MODULE(_core, m) {
         },
         py::arg("scene"), py::arg("integrator"), py::arg("effects"), py::arg("spp"), py::arg("seconds"),
         py::arg("seed"), py::arg("threads"), py::arg("checkpoints"), py::arg("progress"),
-        py::arg("effect_variance") = false);
+        py::arg("effect_variance") = false, py::arg("sampler") = "independent", py::arg("sample_count") = 4,
+        py::arg("jitter") = true);
 }

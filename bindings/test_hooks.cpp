@@ -6,6 +6,7 @@
 
 #include "bindings.h"
 #include "convert.h"
+#include "core/sampler.h"
 #include "estimators/radiosity/radiosity.h"
 #include "render/memory.h"
 #include "render/registry.h"
@@ -281,6 +282,46 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
     // The memory a render may use (render/memory.h), in bytes: the machine's,
     // or `bytes` when the tests set it (0 restores the machine's), so that
     // the limit tests do not depend on the machine they run on.
+    // Samplers (tests/test_samplers.py): the values samples [0, samples) of
+    // `pixel` draw through Sampler, for a draw pattern (1: next_1d, 2:
+    // next_2d), as the camera driver makes them: a (samples, dims) array.
+    m.def(
+        "sampler_draws",
+        [](const std::string& type, int sample_count, bool jitter, uint64_t seed, int width, int height, int spp,
+           uint64_t pixel, int samples, const std::vector<int>& draws) {
+            SamplerDesc d;
+            d.type = type;
+            d.sample_count = sample_count;
+            d.jitter = jitter;
+            SamplerPlan plan(d, spp, width, height, seed);
+            int dims = 0;
+            for (int k : draws) {
+                if (k != 1 && k != 2) throw py::value_error("sampler_draws: draws are 1 or 2");
+                dims += k;
+            }
+            py::array_t<float> out({py::ssize_t(samples), py::ssize_t(dims)});
+            auto o = out.mutable_unchecked<2>();
+            for (int s = 0; s < samples; ++s) {
+                PixelSampleSource source(plan, pixel, uint64_t(s));
+                Sampler sampler = plan.independent() ? Sampler(seed, pixel, uint64_t(s)) : Sampler(&source);
+                int c = 0;
+                for (int k : draws) {
+                    if (k == 1) {
+                        o(s, c++) = sampler.next_1d();
+                    } else {
+                        Vec2 v = sampler.next_2d();
+                        o(s, c++) = v.x;
+                        o(s, c++) = v.y;
+                    }
+                }
+            }
+            return out;
+        },
+        py::arg("type"), py::arg("sample_count"), py::arg("jitter"), py::arg("seed"), py::arg("width"),
+        py::arg("height"), py::arg("spp"), py::arg("pixel"), py::arg("samples"), py::arg("draws"));
+    m.def("sobol_u32", &sobol_u32, py::arg("i"), py::arg("dim"), "Sobol dimension dim (0, 1) of index i, unscrambled");
+    m.def("owen_scramble", &owen_scramble, py::arg("v"), py::arg("seed"));
+    m.def("permute_index", &permute_index, py::arg("i"), py::arg("n"), py::arg("key"));
     m.def("memory_limit", &memory_limit_bytes, "bytes of memory a render may use (render/memory.h)");
     m.def("set_memory_limit_for_tests", &set_memory_limit_override, py::arg("bytes"),
           "test hook: the memory limit of render/memory.h (0: the machine's)");

@@ -177,8 +177,8 @@ XML = [
     ("unknown_sensor", '<sensor type="thinlens"/>' + MARK, ["sensor type 'thinlens' is not supported"]),
     ("unknown_film", '<sensor type="perspective"><film type="specfilm"/></sensor>' + MARK,
      ["film type 'specfilm'"]),
-    ("unknown_sampler", '<sensor type="perspective"><sampler type="stratified"/></sensor>' + MARK,
-     ["sampler type 'stratified'"]),
+    ("unknown_sampler", '<sensor type="perspective"><sampler type="orthogonal"/></sensor>' + MARK,
+     ["sampler type 'orthogonal'"]),
     ("unknown_rfilter", _film('<rfilter type="lanczos"/>'), ["rfilter type 'lanczos'"]),
     ("texture", '<texture type="bitmap"/>' + MARK, ["texture type 'bitmap' is not supported"]),
     ("texture_param", '<shape type="sphere"><bsdf type="diffuse">\n<texture name="reflectance" type="checkerboard"/>'

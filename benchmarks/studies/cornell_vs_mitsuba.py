@@ -3,6 +3,12 @@ max_depth 8, our `path` against Mitsuba 3's `path` in llvm_ad_rgb and
 scalar_rgb, in one process, on all cores.
 
     python -m radiometer.benchmarks.studies.cornell_vs_mitsuba [--repeats 3]
+        [--samplers independent,sobol] [--mitsuba-samplers independent,multijitter]
+
+`--samplers` renders ours with each of our samplers (radiometer.samplers),
+`--mitsuba-samplers` Mitsuba with each of its (the scene's sampler type
+replaced in a copy of the XML); time to error = relMSE x time, each row's
+relative to the best Mitsuba row's.
 
 For each renderer: scene load, the first render, then `repeats` timed
 renders with fresh seeds. Each Mitsuba variant runs in its own process with
@@ -68,7 +74,7 @@ def long_reference(res: int, max_depth: int, runs: int, spp: int, rfilter: str =
     return ref, path
 
 
-def bench_ours(res, spp, max_depth, repeats, ref, rfilter="gaussian"):
+def bench_ours(res, spp, max_depth, repeats, ref, rfilter="gaussian", sampler="independent"):
     import radiometer as rm
 
     t0 = time.perf_counter()
@@ -79,27 +85,36 @@ def bench_ours(res, spp, max_depth, repeats, ref, rfilter="gaussian"):
     build_s = time.perf_counter() - t0
     integ = {"type": "path", "max_depth": max_depth}
     t0 = time.perf_counter()
-    r = rm.render(scene, integrator=integ, spp=spp, seed=0)
+    r = rm.render(scene, integrator=integ, spp=spp, seed=0, sampler=sampler)
     first_s = time.perf_counter() - t0
     walls, drivers, errs = [], [], []
     threads = r.stats.get("threads")
     for i in range(repeats):
         t0 = time.perf_counter()
-        r = rm.render(scene, integrator=integ, spp=spp, seed=1 + i)
+        r = rm.render(scene, integrator=integ, spp=spp, seed=1 + i, sampler=sampler)
         walls.append(time.perf_counter() - t0)
         drivers.append(float(r.seconds))
         errs.append(rel_mse(r.image, ref))
-    return {"renderer": "radiometer path", "variant": "C++ (Embree, FIS)", "threads": threads,
+    return {"renderer": "radiometer path", "variant": "C++ (Embree, FIS)", "sampler": sampler, "threads": threads,
             "load_s": load_s, "scene_build_s": build_s, "first_render_s": first_s, "compile_s": None,
             "render_s": walls, "render_driver_s": drivers, "relmse": errs}
 
 
-def bench_mitsuba(variant, res, spp, max_depth, repeats, ref, rfilter="gaussian"):
+def bench_mitsuba(variant, res, spp, max_depth, repeats, ref, rfilter="gaussian", sampler="independent"):
     import mitsuba as mi
 
     mi.set_variant(variant)
+    xml = SCENE
+    if sampler != "independent":
+        text = SCENE.read_text()
+        if text.count('<sampler type="independent">') != 1:
+            raise RuntimeError(f"{SCENE}: expected one independent sampler to replace")
+        tmp = Path(tempfile.mkdtemp(prefix="cornell_sampler_"))
+        xml = tmp / "scene.xml"
+        xml.write_text(text.replace('<sampler type="independent">', f'<sampler type="{sampler}">'))
+        mi.Thread.thread().file_resolver().prepend(str(SCENE.parent))
     t0 = time.perf_counter()
-    scene = mi.load_file(str(SCENE), res=res, spp=spp, max_depth=max_depth, rfilter=rfilter)
+    scene = mi.load_file(str(xml), res=res, spp=spp, max_depth=max_depth, rfilter=rfilter)
     load_s = time.perf_counter() - t0
     # Warm-up: for llvm this traces and JIT-compiles the kernel; the later
     # renders reuse it from drjit's kernel cache.
@@ -119,20 +134,20 @@ def bench_mitsuba(variant, res, spp, max_depth, repeats, ref, rfilter="gaussian"
     except Exception:
         threads = None
     med = statistics.median(walls)
-    return {"renderer": "mitsuba path", "variant": variant, "threads": threads, "load_s": load_s,
+    return {"renderer": "mitsuba path", "variant": variant, "sampler": sampler, "threads": threads, "load_s": load_s,
             "scene_build_s": None, "first_render_s": first_s,
             "compile_s": (first_s - med) if variant.startswith("llvm") else None,
             "render_s": walls, "render_driver_s": None, "relmse": errs}
 
 
-def _run_worker(variant, args, ref_path):
+def _run_worker(variant, args, ref_path, sampler="independent"):
     """Runs bench_mitsuba in a fresh interpreter whose drjit kernel cache is
     empty, and returns its result row."""
     with tempfile.TemporaryDirectory(prefix="drjit_home_") as home:
         env = dict(os.environ, HOME=home)
         cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", variant, "--worker-ref", str(ref_path),
                "--res", str(args.res), "--spp", str(args.spp), "--max-depth", str(args.max_depth),
-               "--repeats", str(args.repeats), "--rfilter", args.rfilter]
+               "--repeats", str(args.repeats), "--rfilter", args.rfilter, "--worker-sampler", sampler]
         p = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, text=True)
     if p.returncode != 0:
         raise RuntimeError(f"Mitsuba {variant} worker failed (exit {p.returncode})")
@@ -156,6 +171,10 @@ def main(argv=None):
                     help="results JSON (default: benchmarks/results/cornell_vs_mitsuba[_FILTER].json)")
     ap.add_argument("--worker", help=argparse.SUPPRESS)  # internal: one Mitsuba variant, JSON row on stdout
     ap.add_argument("--worker-ref", type=Path, help=argparse.SUPPRESS)
+    ap.add_argument("--worker-sampler", default="independent", help=argparse.SUPPRESS)
+    ap.add_argument("--samplers", default="independent", help="our samplers, comma-separated")
+    ap.add_argument("--mitsuba-samplers", default="independent",
+                    help="Mitsuba's samplers for llvm_ad_rgb, comma-separated (scalar_rgb: independent)")
     args = ap.parse_args(argv)
     if args.out is None:
         args.out = (RESULTS if args.rfilter == "gaussian"
@@ -165,7 +184,8 @@ def main(argv=None):
         import radiometer as rm
 
         ref = rm.read_exr(args.worker_ref).image.astype(np.float64)
-        row = bench_mitsuba(args.worker, args.res, args.spp, args.max_depth, args.repeats, ref, args.rfilter)
+        row = bench_mitsuba(args.worker, args.res, args.spp, args.max_depth, args.repeats, ref, args.rfilter,
+                            args.worker_sampler)
         print(json.dumps(row))
         return row
 
@@ -175,12 +195,16 @@ def main(argv=None):
     started = _now()
     ref, ref_path = long_reference(args.res, args.max_depth, args.ref_runs, args.ref_spp, args.rfilter)
     r = ref.image.astype(np.float64)
-    print("running radiometer path ...", file=sys.stderr, flush=True)
-    rows = [bench_ours(args.res, args.spp, args.max_depth, args.repeats, r, args.rfilter)]
-    variants = ["llvm_ad_rgb"] + ([] if args.no_scalar else ["scalar_rgb"])
-    for v in variants:
-        print(f"running Mitsuba {v} (own process, empty kernel cache) ...", file=sys.stderr, flush=True)
-        rows.append(_run_worker(v, args, ref_path))
+    rows = []
+    for smp in args.samplers.split(","):
+        print(f"running radiometer path, sampler {smp} ...", file=sys.stderr, flush=True)
+        rows.append(bench_ours(args.res, args.spp, args.max_depth, args.repeats, r, args.rfilter, smp))
+    runs = [("llvm_ad_rgb", smp) for smp in args.mitsuba_samplers.split(",")]
+    runs += [] if args.no_scalar else [("scalar_rgb", "independent")]
+    for v, smp in runs:
+        print(f"running Mitsuba {v}, sampler {smp} (own process, empty kernel cache) ...", file=sys.stderr,
+              flush=True)
+        rows.append(_run_worker(v, args, ref_path, smp))
     finished = _now()
 
     ours_s = statistics.median(rows[0]["render_s"])
@@ -192,23 +216,29 @@ def main(argv=None):
         # Efficiency (DESIGN section 4): 1 / (error x time).
         row["efficiency"] = 1.0 / (row["relmse_mean"] * row["render_s_median"])
     e_ours = rows[0]["efficiency"]
+    best_mitsuba = min(row["relmse_mean"] * row["render_s_median"] for row in rows
+                       if row["renderer"].startswith("mitsuba"))
     for row in rows:
         row["efficiency_vs_ours"] = row["efficiency"] / e_ours
+        # Time to a given error, relMSE x time, against Mitsuba's best row (the goal: <= 0.5).
+        row["time_to_error_vs_best_mitsuba"] = row["relmse_mean"] * row["render_s_median"] / best_mitsuba
 
-    hdr = (f"{'renderer':<16} {'variant':<20} {'load s':>7} {'first s':>8} {'JIT s':>6} {'render s':>9} "
-           f"{'x ours':>7} {'Msamp/s':>8} {'relMSE':>9} {'eff. x ours':>11}")
+    hdr = (f"{'renderer':<16} {'variant':<20} {'sampler':<12} {'load s':>7} {'first s':>8} {'JIT s':>6} "
+           f"{'render s':>9} {'x ours':>7} {'Msamp/s':>8} {'relMSE':>9} {'eff. x ours':>11} {'t2e/best M':>10}")
     print(f"\nCornell box {args.res}x{args.res}, {args.spp} spp, max_depth {args.max_depth}, {args.rfilter} filter; "
           f"median of {args.repeats} renders; relMSE (eps {EPS:g}) against {ref_path.name}")
     print(hdr)
     print("-" * len(hdr))
     for row in rows:
         jit = f"{row['compile_s']:.2f}" if row["compile_s"] is not None else "-"
-        print(f"{row['renderer']:<16} {row['variant']:<20} {row['load_s']:>7.2f} {row['first_render_s']:>8.2f} "
-              f"{jit:>6} {row['render_s_median']:>9.3f} {row['time_vs_ours']:>7.2f} {row['msamples_per_s']:>8.2f} "
-              f"{row['relmse_mean']:>9.3e} {row['efficiency_vs_ours']:>11.2f}")
+        print(f"{row['renderer']:<16} {row['variant']:<20} {row['sampler']:<12} {row['load_s']:>7.2f} "
+              f"{row['first_render_s']:>8.2f} {jit:>6} {row['render_s_median']:>9.3f} {row['time_vs_ours']:>7.2f} "
+              f"{row['msamples_per_s']:>8.2f} {row['relmse_mean']:>9.3e} {row['efficiency_vs_ours']:>11.2f} "
+              f"{row['time_to_error_vs_best_mitsuba']:>10.2f}")
 
     params = {"res": args.res, "spp": args.spp, "max_depth": args.max_depth, "repeats": args.repeats,
-              "rfilter": args.rfilter, "ref_runs": args.ref_runs, "ref_spp": args.ref_spp, "no_scalar": args.no_scalar}
+              "rfilter": args.rfilter, "ref_runs": args.ref_runs, "ref_spp": args.ref_spp, "no_scalar": args.no_scalar,
+              "samplers": args.samplers, "mitsuba_samplers": args.mitsuba_samplers}
     out = {
         "scene": str(SCENE.relative_to(ROOT)),
         "metric": f"relMSE, eps {EPS:g}: mean over pixels and channels of (a - r)^2 / (r^2 + eps)",

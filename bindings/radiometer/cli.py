@@ -122,7 +122,7 @@ def cmd_render(a) -> int:
     bar = _Progress(f"render {Path(a.scene).stem}")
     try:
         res = render(scene, integrator=integrator, spp=a.spp, seconds=a.seconds, seed=a.seed, threads=a.threads,
-                     effects=effects, progress=bar)
+                     effects=effects, progress=bar, sampler=a.sampler)
     except RenderCancelled as e:
         bar.close()
         res = e.result
@@ -357,6 +357,7 @@ def main(argv=None) -> int:
     g.add_argument("--seconds", type=float, help="wall-clock budget in seconds")
     r.add_argument("--max-depth", type=int, help="override the estimator's max_depth")
     r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--sampler", help="independent, stratified, multijitter, sobol or zsobol (default: the scene's)")
     r.add_argument("--threads", type=int, default=0, help="0 = all cores")
     r.add_argument("--effects", help=f"comma-separated subset of: {','.join(EFFECTS)}")
     r.add_argument("-o", "--output", default="out.exr")

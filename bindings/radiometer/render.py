@@ -7,6 +7,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from .samplers import resolve_sampler
 from .scene_desc import IntegratorDesc, SceneError
 
 EFFECTS = ("emission", "direct", "indirect", "caustic", "specular", "volume", "subsurface")
@@ -120,6 +121,13 @@ def _mixed_bsdfs(desc) -> list:
     return sorted(set(found))
 
 
+def _warn(stats, msg):
+    import warnings
+
+    stats.setdefault("warnings", []).append(msg)
+    warnings.warn(msg, stacklevel=3)
+
+
 def _effects_mask(effects):
     if effects is None:
         return [True] * len(EFFECTS)
@@ -151,7 +159,8 @@ def refusal(scene, integrator) -> Optional[str]:
 
 def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[float] = None, seed: int = 0,
            threads: int = 0, checkpoints=None, effects=None,
-           progress: Optional[Callable[[int, int], None]] = None, effect_variance: bool = False) -> RenderResult:
+           progress: Optional[Callable[[int, int], None]] = None, effect_variance: bool = False,
+           sampler=None) -> RenderResult:
     """Renders `scene` (from load_file/load_dict) and returns a RenderResult.
 
     integrator: None (the scene's), a name, or a dict like the XML's.
@@ -166,6 +175,10 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
     effect_variance: also keep each effect's per-pixel variance
         (res.effect_variance; camera estimators, whose film sums the
         squares; 21 more doubles a pixel). The image is the same either way.
+    sampler: None (the scene sensor's), a name or a dict like the scene's
+        ({"type": "sobol", "sample_count": 64}); see radiometer.samplers.
+        Camera and light paths draw on it; photon passes, sppm and the vcm
+        family on the independent stream (a warning says so).
     Ctrl-C raises RenderCancelled carrying the finished passes.
     """
     from . import _core
@@ -200,12 +213,23 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
     if not isinstance(effect_variance, (bool, np.bool_)):
         raise ValueError(f"effect_variance: expected True or False, got {effect_variance!r}")
     mask = _effects_mask(effects)
+    sens = scene.desc.sensor
+    smp = resolve_sampler(sampler, {"type": getattr(sens, "sampler", "independent"), "sample_count": sens.spp,
+                                    "jitter": getattr(sens, "jitter", True)})
     core_scene = scene.core()
     r = _core.render(core_scene, _core_integrator(spec), mask, int(spp), float(seconds or 0.0), int(seed),
-                     int(threads), checkpoints, progress, bool(effect_variance))
+                     int(threads), checkpoints, progress, bool(effect_variance), smp["type"], smp["sample_count"],
+                     smp["jitter"])
     stats = dict(r["stats"])
     stats.update(threads=r["threads"], cancelled=r["cancelled"], features=core_scene.features,
                  effects_simulated=[e for e, m in zip(EFFECTS, mask) if m])
+    stats["sampler"] = r["sampler"] or "independent"
+    if smp["type"] != "independent" and r["sampler"] != smp["type"]:
+        _warn(stats, f"{spec['type']}: sampler '{smp['type']}' is not used: this estimator draws its paths on "
+                     f"streams of its own (photon passes, sppm, vcm, bpm, ppm), on the independent sampler")
+    elif smp["type"] != "independent" and spec["type"] == "photonmapper":
+        _warn(stats, f"photonmapper: sampler '{smp['type']}' draws the camera passes; the photon passes use the "
+                     f"independent sampler")
     result = RenderResult(image=r["image"], variance=r["variance"], effects=dict(r["effects"]), spp=r["spp"],
                           seconds=r["seconds"], stats=stats, checkpoints=list(r["checkpoints"]), integrator=spec,
                           seed=int(seed), strategies=dict(r["strategies"]),

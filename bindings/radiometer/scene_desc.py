@@ -131,6 +131,8 @@ class SensorDesc:
     filter_radius: float = 2.0
     filter_stddev: float = 0.5
     spp: int = 4  # from the sampler's sample_count
+    sampler: str = "independent"  # the sampler's type (radiometer.samplers)
+    jitter: bool = True  # stratified, multijitter: jitter within strata
     # The film's crop window (Mitsuba's crop_offset_x/y, crop_width/height):
     # the pixels rendered and returned; width/height keep the full film's
     # geometry. crop_width/height 0: the full film.

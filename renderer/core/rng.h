@@ -52,6 +52,9 @@ public:
     virtual ~SampleSource() = default;
     virtual float get_1d(uint32_t dim) = 0;
     virtual Vec2 get_2d(uint32_t dim) { return {get_1d(dim), get_1d(dim + 1)}; }
+    // Dimensions reserved per bounce (Sampler::start_bounce), 0: none, the
+    // dimensions follow the draws one after another.
+    virtual uint32_t bounce_stride() const { return 0; }
 };
 
 // Sampler: what estimators ask for 1D/2D samples. By default the
@@ -62,7 +65,7 @@ class Sampler {
 public:
     Sampler(uint64_t seed, uint64_t pixel, uint64_t sample_index)
         : rng_(mix64(seed ^ mix64(sample_index + 0x632be59bd9b4e019ULL)), mix64(pixel + (seed << 1))) {}
-    explicit Sampler(SampleSource* source) : source_(source) {}
+    explicit Sampler(SampleSource* source) : source_(source), stride_(source ? source->bounce_stride() : 0) {}
     float next_1d() {
         if (source_) return source_->get_1d(dim_++);
         return rng_.next_float();
@@ -79,10 +82,25 @@ public:
     }
     // Values drawn so far through a source (0 for the independent stream).
     uint32_t dimension() const { return dim_; }
+    // Called by an estimator at the start of bounce `depth` (before its
+    // light sample): with a source that reserves dimensions per bounce,
+    // bounce `depth` starts at dimension kCameraDims + depth * stride, so
+    // that a bounce drawing fewer values than the same bounce of another
+    // sample (no light sample at a specular vertex) does not shift the
+    // dimensions of the bounces after it. The counter never moves back, so
+    // no dimension is drawn twice along a path; a no-op otherwise.
+    void start_bounce(int depth) {
+        if (stride_ == 0) return;
+        uint32_t at = kCameraDims + uint32_t(depth) * stride_;
+        if (at > dim_) dim_ = at;
+    }
+    // The dimensions a camera sample takes first (camera_sample.h draws 7).
+    static constexpr uint32_t kCameraDims = 8;
 
 private:
     Pcg32 rng_;
     SampleSource* source_ = nullptr;
+    uint32_t stride_ = 0;
     uint32_t dim_ = 0;
 };
 

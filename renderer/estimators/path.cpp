@@ -83,7 +83,9 @@ public:
         EffectRadiance tail;
         EffectRadiance* sink = &out;
         for (int depth = 0;; ++depth) {
-            // 1. Find the next vertex.
+            // 1. Find the next vertex (its draws start at the bounce's own
+            //    dimensions, for structured samplers: rng.h).
+            sampler.start_bounce(depth);
             Interaction it;
             ++stats.rays;
             bool hit = scene.intersect(ray, it);

@@ -1,8 +1,10 @@
 // The camera driver: camera rays through every pixel, tile by tile, on the
 // pass loop. Results are identical for a given seed whatever the thread
-// count: every (pixel, sample) has its own random stream, each pixel's
-// samples are accumulated in order by one thread, and a pass joins the film
-// only when complete.
+// count: every (pixel, sample) has its own random stream (the independent
+// PCG stream, or the render's structured sampler, a function of seed, pixel,
+// sample and dimension: core/sampler.h), each pixel's samples are
+// accumulated in order by one thread, and a pass joins the film only when
+// complete.
 #include <algorithm>
 #include <stdexcept>
 #include <string>
@@ -19,7 +21,7 @@ constexpr int kTile = 16;
 
 class CameraStep final : public PassStep {
 public:
-    CameraStep(const Scene& scene, const Integrator& integrator, bool effect_variance)
+    CameraStep(const Scene& scene, const Integrator& integrator, bool effect_variance, const SamplerPlan& plan)
         : scene_(scene),
           integrator_(integrator),
           W_(scene.sensor->width),
@@ -32,7 +34,8 @@ public:
           film_(W_, H_, effect_variance),
           pass_film_(W_, H_, effect_variance),
           tiles_x_((cw_ + kTile - 1) / kTile),
-          tiles_y_((ch_ + kTile - 1) / kTile) {}
+          tiles_y_((ch_ + kTile - 1) / kTile),
+          plan_(plan) {}
 
     int pass(PassLoop& loop, int s0, int s1) override {
         // 1. Tiles over threads, into the film of the pass in flight.
@@ -64,23 +67,33 @@ private:
                 int pixel = y * W_ + x;
                 for (int s = s0; s < s1; ++s) {
                     // 1. The sample's own stream and its filter-sampled camera ray.
-                    Sampler sampler(loop.seed(), uint64_t(pixel), uint64_t(s));
-                    SensorRay sr = sample_camera_ray(*scene_.sensor, filter_, pixel, sampler);
-                    // 2. The estimator's radiance along it, by effect, times the ray's weight.
-                    EffectRadiance er;
-                    ++stats.paths;
-                    integrator_.sample(scene_, sampler, sr.ray, er, stats);
-                    Color total(0.f);
-                    for (int k = 0; k < kNumEffects; ++k) {
-                        er.by_effect[k] *= sr.weight;
-                        total += er.by_effect[k];
+                    if (plan_.independent()) {
+                        Sampler sampler(loop.seed(), uint64_t(pixel), uint64_t(s));
+                        render_sample(sampler, pixel, stats);
+                    } else {
+                        PixelSampleSource source(plan_, uint64_t(pixel), uint64_t(s));
+                        Sampler sampler(&source);
+                        render_sample(sampler, pixel, stats);
                     }
-                    // 3. Into the pass's film, unless NaN or Inf (counted, dropped).
-                    if (!keep_finite(stats, total)) er = EffectRadiance();
-                    pass_film_.add(pixel, er);
                 }
             }
         loop.add_done(uint64_t(s1 - s0) * uint64_t((x1 - x0) * (y1 - y0)));
+    }
+
+    void render_sample(Sampler& sampler, int pixel, ThreadStats& stats) {
+        SensorRay sr = sample_camera_ray(*scene_.sensor, filter_, pixel, sampler);
+        // 2. The estimator's radiance along it, by effect, times the ray's weight.
+        EffectRadiance er;
+        ++stats.paths;
+        integrator_.sample(scene_, sampler, sr.ray, er, stats);
+        Color total(0.f);
+        for (int k = 0; k < kNumEffects; ++k) {
+            er.by_effect[k] *= sr.weight;
+            total += er.by_effect[k];
+        }
+        // 3. Into the pass's film, unless NaN or Inf (counted, dropped).
+        if (!keep_finite(stats, total)) er = EffectRadiance();
+        pass_film_.add(pixel, er);
     }
 
     const Scene& scene_;
@@ -91,6 +104,7 @@ private:
     Film film_;       // finished passes
     Film pass_film_;  // the pass in flight; merged only when complete
     const int tiles_x_, tiles_y_;
+    const SamplerPlan& plan_;
 };
 
 }  // namespace
@@ -101,9 +115,13 @@ RenderOutput render_camera_paths(PassLoop& loop, const Integrator& integrator) {
     // Said up front rather than failing inside an allocation (memory.h).
     const bool effvar = loop.options().effect_variance;
     check_memory(integrator.type, W, H, {camera_film_memory(W, H, effvar), output_memory(loop.options(), W, H)});
-    CameraStep step(scene, integrator, effvar);
+    const RenderOptions& opts = loop.options();
+    SamplerPlan plan(opts.sampler, opts.spp, W, H, opts.seed);
+    CameraStep step(scene, integrator, effvar, plan);
     loop.set_pixels(uint64_t(scene.sensor->crop_w) * uint64_t(scene.sensor->crop_h));  // the window's, for progress
-    return loop.run(step);
+    RenderOutput out = loop.run(step);
+    out.sampler = plan.name();
+    return out;
 }
 
 RenderOutput render_camera_paths(const Scene& scene, const Integrator& integrator, const RenderOptions& opts,

@@ -2,7 +2,8 @@
 // instead of camera tiles, their splats filtered onto the film.
 //
 // Which light paths: a render of `spp` traces M = spp * W * H of them, light
-// path g = s * W * H + j (s < spp, j < W * H) drawing on Sampler(seed, j, s),
+// path g = s * W * H + j (s < spp, j < W * H) drawing on Sampler(seed, j, s)
+// (or sample s of pixel j of the render's structured sampler, core/sampler.h),
 // so every path's random numbers are fixed by the seed alone.
 //
 // Determinism whatever the thread count: the paths of a pass are cut into
@@ -205,14 +206,16 @@ private:
 // in chunks of up to kChunkItems work items (bounds the splats in memory).
 class LightStep final : public PassStep {
 public:
-    LightStep(const Scene& scene, const Integrator& integrator, const FilterSampler& filter, int n_strat, int threads)
+    LightStep(const Scene& scene, const Integrator& integrator, const FilterSampler& filter, int n_strat, int threads,
+              const SamplerPlan& plan)
         : scene_(scene),
           integrator_(integrator),
           pixels_(uint64_t(scene.sensor->width) * uint64_t(scene.sensor->height)),
           n_strat_(n_strat),
           film_(*scene.sensor, filter, n_strat),
           stripes_(std::min(scene.sensor->height, threads * 4)),
-          items_(kChunkItems) {}
+          items_(kChunkItems),
+          plan_(plan) {}
 
     int pass(PassLoop& loop, int s0, int s1) override {
         const uint64_t g_end = uint64_t(s1) * pixels_;
@@ -258,9 +261,15 @@ private:
         std::vector<Splat> splats;
         for (uint64_t g = a; g < b; ++g) {
             if (loop.cancelled()) return;
-            Sampler sampler(loop.seed(), g % pixels_, g / pixels_);
             splats.clear();
-            integrator_.trace_light_path(scene_, sampler, int(g % pixels_), splats, stats);
+            if (plan_.independent()) {
+                Sampler sampler(loop.seed(), g % pixels_, g / pixels_);
+                integrator_.trace_light_path(scene_, sampler, int(g % pixels_), splats, stats);
+            } else {
+                PixelSampleSource source(plan_, g % pixels_, g / pixels_);
+                Sampler sampler(&source);
+                integrator_.trace_light_path(scene_, sampler, int(g % pixels_), splats, stats);
+            }
             for (const Splat& s : splats)
                 if (keep_finite(stats, s.value)) dst.push_back({s, batch_of(g, pixels_)});
         }
@@ -274,6 +283,7 @@ private:
     SplatFilm film_;
     const int stripes_;
     std::vector<std::vector<ItemSplat>> items_;
+    const SamplerPlan& plan_;
     uint64_t paths_done_ = 0;  // light paths [0, paths_done_) are in the film
 };
 
@@ -296,8 +306,11 @@ RenderOutput render_light_paths(const Scene& scene, const Integrator& integrator
         output_memory(opts, W, H)};
     check_memory(integrator.type, W, H, parts);
     PassLoop loop(scene, opts, poll);
-    LightStep step(scene, integrator, filter, n_strat, loop.threads());
-    return loop.run(step);
+    SamplerPlan plan(opts.sampler, opts.spp, W, H, opts.seed);
+    LightStep step(scene, integrator, filter, n_strat, loop.threads(), plan);
+    RenderOutput out = loop.run(step);
+    out.sampler = plan.name();
+    return out;
 }
 
 }  // namespace rm

@@ -13,6 +13,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/sampler.h"
 #include "render/integrator.h"
 
 namespace rm {
@@ -24,6 +25,10 @@ struct RenderOptions {
     int threads = 0;               // 0 = all hardware threads
     std::vector<int> checkpoints;  // spp counts at which to keep a snapshot
     bool effect_variance = false;  // also the variance of each effect's estimate (camera driver)
+    // Where the camera and light drivers' paths draw their numbers
+    // (core/sampler.h); estimators with passes of their own (photon passes,
+    // sppm, vcm) draw on the independent stream whatever it is.
+    SamplerDesc sampler;
 };
 
 struct Checkpoint {
@@ -81,6 +86,9 @@ struct RenderOutput {
     std::vector<OutputArray> arrays;
     int threads = 0;
     double setup_seconds = 0;
+    // The sampler that camera (or light) paths drew on; empty when the
+    // estimator draws only on streams of its own (photon passes, vcm).
+    std::string sampler;
 };
 
 // Called about every 50 ms from the calling thread with (done, total) sample

@@ -14,8 +14,11 @@ SensorRay sample_camera_ray(const Sensor& sensor, const FilterSampler& filter, i
         x0 = sensor.crop_x, x1 = sensor.crop_x + sensor.crop_w;
         y0 = sensor.crop_y, y1 = sensor.crop_y + sensor.crop_h;
     }
-    float fx = filter.sample(sampler.next_1d(), float(x0 - x) - 0.5f, float(x1 - x) - 0.5f);
-    float fy = filter.sample(sampler.next_1d(), float(y0 - y) - 0.5f, float(y1 - y) - 0.5f);
+    // One 2D draw (the same two numbers of the independent stream as two 1D
+    // draws), so that a structured sampler stratifies the pixel's area.
+    Vec2 uf = sampler.next_2d();
+    float fx = filter.sample(uf.x, float(x0 - x) - 0.5f, float(x1 - x) - 0.5f);
+    float fy = filter.sample(uf.y, float(y0 - y) - 0.5f, float(y1 - y) - 0.5f);
     Vec2 film_pos(float(x) + 0.5f + fx, float(y) + 0.5f + fy);
     // The sensor's own numbers (lens, area sensors' point and direction).
     float u1 = sampler.next_1d();

@@ -92,7 +92,10 @@ film       hdrfilm: width [768], height [576] (1..16384), pixel_format
                border is then empty).
 rfilter    box (radius 0.5), tent: radius [1], gaussian: stddev [0.5]
                (radius = 4 stddev).
-sampler    independent: sample_count [4] -> SensorDesc.spp, seed (accepted).
+sampler    independent, stratified, multijitter, sobol, zsobol, ldsampler (rendered
+               by sobol) (radiometer.samplers):
+               sample_count [4] -> SensorDesc.spp, seed (accepted; render()'s
+               seed decides), jitter [true] (stratified, multijitter).
 integrator moment: its one nested integrator (Mitsuba's moment adds
                per-pixel moments; RenderResult.variance is always there).
 integrator every estimator the core registers (radiometer.registry); its

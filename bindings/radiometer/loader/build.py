@@ -22,6 +22,8 @@ from ..scene_desc import (
     SensorDesc,
     ShapeDesc,
 )
+from ..samplers import ALIASES as SAMPLER_ALIASES
+from ..samplers import SAMPLER_PARAMS
 from .images import read_rgb
 from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _rectangle_mesh
 from .nodes import _Node, _Prop, _Ref
@@ -470,8 +472,11 @@ class _Builder:
         s.spp = 4
         if sampler is not None:
             sp = _Params(sampler)
+            s.sampler = SAMPLER_ALIASES.get(sampler.type, sampler.type)
             s.spp = sp.int("sample_count", 4, lo=1, hi=_MAX_SPP)
             sp.int("seed", 0)  # accepted; the render call's seed decides
+            if "jitter" in SAMPLER_PARAMS[sampler.type]:
+                s.jitter = sp.bool("jitter", True)
             sp.done()
         m = p.transform("to_world") if t != "irradiancemeter" else None
         if t in ("perspective", "orthographic"):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ..registry import estimator_names
+from ..samplers import SAMPLER_NAMES
 
 PLUGINS = {
     "shape": ("obj", "ply", "rectangle", "cube", "disk", "sphere"),
@@ -12,7 +13,7 @@ PLUGINS = {
     "sensor": ("perspective", "orthographic", "radiancemeter", "irradiancemeter"),
     "film": ("hdrfilm",),
     "rfilter": ("box", "tent", "gaussian"),
-    "sampler": ("independent",),
+    "sampler": SAMPLER_NAMES,
     # the core's registry, and Mitsuba's `moment` around one of them
     "integrator": estimator_names() + ("moment",),
     "medium": ("homogeneous", "heterogeneous"),

@@ -1,0 +1,309 @@
+#include "core/sampler.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <stdexcept>
+
+namespace rm {
+
+namespace {
+
+uint32_t reverse_bits32(uint32_t v) {
+    v = ((v >> 1) & 0x55555555u) | ((v & 0x55555555u) << 1);
+    v = ((v >> 2) & 0x33333333u) | ((v & 0x33333333u) << 2);
+    v = ((v >> 4) & 0x0f0f0f0fu) | ((v & 0x0f0f0f0fu) << 4);
+    v = ((v >> 8) & 0x00ff00ffu) | ((v & 0x00ff00ffu) << 8);
+    return (v >> 16) | (v << 16);
+}
+
+// Direction numbers of Sobol dimension 2 (Joe and Kuo's row "2 1 0 1"):
+// v_k = m_k / 2^k, m_1 = 1, m_k = 2 m_{k-1} xor m_{k-1}, as 32-bit fractions;
+// kept, bit-reversed (as owen_reversed takes them), as the xor of the v_k of
+// every byte value at each of the index's four bytes, so a point takes four
+// lookups instead of a loop over its bits.
+struct Sobol2Directions {
+    std::array<std::array<uint32_t, 256>, 4> byte{};
+    Sobol2Directions() {
+        std::array<uint32_t, 32> v{};
+        uint64_t m = 1;
+        for (int k = 1; k <= 32; ++k) {
+            if (k > 1) m = (m << 1) ^ m;
+            v[size_t(k - 1)] = uint32_t(m << (32 - k));
+        }
+        for (int b = 0; b < 4; ++b)
+            for (uint32_t x = 0; x < 256; ++x) {
+                uint32_t acc = 0;
+                for (int k = 0; k < 8; ++k)
+                    if (x >> k & 1u) acc ^= v[size_t(8 * b + k)];
+                byte[size_t(b)][x] = reverse_bits32(acc);
+            }
+    }
+};
+const Sobol2Directions kSobol2;
+
+// The 24 permutations of {0, 1, 2, 3}, in lexicographic order.
+struct Perm4 {
+    std::array<std::array<uint8_t, 4>, 24> p{};
+    Perm4() {
+        std::array<uint8_t, 4> a{0, 1, 2, 3};
+        for (auto& row : p) {
+            row = a;
+            std::next_permutation(a.begin(), a.end());
+        }
+    }
+};
+const Perm4 kPerm4;
+
+// 24 random bits of a 32-bit value as a float in [0, 1) (as Pcg32::next_float).
+float to_float(uint32_t v) { return float(v >> 8) * 0x1p-24f; }
+
+// A uniform float of (key, i).
+float hash_float(uint64_t key, uint32_t i) { return to_float(uint32_t(mix64(key ^ (uint64_t(i) << 32 | i)) >> 32)); }
+
+// (stratum + offset) / n, kept below 1 whatever the rounding.
+float stratum_value(uint32_t stratum, float offset, uint32_t n) {
+    return std::min(float((double(stratum) + double(offset)) / double(n)), 0x1.fffffep-1f);
+}
+
+// Sobol dimension 2 of index i, bit-reversed.
+uint32_t sobol2_reversed(uint32_t i) {
+    const auto& t = kSobol2.byte;
+    return t[0][i & 255u] ^ t[1][(i >> 8) & 255u] ^ t[2][(i >> 16) & 255u] ^ t[3][i >> 24];
+}
+
+// Burley 2020, Section 3: a hash in which every bit depends only on the
+// bits below it (adds and multiplies carry upwards), applied to the
+// reversed bits of a value, is a nested uniform scramble of its digits from
+// the top. Takes the reversed bits, returns the scrambled value.
+uint32_t owen_reversed(uint32_t x, uint32_t seed) {
+    x += seed;
+    x ^= x * 0x6c50b47cu;
+    x ^= x * 0xb82f1e52u;
+    x ^= x * 0xc7afe638u;
+    x ^= x * 0x8d22f6e6u;
+    return reverse_bits32(x);
+}
+
+// A uniform integer in [0, n) from the top 32 bits of a hash (multiply and
+// shift, no division).
+uint32_t below(uint64_t hash, uint32_t n) { return uint32_t((uint64_t(uint32_t(hash >> 32)) * n) >> 32); }
+
+uint64_t morton2(uint32_t x, uint32_t y) {
+    auto spread = [](uint64_t v) {
+        v &= 0xffffffffULL;
+        v = (v | (v << 16)) & 0x0000ffff0000ffffULL;
+        v = (v | (v << 8)) & 0x00ff00ff00ff00ffULL;
+        v = (v | (v << 4)) & 0x0f0f0f0f0f0f0f0fULL;
+        v = (v | (v << 2)) & 0x3333333333333333ULL;
+        v = (v | (v << 1)) & 0x5555555555555555ULL;
+        return v;
+    };
+    return spread(x) | (spread(y) << 1);
+}
+
+// Ahmed and Wonka 2020, Section 4: the `bits`-bit index m with each base-4
+// digit (from the top) replaced by its image under one of the 24
+// permutations, chosen by hashing the digits above it with the dimension's
+// key; an odd lowest bit is flipped by a hashed coin. The map is a
+// bijection that keeps every aligned block of 4^k indices a block, so the
+// samples of a pixel stay one Sobol net while the pixels' order is
+// randomised hierarchically.
+uint64_t zorder_scramble(uint64_t m, int bits, uint64_t key) {
+    uint64_t out = 0;
+    int b = bits;
+    for (; b >= 2; b -= 2) {
+        int at = b - 2;
+        uint32_t digit = uint32_t(m >> at) & 3u;
+        uint64_t above = (at + 2 >= 64) ? 0 : (m >> (at + 2));
+        uint32_t p = below(mix64((above | (uint64_t(at + 1) << 58)) ^ key), 24u);
+        out |= uint64_t(kPerm4.p[p][digit]) << at;
+    }
+    if (b == 1) out |= (m & 1u) ^ (mix64((m >> 1) ^ key) & 1u);
+    return out;
+}
+
+int ceil_log2(uint64_t n) {
+    int k = 0;
+    while ((uint64_t(1) << k) < n) ++k;
+    return k;
+}
+
+}  // namespace
+
+uint32_t sobol_u32(uint32_t i, int dim) { return reverse_bits32(dim == 0 ? i : sobol2_reversed(i)); }
+
+uint32_t owen_scramble(uint32_t v, uint32_t seed) { return owen_reversed(reverse_bits32(v), seed); }
+
+uint32_t permute_index(uint32_t i, uint32_t n, uint64_t key) {
+    if (n <= 1) return 0;
+    // A keyed bijection of [0, 2^bits) (xors with the key, multiplies by odd
+    // numbers and xor-shifts, each invertible modulo 2^bits), walked until
+    // it lands in [0, n) (cycle walking, Kensler 2013 Section 4), then a
+    // keyed rotation, which makes every element's image uniform over keys.
+    uint32_t w = n - 1;
+    w |= w >> 1;
+    w |= w >> 2;
+    w |= w >> 4;
+    w |= w >> 8;
+    w |= w >> 16;
+    int bits = 0;
+    while ((w >> bits) != 0) ++bits;
+    const int s1 = std::max(1, bits / 2), s2 = std::max(1, bits / 3);
+    const uint32_t k0 = uint32_t(key), k1 = uint32_t(key >> 32);
+    do {
+        i ^= k0 & w;
+        i = (i * (k1 | 1u)) & w;
+        i ^= i >> s1;
+        i = (i * 0x9e3779b1u) & w;
+        i ^= (k1 >> 7) & w;
+        i ^= i >> s2;
+        i = (i * ((k0 >> 3) | 1u)) & w;
+        i ^= i >> s1;
+    } while (i >= n);
+    i += below(mix64(key), n);
+    return i >= n ? i - n : i;
+}
+
+const char* sampler_names() { return "independent, stratified, multijitter, sobol, zsobol"; }
+
+SamplerPlan::SamplerPlan(const SamplerDesc& desc, int spp, int width, int height, uint64_t seed)
+    : name_(desc.type), jitter_(desc.jitter), seed_(seed), width_(std::max(width, 1)) {
+    const std::string& t = desc.type;
+    if (t == "independent")
+        type_ = SamplerType::Independent;
+    else if (t == "stratified")
+        type_ = SamplerType::Stratified;
+    else if (t == "multijitter")
+        type_ = SamplerType::Multijitter;
+    else if (t == "sobol")
+        type_ = SamplerType::Sobol;
+    else if (t == "zsobol")
+        type_ = SamplerType::ZSobol;
+    else
+        throw std::invalid_argument("sampler: unknown type '" + t + "' (known: " + sampler_names() + ")");
+    const int64_t want = spp > 0 ? spp : desc.sample_count;
+    if (want < 1 || want > (int64_t(1) << 24))
+        throw std::invalid_argument("sampler '" + t + "': sample_count must be in 1..2^24, got " +
+                                    std::to_string(want));
+    switch (type_) {
+        case SamplerType::Independent:
+        case SamplerType::Sobol:  // one infinite sequence per pixel: no pattern size
+            n_ = uint32_t(want);
+            break;
+        case SamplerType::Stratified: {  // rounded up to a square, as Mitsuba 3 does
+            uint32_t r = uint32_t(std::ceil(std::sqrt(double(want))));
+            while (uint64_t(r) * r < uint64_t(want)) ++r;
+            while (r > 1 && uint64_t(r - 1) * (r - 1) >= uint64_t(want)) --r;
+            res_x_ = res_y_ = r;
+            n_ = r * r;
+            break;
+        }
+        case SamplerType::Multijitter: {  // rows = floor(sqrt N), columns to cover N
+            uint32_t rows = std::max<uint32_t>(1, uint32_t(std::floor(std::sqrt(double(want)))));
+            while (uint64_t(rows + 1) * (rows + 1) <= uint64_t(want)) ++rows;
+            while (uint64_t(rows) * rows > uint64_t(want)) --rows;
+            uint32_t cols = uint32_t((uint64_t(want) + rows - 1) / rows);
+            res_x_ = cols;
+            res_y_ = rows;
+            n_ = cols * rows;
+            break;
+        }
+        case SamplerType::ZSobol: {
+            log2_n_ = ceil_log2(uint64_t(want));
+            n_ = uint32_t(1) << log2_n_;
+            zbits_ = 2 * ceil_log2(uint64_t(std::max({width, height, 1})));
+            if (zbits_ + log2_n_ > 56)
+                throw std::invalid_argument("sampler 'zsobol': film of " + std::to_string(width) + " x " +
+                                            std::to_string(height) + " at " + std::to_string(n_) +
+                                            " samples per pixel needs more than 56 index bits");
+            break;
+        }
+    }
+}
+
+PixelSampleSource::PixelSampleSource(const SamplerPlan& plan, uint64_t pixel, uint64_t sample) : plan_(plan) {
+    // Pattern `block` of the pixel; sobol is one sequence, never repeated.
+    const bool unbounded = plan.type_ == SamplerType::Sobol;
+    const uint64_t block = unbounded ? 0 : sample / plan.n_;
+    j_ = uint32_t(unbounded ? sample : sample % plan.n_);
+    const uint64_t seed_key = mix64(plan.seed_ ^ mix64(block + 0x5a6f5b1d3e2c4a97ULL));
+    if (plan.type_ == SamplerType::ZSobol) {
+        // One scramble for the whole film: the pixel is in the index.
+        pixel_key_ = seed_key;
+        const uint64_t x = pixel % uint64_t(plan.width_), y = pixel / uint64_t(plan.width_);
+        zindex_ = (morton2(uint32_t(x), uint32_t(y)) << plan.log2_n_) | j_;
+    } else {
+        pixel_key_ = mix64(seed_key ^ mix64(pixel + 0x243f6a8885a308d3ULL));
+    }
+}
+
+uint64_t PixelSampleSource::dim_key(uint32_t dim) const {
+    return mix64(pixel_key_ + 0x9e3779b97f4a7c15ULL * (dim + 1));
+}
+
+float PixelSampleSource::get_1d(uint32_t dim) {
+    const uint64_t h = dim_key(dim);
+    switch (plan_.type_) {
+        case SamplerType::Stratified:
+        case SamplerType::Multijitter: {
+            uint32_t stratum = permute_index(j_, plan_.n_, h);
+            return stratum_value(stratum, plan_.jitter_ ? hash_float(h, j_) : 0.5f, plan_.n_);
+        }
+        case SamplerType::Sobol: {
+            uint32_t idx = owen_scramble(j_, uint32_t(h));           // Burley's shuffle
+            return to_float(owen_reversed(idx, uint32_t(h >> 32)));  // dimension 1 reversed is the index
+        }
+        case SamplerType::ZSobol: {
+            uint64_t idx = zorder_scramble(zindex_, plan_.zbits_ + plan_.log2_n_, h);
+            return to_float(owen_reversed(uint32_t(idx), uint32_t(h >> 32)));
+        }
+        case SamplerType::Independent:
+            break;
+    }
+    throw std::logic_error("PixelSampleSource: the independent sampler has no source");
+}
+
+Vec2 PixelSampleSource::get_2d(uint32_t dim) {
+    const uint64_t h = dim_key(dim);
+    const uint64_t h1 = mix64(h + 1);
+    switch (plan_.type_) {
+        case SamplerType::Stratified: {
+            const uint64_t h2 = mix64(h + 2);
+            uint32_t p = permute_index(j_, plan_.n_, h);
+            uint32_t cx = p % plan_.res_x_, cy = p / plan_.res_x_;
+            float jx = plan_.jitter_ ? hash_float(h1, j_) : 0.5f, jy = plan_.jitter_ ? hash_float(h2, j_) : 0.5f;
+            return {stratum_value(cx, jx, plan_.res_x_), stratum_value(cy, jy, plan_.res_y_)};
+        }
+        case SamplerType::Multijitter: {
+            // Kensler 2013, Section 3: cell (col, row) of an m x n grid, and
+            // within it sub-cell (sy, sx) of the n x m grid of the cell, with
+            // the sub-cell permutations shared by every row and column, so
+            // both projections are stratified into N (N-rooks).
+            const uint64_t h2 = mix64(h + 2);
+            const uint32_t m = plan_.res_x_, n = plan_.res_y_;
+            uint32_t s = permute_index(j_, plan_.n_, h);
+            uint32_t col = s % m, row = s / m;
+            uint32_t sx = permute_index(col, m, h1), sy = permute_index(row, n, h2);
+            float jx = plan_.jitter_ ? hash_float(h1, j_) : 0.5f, jy = plan_.jitter_ ? hash_float(h2, j_) : 0.5f;
+            float x = stratum_value(col * n + sy, jx, m * n);
+            float y = stratum_value(row * m + sx, jy, m * n);
+            return {x, y};
+        }
+        case SamplerType::Sobol: {
+            uint32_t idx = owen_scramble(j_, uint32_t(h));
+            return {to_float(owen_reversed(idx, uint32_t(h >> 32))),
+                    to_float(owen_reversed(sobol2_reversed(idx), uint32_t(h1)))};
+        }
+        case SamplerType::ZSobol: {
+            uint32_t idx = uint32_t(zorder_scramble(zindex_, plan_.zbits_ + plan_.log2_n_, h));
+            return {to_float(owen_reversed(idx, uint32_t(h >> 32))),
+                    to_float(owen_reversed(sobol2_reversed(idx), uint32_t(h1)))};
+        }
+        case SamplerType::Independent:
+            break;
+    }
+    throw std::logic_error("PixelSampleSource: the independent sampler has no source");
+}
+
+}  // namespace rm
