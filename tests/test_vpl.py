@@ -99,17 +99,18 @@ def test_rowcolumn_with_a_cluster_per_vpl_is_the_full_vpl_sum():
     MSE per pixel, eps 1e-2) shrinks as the clusters grow."""
     scene = rm.load_file(CORNELL, res=16, rfilter="box", max_depth=4)
     base = {"vpl_count": 64, "max_depth": 4}
-    full = rm.render(scene, integrator={"type": "vpl", **base}, spp=2, seed=5)
-    rc = rm.render(scene, integrator={"type": "rowcolumn", **base, "columns": 1 << 20}, spp=2, seed=5)
+    full = rm.render(scene, integrator={"type": "vpl", **base}, spp=4, seed=5)
+    rc = rm.render(scene, integrator={"type": "rowcolumn", **base, "columns": 1 << 20}, spp=4, seed=5)
     assert rc.image.tobytes() == full.image.tobytes()
-    n_vpl = full.stats["photon_maps"]["vpl"]["photons"] / 2
+    n_vpl = full.stats["photon_maps"]["vpl"]["photons"] / 4
     err = {}
-    for c in (4, 16, 64):
-        r = rm.render(scene, integrator={"type": "rowcolumn", **base, "rows": 32, "columns": c}, spp=2, seed=5)
+    for c in (2, 8, 32):
+        r = rm.render(scene, integrator={"type": "rowcolumn", **base, "rows": 32, "columns": c}, spp=4, seed=5)
         assert_clean(r, f"rowcolumn columns={c}")
         err[c] = float(np.mean((r.image - full.image) ** 2 / (full.image ** 2 + 1e-2)))
-    assert n_vpl > 64, n_vpl
-    assert err[4] > err[16] > err[64] > 0, err
+    # measured (seeds 0-5, about 90 VPLs per pass): 0.030 .. 0.089, 0.005 .. 0.021, 0.0005 .. 0.0023
+    assert n_vpl > 32, n_vpl
+    assert err[2] > err[8] > err[32] > 0, err
 
 
 @pytest.mark.parametrize("integ", [

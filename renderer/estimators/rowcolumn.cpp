@@ -59,13 +59,14 @@ std::unique_ptr<Integrator> make_rowcolumn(ParamReader& p);
         "matrix row-column sampling on the VPLs of instant radiosity: sampled rows, clustered columns, one "
         "representative per cluster (Hasan, Pellacini & Bala 2007)";
     e.params = vpl_shared_params();
-    e.params.push_back(ParamSpec::integer("rows", 32, "pixels whose full rows are computed per pass (the reduced "
-                                                      "matrix)")
+    e.params.push_back(ParamSpec::integer("rows", 32,
+                                          "pixels whose full rows are computed per pass (the reduced "
+                                          "matrix)")
                            .at_least(1)
                            .at_most(1 << 16));
-    e.params.push_back(
-        ParamSpec::integer("columns", 32, "clusters of VPLs per pass, one representative each").at_least(1).at_most(
-            1 << 20));
+    e.params.push_back(ParamSpec::integer("columns", 32, "clusters of VPLs per pass, one representative each")
+                           .at_least(1)
+                           .at_most(1 << 20));
     e.caps.driver = Driver::OwnPasses;
     e.caps.bias = Bias::Biased;                          // clamping, as vpl's
     e.caps.effects = effect_mask({kEmission, kDirect});  // as vpl's
@@ -151,7 +152,8 @@ private:
                 for (int k = 0; k < ngp_[p]; ++k) {
                     const GatherPoint& g = gp_[p * kMaxGather + k];
                     Color L(0.f);
-                    for (const auto& rep : reps_) L += rep.second * eng_.contribution(g.v, g.depth, vpls_[rep.first], stats);
+                    for (const auto& rep : reps_)
+                        L += rep.second * eng_.contribution(g.v, g.depth, vpls_[rep.first], stats);
                     er.add(g.cls, g.v.beta * L);
                 }
                 if (!keep_finite(stats, er.total())) continue;
@@ -236,8 +238,7 @@ private:
     }
 
     // Step 2: `c` clusters of the columns of R_.
-    bool cluster(PassLoop& loop, Sampler& rng, const std::vector<double>& norm, size_t c,
-                 std::vector<Cluster>& out) {
+    bool cluster(PassLoop& loop, Sampler& rng, const std::vector<double>& norm, size_t c, std::vector<Cluster>& out) {
         const size_t n = norm.size();
         const int r = rc_.rows_;
         std::vector<uint32_t> seen, unseen;
@@ -289,8 +290,7 @@ private:
         auto cmp = [](const std::pair<double, size_t>& a, const std::pair<double, size_t>& b) {
             return a.first < b.first || (a.first == b.first && a.second > b.second);
         };
-        std::priority_queue<std::pair<double, size_t>, std::vector<std::pair<double, size_t>>, decltype(cmp)> heap(
-            cmp);
+        std::priority_queue<std::pair<double, size_t>, std::vector<std::pair<double, size_t>>, decltype(cmp)> heap(cmp);
         auto push = [&](Cluster&& k) {
             if (k.members.empty()) return;
             k.cost = cost(k.members, norm);
@@ -385,7 +385,7 @@ private:
     std::vector<EffectRadiance> er_;
     std::vector<GatherPoint> gp_;
     std::vector<int> ngp_;
-    std::vector<float> R_;                            // the reduced matrix, column-major (rows_ per column)
+    std::vector<float> R_;                          // the reduced matrix, column-major (rows_ per column)
     std::vector<std::pair<uint32_t, float>> reps_;  // (VPL, weight W_C / w_j) per cluster, by VPL index
     double t_rows_ = 0, t_cluster_ = 0;
 };

@@ -161,31 +161,30 @@ int VplEngine::camera_sample(Sampler& sampler, int pixel, EffectRadiance& er, Ga
     ++stats.paths;
     int n = 0;
     const int md = cfg_.max_depth;
-    walk_specular_chain(
-        scene_, sampler, sr.ray, SpecularChain{md, cfg_.rr_depth, cfg_.hide}, mask_, er, stats,
-        [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta, const PathClass& pc,
-            int depth) {
-            if (!bsdf.has_smooth()) return true;
-            const bool via_specular = pc.scatter_vertices > 0;
-            const int cls_d = via_specular ? kSpecular : kDirect;
-            // Direct light by one light sample (no MIS partner: bsdf fraction 0).
-            if (mask_[cls_d])
-                er.add(cls_d, beta * estimate_direct(scene_, it, bsdf, wi, sampler, stats, 1.f, 0.f));
-            else  // the same random numbers whatever the mask (a light sample draws 4)
-                sampler.next_1d(), sampler.next_2d(), sampler.next_1d();
-            const int cls = via_specular ? kSpecular : kIndirect;
-            if (needs_ && mask_[cls] && n < kMaxGather && (md < 0 || depth + 3 <= md)) {
-                GatherPoint& g = gp[n++];
-                g.v = PathVertex();
-                g.v.type = VType::Surface;
-                g.v.it = it;
-                g.v.bsdf = &bsdf;
-                g.v.beta = beta * sr.weight;
-                g.depth = depth + 1;
-                g.cls = cls;
-            }
-            return true;
-        });
+    walk_specular_chain(scene_, sampler, sr.ray, SpecularChain{md, cfg_.rr_depth, cfg_.hide}, mask_, er, stats,
+                        [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta,
+                            const PathClass& pc, int depth) {
+                            if (!bsdf.has_smooth()) return true;
+                            const bool via_specular = pc.scatter_vertices > 0;
+                            const int cls_d = via_specular ? kSpecular : kDirect;
+                            // Direct light by one light sample (no MIS partner: bsdf fraction 0).
+                            if (mask_[cls_d])
+                                er.add(cls_d, beta * estimate_direct(scene_, it, bsdf, wi, sampler, stats, 1.f, 0.f));
+                            else  // the same random numbers whatever the mask (a light sample draws 4)
+                                sampler.next_1d(), sampler.next_2d(), sampler.next_1d();
+                            const int cls = via_specular ? kSpecular : kIndirect;
+                            if (needs_ && mask_[cls] && n < kMaxGather && (md < 0 || depth + 3 <= md)) {
+                                GatherPoint& g = gp[n++];
+                                g.v = PathVertex();
+                                g.v.type = VType::Surface;
+                                g.v.it = it;
+                                g.v.bsdf = &bsdf;
+                                g.v.beta = beta * sr.weight;
+                                g.depth = depth + 1;
+                                g.cls = cls;
+                            }
+                            return true;
+                        });
     for (Color& c : er.by_effect) c *= sr.weight;
     return n;
 }
@@ -286,8 +285,7 @@ std::unique_ptr<Integrator> make_vpl(ParamReader& p);
         "(Keller 1997); clamping as Mitsuba 0.6, optional bias compensation (Kollig & Keller 2004)";
     e.params = vpl_shared_params();
     e.params.push_back(ParamSpec::boolean(
-        "compensate", false,
-        "add back what clamping removes: one gather ray per gather point (Kollig & Keller 2004)"));
+        "compensate", false, "add back what clamping removes: one gather ray per gather point (Kollig & Keller 2004)"));
     e.caps.driver = Driver::OwnPasses;
     e.caps.bias = Bias::Biased;                          // the default clamping, uncompensated
     e.caps.effects = effect_mask({kEmission, kDirect});  // indirect misses L .. D S+ D E
