@@ -102,27 +102,6 @@ private:
     bool needs_ = false;
 };
 
-// The per-pixel sums over passes: each pass's estimate (by class) is
-// written into the pass buffer, then committed whole (a cancelled pass
-// leaves the sums untouched). Variance: the sample variance over passes of
-// each pass's estimate, over their count (as sppm.cpp): the passes are
-// independent and identically distributed (fresh VPLs each).
-class PassSums {
-public:
-    explicit PassSums(size_t pixels);
-    void clear_pass();
-    void set(size_t pixel, const EffectRadiance& er);
-    void commit();
-    int passes() const { return passes_; }
-    void develop(int n, std::vector<float>& image, std::vector<float>& variance,
-                 std::vector<std::vector<float>>* effects) const;
-
-private:
-    size_t px_;
-    std::vector<double> iter_, sum_, tot_, tot_sq_;
-    int passes_ = 0;
-};
-
 // The light paths' stream of pass `pass` (one per path g).
 inline Sampler vpl_light_sampler(uint64_t seed, uint64_t g, int pass) {
     return Sampler(mix64(seed + 0x76706c6c69676874ULL), g, uint64_t(pass));
