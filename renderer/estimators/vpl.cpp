@@ -231,9 +231,8 @@ std::unique_ptr<Integrator> make_vpl(ParamReader& p);
         "instant radiosity: each pass's light paths leave virtual point lights that every camera sample gathers "
         "(Keller 1997); clamping as Mitsuba 0.6, optional bias compensation (Kollig & Keller 2004)";
     e.params = vpl_shared_params();
-    e.params.push_back(ParamSpec::mitsuba_ignored("shadow_map_resolution",
-                                                  "Mitsuba 0.6's shadow maps: changes nothing here (shadow rays)")
-                           .alias("shadowMapResolution"));
+    e.params.push_back(ParamSpec::mitsuba_ignored("shadowMapResolution",
+                                                  "Mitsuba 0.6's shadow maps: changes nothing here (shadow rays)"));
     e.params.push_back(ParamSpec::boolean(
         "compensate", false, "add back what clamping removes: one gather ray per gather point (Kollig & Keller 2004)"));
     e.caps.driver = Driver::OwnPasses;
