@@ -1,8 +1,8 @@
 // What `vpl` (instant radiosity, vpl.cpp) and `rowcolumn` (matrix
 // row-column sampling, rowcolumn.cpp) share: one pass's set of virtual
-// point lights, the camera sample that ends at gather points, one VPL's
-// (clamped) contribution to a gather point, and the per-pixel sums over
-// passes. docs/vpl.md has the whole story.
+// point lights, the camera sample that ends at gather points and one
+// VPL's (clamped) contribution to a gather point (the per-pixel sums over
+// passes: PassSums, render/pass_loop.h). docs/vpl.md has the whole story.
 //
 // A pass (one spp of the pass loop):
 //   1. vpl_count light paths on subpath.h's light walk; each vertex y_i,
