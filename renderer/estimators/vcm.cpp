@@ -510,12 +510,9 @@ public:
           scene_(scene),
           filter_(scene.sensor_desc.rfilter, scene.sensor_desc.filter_radius, scene.sensor_desc.filter_stddev),
           W_(scene.sensor->width),
-          H_(scene.sensor->height) {
+          H_(scene.sensor->height),
+          sums_(size_t(W_) * size_t(H_)) {
         const size_t px = size_t(W_) * size_t(H_);
-        iter_.assign(px * kNumEffects * 3, 0.0);
-        sum_.assign(px * kNumEffects * 3, 0.0);
-        tot_.assign(px * 3, 0.0);
-        tot_sq_.assign(px * 3, 0.0);
         // Light tracing's splats: the crop window's (by default the film's),
         // as the light driver's (camera samples stay inside it: camera_sample.cpp).
         const Sensor& sn = *scene.sensor;
@@ -537,26 +534,7 @@ public:
 
     void develop(int n, std::vector<float>& image, std::vector<float>& variance,
                  std::vector<std::vector<float>>* effects) const override {
-        const size_t px = size_t(W_) * size_t(H_);
-        image.assign(3 * px, 0.f);
-        variance.assign(3 * px, std::numeric_limits<float>::quiet_NaN());
-        if (effects) effects->assign(kNumEffects, std::vector<float>(3 * px, 0.f));
-        if (n <= 0) return;
-        for (size_t p = 0; p < px; ++p)
-            for (int c = 0; c < 3; ++c) {
-                double t = 0;
-                for (int k = 0; k < kNumEffects; ++k) {
-                    double e = sum_[(p * kNumEffects + k) * 3 + c] / n;
-                    t += e;
-                    if (effects) (*effects)[k][3 * p + c] = float(e);
-                }
-                image[3 * p + c] = float(t);
-                if (n > 1) {
-                    double mean = tot_[3 * p + c] / n;
-                    double var = std::max(0.0, (tot_sq_[3 * p + c] - n * mean * mean) / (n - 1.0));
-                    variance[3 * p + c] = float(var / n);
-                }
-            }
+        sums_.develop(n, image, variance, effects);
     }
 
     void finish(RenderOutput& out) const override {
@@ -567,10 +545,10 @@ public:
         const int D = v_.tech_depth_;
         auto image = [&](int k, int off) {
             std::vector<float> img(3 * px, 0.f);
-            if (iterations_ > 0)
+            if (sums_.passes() > 0)
                 for (size_t p = 0; p < px; ++p)
                     for (int c = 0; c < 3; ++c)
-                        img[3 * p + c] = float(tech_sum_[(p * n_tech_ + k) * 6 + off + c] / iterations_);
+                        img[3 * p + c] = float(tech_sum_[(p * n_tech_ + k) * 6 + off + c] / sums_.passes());
             return img;
         };
         for (int k = 0; k < num_strategies(D); ++k) {
@@ -662,7 +640,7 @@ private:
         }
         pms_.build_seconds += std::chrono::duration<double>(Clock::now() - tb).count();
         // 3. Camera subpaths, row by row, into this iteration's buffer.
-        std::fill(iter_.begin(), iter_.end(), 0.0);
+        sums_.clear_pass();
         std::fill(tech_iter_.begin(), tech_iter_.end(), 0.0);
         auto row = [&](size_t y, int th) { camera_row(loop, it, int(y), w, nl, r2, loop.stats(th)); };
         if (!loop.parallel_for(size_t(H_), row)) return false;
@@ -670,20 +648,8 @@ private:
         const double inv_nl = 1.0 / double(nl);
         for (const Item& item : items_)
             for (const LtSplat& sp : item.splats) splat(sp, inv_nl);
-        const size_t px = size_t(W_) * size_t(H_);
-        for (size_t p = 0; p < px; ++p)
-            for (int c = 0; c < 3; ++c) {
-                double t = 0;
-                for (int k = 0; k < kNumEffects; ++k) {
-                    double e = iter_[(p * kNumEffects + k) * 3 + c];
-                    sum_[(p * kNumEffects + k) * 3 + c] += e;
-                    t += e;
-                }
-                tot_[3 * p + c] += t;
-                tot_sq_[3 * p + c] += t * t;
-            }
+        sums_.commit();
         for (size_t k = 0; k < tech_iter_.size(); ++k) tech_sum_[k] += tech_iter_[k];
-        ++iterations_;
         return true;
     }
 
@@ -717,7 +683,7 @@ private:
         if (sp.film.x < float(cx0_) || sp.film.x > float(cx1_) || sp.film.y < float(cy0_) || sp.film.y > float(cy1_))
             return;
         for_each_splat_pixel(filter_, norm_x_, norm_y_, W_, 0, H_, sp.film.x, sp.film.y, [&](size_t p, double wgt) {
-            double* e = &iter_[(p * kNumEffects + sp.effect) * 3];
+            double* e = sums_.pass_pixel(p) + sp.effect * 3;
             for (int c = 0; c < 3; ++c) e[c] += wgt * scale * double(sp.value[c]);
             if (sp.tech >= 0) add_tech(p, sp.tech, sp.value * float(wgt * scale), sp.weight);
         });
@@ -838,7 +804,7 @@ private:
             }
             Color tot = er.total();
             if (!keep_finite(stats, tot)) continue;
-            double* e = &iter_[size_t(p) * kNumEffects * 3];
+            double* e = sums_.pass_pixel(size_t(p));
             for (int k = 0; k < kNumEffects; ++k)
                 for (int c = 0; c < 3; ++c) e[k * 3 + c] += double(er.by_effect[k][c]);
             for (const auto& tc : techs) add_tech(size_t(p), tc.first, tc.second.first, tc.second.second);
@@ -887,10 +853,9 @@ private:
     int W_, H_;
     int cx0_ = 0, cx1_ = 0, cy0_ = 0, cy1_ = 0;  // the crop window
     std::vector<double> norm_x_, norm_y_;
-    std::vector<double> iter_, sum_, tot_, tot_sq_;
+    PassSums sums_;
     int n_tech_ = 0;
     std::vector<double> tech_iter_, tech_sum_;  // [pixel][technique][weighted rgb, unweighted rgb]
-    int iterations_ = 0;                        // iterations committed
     std::vector<Item> items_;
     std::vector<PathVertex> lv_;
     std::vector<VcmMis> lm_;

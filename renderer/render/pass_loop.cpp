@@ -160,4 +160,57 @@ RenderOutput PassLoop::run(PassStep& step) {
     return out;
 }
 
+PassSums::PassSums(size_t pixels) : px_(pixels) {
+    iter_.assign(px_ * kNumEffects * 3, 0.0);
+    sum_.assign(px_ * kNumEffects * 3, 0.0);
+    tot_.assign(px_ * 3, 0.0);
+    tot_sq_.assign(px_ * 3, 0.0);
+}
+
+void PassSums::clear_pass() { std::fill(iter_.begin(), iter_.end(), 0.0); }
+
+void PassSums::set(size_t p, const EffectRadiance& er) {
+    double* e = &iter_[p * kNumEffects * 3];
+    for (int k = 0; k < kNumEffects; ++k)
+        for (int c = 0; c < 3; ++c) e[k * 3 + c] = double(er.by_effect[k][c]);
+}
+
+void PassSums::commit() {
+    for (size_t p = 0; p < px_; ++p)
+        for (int c = 0; c < 3; ++c) {
+            double t = 0;
+            for (int k = 0; k < kNumEffects; ++k) {
+                double e = iter_[(p * kNumEffects + k) * 3 + c];
+                sum_[(p * kNumEffects + k) * 3 + c] += e;
+                t += e;
+            }
+            tot_[3 * p + c] += t;
+            tot_sq_[3 * p + c] += t * t;
+        }
+    ++passes_;
+}
+
+void PassSums::develop(int n, std::vector<float>& image, std::vector<float>& variance,
+                       std::vector<std::vector<float>>* effects) const {
+    image.assign(3 * px_, 0.f);
+    variance.assign(3 * px_, std::numeric_limits<float>::quiet_NaN());
+    if (effects) effects->assign(kNumEffects, std::vector<float>(3 * px_, 0.f));
+    if (n <= 0) return;
+    for (size_t p = 0; p < px_; ++p)
+        for (int c = 0; c < 3; ++c) {
+            double t = 0;
+            for (int k = 0; k < kNumEffects; ++k) {
+                double e = sum_[(p * kNumEffects + k) * 3 + c] / n;
+                t += e;
+                if (effects) (*effects)[k][3 * p + c] = float(e);
+            }
+            image[3 * p + c] = float(t);
+            if (n > 1) {
+                double mean = tot_[3 * p + c] / n;
+                double var = std::max(0.0, (tot_sq_[3 * p + c] - n * mean * mean) / (n - 1.0));
+                variance[3 * p + c] = float(var / n);
+            }
+        }
+}
+
 }  // namespace rm

@@ -161,6 +161,30 @@ private:
     Shade shade_;
 };
 
+// The per-pixel sums of an estimator with passes of its own (vcm, vpl,
+// rowcolumn): each pass's estimate, by effect class, is written into the
+// pass buffer (pass_pixel: kNumEffects x 3 doubles per pixel), then
+// committed whole, so a cancelled pass leaves the sums untouched.
+// develop(): the mean over passes, and as variance the sample variance
+// over passes of each pass's estimate over their count (the passes as
+// independent estimates).
+class PassSums {
+public:
+    explicit PassSums(size_t pixels);
+    void clear_pass();
+    double* pass_pixel(size_t p) { return &iter_[p * kNumEffects * 3]; }
+    void set(size_t pixel, const EffectRadiance& er);
+    void commit();
+    int passes() const { return passes_; }
+    void develop(int n, std::vector<float>& image, std::vector<float>& variance,
+                 std::vector<std::vector<float>>* effects) const;
+
+private:
+    size_t px_;
+    std::vector<double> iter_, sum_, tot_, tot_sq_;
+    int passes_ = 0;
+};
+
 // The camera driver on a loop (camera_driver.cpp): `integrator`'s sample()
 // along filter-importance-sampled camera rays, tile by tile; photonmapper
 // runs its camera passes through it after its photon passes.
