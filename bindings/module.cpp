@@ -640,6 +640,13 @@ PYBIND11_MODULE(_core, m) {
                 maps[py::str(pm.name)] = d;
             }
             st["photon_maps"] = maps;
+            for (const auto& kv : out.values) st[py::str(kv.first)] = kv.second;
+            for (NamedArray& a : out.arrays) {
+                py::ssize_t cols = py::ssize_t(std::max<size_t>(1, a.columns.size()));
+                py::ssize_t rows = py::ssize_t(a.data.size()) / cols;
+                st[py::str(a.name)] = to_numpy(std::move(a.data), {rows, cols});
+                st[py::str(a.name + "_columns")] = a.columns;
+            }
             r["stats"] = st;
             py::list cps;
             for (auto& c : out.checkpoints)

@@ -43,6 +43,14 @@ struct PhotonMapStats {
     uint64_t max_paths = 0;      // the give-up bound on paths (photon_trace.h; 0 for sppm's)
 };
 
+// A table an estimator reports in res.stats under `name`: rows of
+// columns.size() floats (irrcache's records).
+struct NamedArray {
+    std::string name;
+    std::vector<std::string> columns;
+    std::vector<float> data;  // row-major
+};
+
 struct RenderOutput {
     int width = 0, height = 0, spp = 0;
     double seconds = 0;
@@ -63,6 +71,10 @@ struct RenderOutput {
     std::vector<Checkpoint> checkpoints;
     ThreadStats stats;
     std::vector<PhotonMapStats> photon_maps;
+    // Estimator-specific entries of res.stats: numbers, and tables (a numpy
+    // array of shape (rows, columns) beside NAME_columns).
+    std::vector<std::pair<std::string, double>> values;
+    std::vector<NamedArray> arrays;
     int threads = 0;
     double setup_seconds = 0;
 };

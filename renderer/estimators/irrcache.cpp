@@ -1,0 +1,652 @@
+// `irrcache`: irradiance caching (Ward, Rubinstein and Clear 1988, "A Ray
+// Tracing Solution for Diffuse Interreflection"): indirect diffuse
+// irradiance is computed at sparse records by stratified final gathering
+// and interpolated between them; everything else is path traced.
+//
+// What comes from where, at the first vertex x of a camera path when x is
+// Lambertian (DESIGN section 3's classes, camera side):
+//   emission, direct (L D E), caustic (L D S+ E... seen as L S+ D E) and
+//   specular (anything seen through a delta vertex first): the `path`
+//   estimator itself, run with the indirect class masked out (its
+//   PathClass stops the path at the second smooth vertex), so these classes
+//   stay exact (unbiased);
+//   indirect (L ... D D E): f(x) E_c(x), E_c the irradiance at x carried by
+//   light that scattered at a smooth vertex after x, interpolated from the
+//   cache. At a first vertex that is not Lambertian (glossy, mixed lobes,
+//   index-matched boundaries) the whole path is path traced.
+// A record at x holds E_c by M x N stratified cosine-weighted gather rays
+// (Ward and Heckbert 1992, sec. 2: M = gather_resolution polar strata,
+// N = round(pi M) azimuthal ones). Each gather ray follows delta vertices
+// to its first smooth vertex y and takes `path`'s estimate of the radiance
+// y reflects towards x (emission at y and light reaching x through delta
+// vertices only are excluded: they are direct and caustic light at x).
+// Gradients (Ward and Heckbert 1992; the forms of Krivanek and Gautron
+// 2009, "Practical Global Illumination with Irradiance Caching", ch. 5,
+// derived there after Krivanek et al. 2005, "Radiance caching for
+// efficient global illumination computation"):
+//   rotational     grad_r E = pi / (M N) sum_k v_k sum_j tan(theta_j) L_jk,
+//                  v_k = (-sin phi_k, cos phi_k, 0);
+//   translational  per boundary between cells, the radiance difference
+//                  times the rate at which the projected solid angle of the
+//                  cell moves when x moves, the nearer of the two cells'
+//                  hit distances setting that rate:
+//                  polar walls  2 pi cos^2 theta_- sin theta_- / (N r) along u_k,
+//                  azimuthal    cos theta_c (cos theta_- - cos theta_+) / (sin theta_c r) along v_k-.
+// Weights (the record valid where w > 0, E(x) = sum w_i E_i(x) / sum w_i):
+//   tabellion  Tabellion and Lamorlette 2004, "An Approximate Global
+//              Illumination System for Computer Generated Films":
+//              w = 1 - kappa max(2 |x - x_i| / R_i, sqrt(1 - n.n_i) / sqrt(1 - cos 10 deg)),
+//              R_i the smallest hit distance of the gather rays at least
+//              10 degrees above the tangent plane;
+//   ward       Ward et al. 1988: w = 1 / (|x - x_i| / R_i + sqrt(1 - n.n_i)),
+//              valid where w > 1 / ward_a, R_i the harmonic mean hit distance.
+// Records "in front of" x (Ward et al. 1988: (x - x_i).(n + n_i)/2 < 0) are
+// skipped. R_i is limited by E / |grad_t E| when gradients are on
+// (Krivanek and Gautron 2009, ch. 5), by neighbour clamping (Krivanek et
+// al. 2006, "Making radiance and irradiance caching practical: adaptive
+// caching and neighbor clamping": R_i <= R_j + |x_i - x_j| both ways for
+// overlapping records), and clamped to [min_spacing, max_spacing] times
+// the radius of the scene's bounding sphere.
+//
+// Determinism: the cache is filled before the camera passes by an
+// overture over a fixed set of record candidates (the first hit of one
+// camera ray per pixel, in coarse-to-fine pixel grids, strides 16 .. 1),
+// in batches of a fixed size: within a batch each candidate not covered by
+// the cache so far computes its record on its own random stream (in
+// parallel), then the batch's records are inserted in candidate order. The
+// camera passes only read the cache (with the weights relaxed by
+// quality_adjustment, as Mitsuba 0.6's irrcache relaxes kappa after its
+// overture); a point no record covers gets a record of its own, computed
+// from the camera sample's stream and not stored (res.stats counts them).
+// So a seed fixes the bytes whatever the thread count. overture = false
+// leaves the cache empty: every camera sample then gathers its own
+// irradiance, an unbiased estimate (final gathering without caching).
+//
+// The record index is a small loose octree of our own (after pbrt-v2's
+// irradiance cache octree: a record's sphere of influence is stored in the
+// nodes it overlaps down to its own size; a lookup walks one root-to-leaf
+// path): about 100 lines, built and read single-threaded or read-only,
+// where a general spatial library would bring a dependency for one use.
+//
+// Bias: biased (interpolation error that more samples per pixel do not
+// remove; it falls as the records get denser, kappa up). Measured in
+// docs/irrcache.md and tests/test_irrcache.py. Records (position, normal,
+// radius) come back in res.stats["irrcache_records"].
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+
+#include "render/pass_loop.h"
+#include "render/registry.h"
+#include "transport/camera_sample.h"
+#include "transport/common.h"
+
+namespace rm {
+
+namespace {
+
+std::unique_ptr<Integrator> make_irrcache(ParamReader& p);
+
+[[maybe_unused]] const bool kRegistered = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "irrcache";
+    e.doc =
+        "irradiance caching (Ward et al. 1988) with gradients (Ward and Heckbert 1992) and neighbour clamping "
+        "(Krivanek et al. 2006): indirect diffuse light interpolated, the rest path traced";
+    e.params = {
+        max_depth_param(),
+        rr_depth_param(),
+        hide_emitters_param(),
+        ParamSpec::integer("gather_resolution", 8,
+                           "polar strata M of a record's final gather (M x round(pi M) rays; Mitsuba's resolution)")
+            .at_least(1)
+            .at_most(256)
+            .alias("resolution"),
+        ParamSpec::string("weight", "tabellion", "interpolation weight: Tabellion and Lamorlette 2004, or Ward 1988")
+            .one_of({"tabellion", "ward"}),
+        ParamSpec::real("kappa", 1.0, "Tabellion's kappa: larger means denser records (Mitsuba's quality)")
+            .greater_than(0)
+            .alias("quality"),
+        ParamSpec::real("ward_a", 0.2, "Ward's error bound a (weight 'ward'): smaller means denser records")
+            .greater_than(0),
+        ParamSpec::real("quality_adjustment", 0.5,
+                        "kappa (or 1 / a) of the camera passes' lookups relative to the overture's")
+            .greater_than(0)
+            .at_most(1)
+            .alias("qualityAdjustment"),
+        ParamSpec::boolean("gradients", true, "translational and rotational irradiance gradients"),
+        ParamSpec::boolean("neighbour_clamping", true, "neighbour clamping of record radii (Krivanek et al. 2006)")
+            .alias("clamp_neighbor")
+            .alias("clampNeighbor"),
+        ParamSpec::real("min_spacing", 0.005, "smallest record radius, relative to the scene's bounding sphere")
+            .at_least(0),
+        ParamSpec::real("max_spacing", 0.25, "largest record radius, relative to the scene's bounding sphere")
+            .greater_than(0),
+        ParamSpec::boolean("overture", true,
+                           "fill the cache before the camera passes (false: no cache, every sample gathers)"),
+    };
+    e.caps.driver = Driver::OwnPasses;
+    e.caps.bias = Bias::Biased;
+    e.factory = make_irrcache;
+    return e;
+}());
+
+using Clock = std::chrono::steady_clock;
+
+// Random streams of the overture (pixel index, one of these sample indices):
+// far from the camera passes' sample indices.
+constexpr uint64_t kCandidateSample = uint64_t(1) << 62;
+constexpr uint64_t kRecordSample = kCandidateSample + 1;
+constexpr int kOvertureBatch = 256;
+constexpr int kMaxChain = 8;  // delta vertices a gather ray follows to its first smooth vertex
+const float kSqrtOneMinusCos10 = std::sqrt(1.f - std::cos(10.f * kPi / 180.f));
+
+struct Record {
+    Vec3 p, n;
+    Color e;
+    float r = 0.f;       // validity radius (clamped)
+    float r_raw = 0.f;   // before the min/max clamp (what neighbour clamping compares)
+    Color tgrad[3];      // d E / d x_a, a = world axis
+    Color rgrad[3];      // rotational gradient, per world axis
+};
+
+// The loose octree of the file's first comment.
+class RecordOctree {
+public:
+    void reset(const Vec3& center, float half) {
+        lo_ = center - Vec3(half);
+        size_ = 2.f * half;
+        nodes_.assign(1, Node());
+    }
+    void insert(int rec, const Vec3& p, float reach) { insert(0, lo_, size_, rec, p, reach, 0); }
+    // f(record index) for every record stored on the path to x's leaf.
+    template <class F>
+    void lookup(const Vec3& x, F&& f) const {
+        int node = 0;
+        Vec3 lo = lo_;
+        float size = size_;
+        for (;;) {
+            for (int r : nodes_[size_t(node)].items) f(r);
+            float h = 0.5f * size;
+            int c = (x.x >= lo.x + h ? 1 : 0) | (x.y >= lo.y + h ? 2 : 0) | (x.z >= lo.z + h ? 4 : 0);
+            int next = nodes_[size_t(node)].child[c];
+            if (next < 0) return;
+            lo = child_lo(lo, h, c);
+            size = h;
+            node = next;
+        }
+    }
+    // f(record index) for every record stored in a node the sphere (c, r)
+    // overlaps (a record may come more than once).
+    template <class F>
+    void query_sphere(const Vec3& c, float r, F&& f) const {
+        sphere(0, lo_, size_, c, r, f);
+    }
+
+private:
+    struct Node {
+        int child[8] = {-1, -1, -1, -1, -1, -1, -1, -1};
+        std::vector<int> items;
+    };
+    static Vec3 child_lo(const Vec3& lo, float h, int c) {
+        return Vec3(lo.x + ((c & 1) ? h : 0.f), lo.y + ((c & 2) ? h : 0.f), lo.z + ((c & 4) ? h : 0.f));
+    }
+    static bool overlaps(const Vec3& lo, float size, const Vec3& c, float r) {
+        float d2 = 0.f;
+        for (int a = 0; a < 3; ++a) {
+            float v = c[a] < lo[a] ? lo[a] - c[a] : (c[a] > lo[a] + size ? c[a] - lo[a] - size : 0.f);
+            d2 += v * v;
+        }
+        return d2 <= r * r;
+    }
+    void insert(int node, Vec3 lo, float size, int rec, const Vec3& p, float reach, int depth) {
+        // Stored here once the node is no larger than the sphere's box.
+        if (size <= 2.f * reach || depth >= 20) {
+            nodes_[size_t(node)].items.push_back(rec);
+            return;
+        }
+        float h = 0.5f * size;
+        for (int c = 0; c < 8; ++c) {
+            Vec3 clo = child_lo(lo, h, c);
+            if (!overlaps(clo, h, p, reach)) continue;
+            int next = nodes_[size_t(node)].child[c];
+            if (next < 0) {
+                next = int(nodes_.size());
+                nodes_[size_t(node)].child[c] = next;
+                nodes_.emplace_back();
+            }
+            insert(next, clo, h, rec, p, reach, depth + 1);
+        }
+    }
+    template <class F>
+    void sphere(int node, Vec3 lo, float size, const Vec3& c, float r, F& f) const {
+        if (!overlaps(lo, size, c, r)) return;
+        for (int i : nodes_[size_t(node)].items) f(i);
+        float h = 0.5f * size;
+        for (int k = 0; k < 8; ++k)
+            if (nodes_[size_t(node)].child[k] >= 0) sphere(nodes_[size_t(node)].child[k], child_lo(lo, h, k), h, c, r, f);
+    }
+    std::vector<Node> nodes_;
+    Vec3 lo_;
+    float size_ = 1.f;
+};
+
+struct CacheStats {
+    uint64_t candidates = 0, computed = 0;
+    double overture_seconds = 0;
+    std::atomic<uint64_t> misses{0}, lookups{0};
+};
+
+}  // namespace
+
+class IrrCache final : public Integrator {
+public:
+    explicit IrrCache(ParamReader& p)
+        : max_depth_(p.get_int("max_depth")),
+          res_(p.get_int("gather_resolution")),
+          ward_(p.get_string("weight") == "ward"),
+          kappa_(p.get_float("kappa")),
+          ward_a_(p.get_float("ward_a")),
+          adjust_(p.get_float("quality_adjustment")),
+          gradients_(p.get_bool("gradients")),
+          clamp_(p.get_bool("neighbour_clamping")),
+          min_spacing_(p.get_float("min_spacing")),
+          max_spacing_(p.get_float("max_spacing")),
+          overture_(p.get_bool("overture")) {
+        if (min_spacing_ > max_spacing_)
+            p.fail("min_spacing", "min_spacing (" + std::to_string(min_spacing_) + ") exceeds max_spacing (" +
+                                      std::to_string(max_spacing_) + ")");
+        n_phi_ = std::max(1, int(std::lround(kPi * float(res_))));
+        // The path tracers it runs: the camera's (all classes, or all but
+        // indirect), and the gather rays' from their first smooth vertex y,
+        // one per length of the delta chain before y (max_depth counts from
+        // the camera: the camera segment and the chain come first).
+        const int rr = p.get_int("rr_depth");
+        const bool hide = p.get_bool("hide_emitters");
+        auto make_path = [&](int md, bool h) {
+            IntegratorDesc d;
+            d.type = "path";
+            d.params.set("max_depth", int64_t(md));
+            d.params.set("rr_depth", int64_t(rr));
+            d.params.set("hide_emitters", h);
+            return make_integrator(d, all_effects());
+        };
+        camera_path_ = make_path(max_depth_, hide);
+        camera_direct_ = make_path(max_depth_, hide);
+        for (int c = 0; c <= kMaxChain; ++c) {
+            int md = max_depth_ < 0 ? -1 : std::max(1, max_depth_ - 1 - c);
+            gather_path_.push_back(make_path(md, false));
+            gather_path_.back()->mask = effect_mask({kDirect, kCaustic, kIndirect});
+            gather_depth_ok_.push_back(max_depth_ < 0 || max_depth_ - 1 - c >= 2);
+        }
+    }
+
+    void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
+        throw std::logic_error("integrator 'irrcache' renders through its own driver");
+    }
+    RenderOutput drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const override;
+
+    // The camera passes' radiance along one camera ray (the file's first comment).
+    void radiance(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
+                  ThreadStats& stats) const {
+        Interaction it;
+        ++stats.rays;
+        bool hit = scene.intersect(ray, it);
+        if (!hit || !mask[kIndirect] || !cacheable(scene, it)) {
+            camera_path_->sample(scene, sampler, ray, out, stats);
+            return;
+        }
+        camera_direct_->sample(scene, sampler, ray, out, stats);
+        Color e;
+        cstats_.lookups.fetch_add(1, std::memory_order_relaxed);
+        if (!interpolate(it, adjust_, e)) {
+            cstats_.misses.fetch_add(1, std::memory_order_relaxed);
+            Record rec;
+            gather(scene, sampler, it, stats, rec);
+            e = rec.e;
+        }
+        out.add(kIndirect, albedo_over_pi(scene, it) * e);
+    }
+
+    void set_masks() const {
+        camera_path_->mask = mask;
+        EffectMask m = mask;
+        m[kIndirect] = false;
+        camera_direct_->mask = m;
+    }
+
+private:
+    // x takes its indirect light from the cache: a Lambertian surface seen
+    // from its front, and paths of 3 segments allowed.
+    bool cacheable(const Scene& scene, const Interaction& it) const {
+        if (max_depth_ >= 0 && max_depth_ < 3) return false;
+        const Bsdf& b = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
+        return b.flags() == kDiffuseReflection && it.to_local(it.wi).z > 0.f &&
+               scene.shapes[it.shape]->dipole < 0;
+    }
+    static Color albedo_over_pi(const Scene& scene, const Interaction& it) {
+        const Bsdf& b = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
+        BsdfContext ctx;
+        return b.eval(ctx, it.to_local(it.wi), Vec3(0.f, 0.f, 1.f));  // f |cos| at the normal: rho / pi
+    }
+
+    // Radiance of class "light that scattered at a smooth vertex after x"
+    // arriving at x from direction d; `dist`: the first hit's distance (inf
+    // when the ray leaves the scene).
+    Color gather_radiance(const Scene& scene, Sampler& sampler, const Interaction& x, const Vec3& d, float& dist,
+                          ThreadStats& stats) const {
+        dist = kInf;
+        if (dot(d, x.n) <= 0.f) return Color(0.f);  // below the geometric surface
+        Ray ray = x.spawn(d);
+        Color w(1.f);
+        BsdfContext ctx;
+        for (int c = 0; c <= kMaxChain; ++c) {
+            Interaction h;
+            ++stats.rays;
+            if (!scene.intersect(ray, h)) return Color(0.f);
+            if (c == 0) dist = h.t;
+            const Bsdf& b = *scene.bsdfs[scene.shapes[h.shape]->bsdf];
+            if (b.has_smooth()) {
+                if (!gather_depth_ok_[size_t(c)]) return Color(0.f);
+                EffectRadiance er;
+                gather_path_[size_t(c)]->sample(scene, sampler, ray, er, stats);
+                return w * er.total();
+            }
+            BsdfSample bs = b.sample(ctx, h.to_local(h.wi), sampler.next_1d(), sampler.next_2d());
+            if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || !bs.is_delta) return Color(0.f);
+            w *= bs.weight;
+            ray = h.spawn(h.to_world(bs.wo));
+        }
+        return Color(0.f);
+    }
+
+    // A record at x: M x N stratified cosine-weighted gather rays, the
+    // irradiance, its gradients and radius (the file's first comment).
+    void gather(const Scene& scene, Sampler& sampler, const Interaction& x, ThreadStats& stats, Record& rec) const {
+        const int M = res_, N = n_phi_;
+        thread_local std::vector<Color> L;
+        thread_local std::vector<float> r;
+        L.assign(size_t(M) * size_t(N), Color(0.f));
+        r.assign(size_t(M) * size_t(N), kInf);
+        for (int j = 0; j < M; ++j)
+            for (int k = 0; k < N; ++k) {
+                Vec2 u = sampler.next_2d();
+                float s2 = (float(j) + u.x) / float(M);
+                float ct = std::sqrt(std::max(0.f, 1.f - s2)), st = std::sqrt(s2);
+                float phi = 2.f * kPi * (float(k) + u.y) / float(N);
+                Vec3 d = x.to_world(Vec3(st * std::cos(phi), st * std::sin(phi), ct));
+                size_t i = size_t(j) * size_t(N) + size_t(k);
+                L[i] = gather_radiance(scene, sampler, x, d, r[i], stats);
+                if (!is_finite(L[i])) L[i] = Color(0.f);
+            }
+        Color e(0.f);
+        Vec3 gt_local[3], gr_local[3];  // per channel, local frame
+        float inv_sum = 0.f, rmin = kInf;
+        for (int j = 0; j < M; ++j) {
+            float ctm = std::sqrt(1.f - float(j) / float(M)), stm = std::sqrt(float(j) / float(M));
+            float ctc = std::sqrt(1.f - (float(j) + 0.5f) / float(M)), stc = std::sqrt((float(j) + 0.5f) / float(M));
+            float ctp = std::sqrt(std::max(0.f, 1.f - float(j + 1) / float(M)));
+            float tanc = stc / ctc;
+            for (int k = 0; k < N; ++k) {
+                size_t i = size_t(j) * size_t(N) + size_t(k);
+                float phic = 2.f * kPi * (float(k) + 0.5f) / float(N), phim = 2.f * kPi * float(k) / float(N);
+                Vec3 uk(std::cos(phic), std::sin(phic), 0.f), vk(-std::sin(phic), std::cos(phic), 0.f);
+                Vec3 vkm(-std::sin(phim), std::cos(phim), 0.f);
+                e += L[i];
+                for (int ch = 0; ch < 3; ++ch) gr_local[ch] += vk * (tanc * L[i][ch]);
+                if (j >= 1) {  // the wall between rings j - 1 and j
+                    size_t o = size_t(j - 1) * size_t(N) + size_t(k);
+                    float rm = std::min(r[i], r[o]);
+                    if (rm < kInf && rm > 0.f) {
+                        float f = 2.f * kPi * ctm * ctm * stm / (float(N) * rm);
+                        for (int ch = 0; ch < 3; ++ch) gt_local[ch] += uk * (f * (L[i][ch] - L[o][ch]));
+                    }
+                }
+                if (N > 1) {  // the wall between sectors k - 1 and k
+                    size_t o = size_t(j) * size_t(N) + size_t((k + N - 1) % N);
+                    float rm = std::min(r[i], r[o]);
+                    if (rm < kInf && rm > 0.f) {
+                        float f = ctc * (ctm - ctp) / (stc * rm);
+                        for (int ch = 0; ch < 3; ++ch) gt_local[ch] += vkm * (f * (L[i][ch] - L[o][ch]));
+                    }
+                }
+                if (r[i] < kInf && r[i] > 0.f) {
+                    inv_sum += 1.f / r[i];
+                    if (ctc > 0.173f) rmin = std::min(rmin, r[i]);  // at least 10 degrees above the tangent plane
+                }
+            }
+        }
+        const float norm = kPi / float(M * N);
+        rec.p = x.p;
+        rec.n = x.sh.n;
+        rec.e = e * norm;
+        for (int a = 0; a < 3; ++a) {
+            rec.tgrad[a] = Color(0.f);
+            rec.rgrad[a] = Color(0.f);
+        }
+        for (int ch = 0; ch < 3; ++ch) {
+            Vec3 gt = x.to_world(gt_local[ch]), gr = x.to_world(gr_local[ch] * norm);
+            for (int a = 0; a < 3; ++a) {
+                rec.tgrad[a][ch] = gt[a];
+                rec.rgrad[a][ch] = gr[a];
+            }
+        }
+        float radius = ward_ ? (inv_sum > 0.f ? float(M * N) / inv_sum : kInf) : rmin;
+        if (gradients_)
+            for (int ch = 0; ch < 3; ++ch) {
+                float g = length(Vec3(rec.tgrad[0][ch], rec.tgrad[1][ch], rec.tgrad[2][ch]));
+                if (g > 0.f) radius = std::min(radius, rec.e[ch] / g);
+            }
+        rec.r_raw = radius;
+        rec.r = clamp_radius(radius);
+    }
+
+    float clamp_radius(float r) const { return std::min(std::max(r, r_min_), r_max_); }
+    // The farthest a record of radius r can be used (lookups relaxed by
+    // quality_adjustment).
+    float reach(float r) const { return ward_ ? r * ward_a_ / adjust_ : r / (2.f * kappa_ * adjust_); }
+
+    // The weight of record `rec` at (p, n); <= 0: not used. `adjust`:
+    // 1 in the overture, quality_adjustment in the camera passes.
+    float weight(const Record& rec, const Vec3& p, const Vec3& n, float adjust) const {
+        Vec3 dp = p - rec.p;
+        float dist = length(dp);
+        if (dot(dp, n + rec.n) * 0.5f < -1e-3f * rec.r) return 0.f;  // in front of x
+        float nd = std::sqrt(std::max(0.f, 1.f - dot(n, rec.n)));
+        if (ward_) {
+            float a = ward_a_ / adjust;
+            float den = dist / rec.r + nd;
+            if (!(den < a)) return 0.f;
+            return 1.f / std::max(den, 1e-6f);
+        }
+        return 1.f - kappa_ * adjust * std::max(2.f * dist / rec.r, nd / kSqrtOneMinusCos10);
+    }
+
+    // The cache's irradiance at `it`, false when no record covers it.
+    bool interpolate(const Interaction& it, float adjust, Color& e) const {
+        float wsum = 0.f;
+        Color sum(0.f);
+        const Vec3 n = it.sh.n;
+        octree_.lookup(it.p, [&](int i) {
+            const Record& rec = records_[size_t(i)];
+            float w = weight(rec, it.p, n, adjust);
+            if (!(w > 0.f)) return;
+            Color v = rec.e;
+            if (gradients_) {
+                Vec3 dp = it.p - rec.p, cn = cross(rec.n, n);
+                for (int a = 0; a < 3; ++a) v += rec.tgrad[a] * dp[a] + rec.rgrad[a] * cn[a];
+                v = Color(std::max(v.x, 0.f), std::max(v.y, 0.f), std::max(v.z, 0.f));
+            }
+            sum += v * w;
+            wsum += w;
+        });
+        if (!(wsum > 0.f)) return false;
+        e = sum / wsum;
+        return true;
+    }
+
+    // Adds a record in the overture's order, with neighbour clamping.
+    void insert(Record rec) const {
+        const int idx = int(records_.size());
+        if (clamp_) {
+            // R_i <= R_j + |x_i - x_j| over the records that reach x_i, then
+            // the same bound on the records within x_i's reach.
+            octree_.lookup(rec.p, [&](int j) {
+                const Record& o = records_[size_t(j)];
+                float d = length(rec.p - o.p);
+                if (d < reach(o.r)) rec.r_raw = std::min(rec.r_raw, o.r_raw + d);
+            });
+            rec.r = clamp_radius(rec.r_raw);
+            float rr = reach(rec.r);
+            octree_.query_sphere(rec.p, rr, [&](int j) {
+                Record& o = records_[size_t(j)];
+                float d = length(rec.p - o.p);
+                if (d < rr && o.r_raw > rec.r_raw + d) {
+                    o.r_raw = rec.r_raw + d;
+                    o.r = clamp_radius(o.r_raw);
+                }
+            });
+        }
+        records_.push_back(rec);
+        octree_.insert(idx, rec.p, reach(rec.r));
+    }
+
+    bool overture(PassLoop& loop) const;
+    void finish_stats(RenderOutput& out) const;
+
+    int max_depth_, res_, n_phi_ = 1;
+    bool ward_;
+    float kappa_, ward_a_, adjust_;
+    bool gradients_, clamp_;
+    float min_spacing_, max_spacing_;
+    bool overture_;
+    std::unique_ptr<Integrator> camera_path_, camera_direct_;
+    std::vector<std::unique_ptr<Integrator>> gather_path_;
+    std::vector<bool> gather_depth_ok_;
+    // The cache of one render (drive() fills it before the camera passes,
+    // which only read it; one render at a time per integrator object).
+    mutable std::vector<Record> records_;
+    mutable RecordOctree octree_;
+    mutable float r_min_ = 0.f, r_max_ = kInf;
+    mutable CacheStats cstats_;
+
+};
+
+namespace {
+
+// The camera passes, through the camera driver.
+class IrrCachePass final : public Integrator {
+public:
+    explicit IrrCachePass(const IrrCache& ic) : ic_(ic) {
+        type = ic.type;
+        caps = ic.caps;
+        caps.driver = Driver::Camera;
+    }
+    void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
+                ThreadStats& stats) const override {
+        ic_.radiance(scene, sampler, ray, out, stats);
+    }
+
+private:
+    const IrrCache& ic_;
+};
+
+}  // namespace
+
+bool IrrCache::overture(PassLoop& loop) const {
+    const Scene& scene = loop.scene();
+    const Sensor& sensor = *scene.sensor;
+    const int W = sensor.width;
+    // Candidates: one camera ray per pixel of the crop window, in
+    // coarse-to-fine grids (stride 16, 8, 4, 2, 1; each pixel once).
+    std::vector<int> cand;
+    const int cx = sensor.crop_x, cy = sensor.crop_y, cw = sensor.crop_w, ch = sensor.crop_h;
+    for (int s = 16; s >= 1; s /= 2)
+        for (int y = 0; y < ch; y += s)
+            for (int x = 0; x < cw; x += s) {
+                bool coarser = s < 16 && (x % (2 * s) == 0) && (y % (2 * s) == 0);
+                if (!coarser) cand.push_back((cy + y) * W + (cx + x));
+            }
+    cstats_.candidates = cand.size();
+    FilterSampler filter(scene.sensor_desc.rfilter, scene.sensor_desc.filter_radius, scene.sensor_desc.filter_stddev);
+    std::vector<Record> batch(kOvertureBatch);
+    std::vector<char> made(kOvertureBatch);
+    for (size_t b0 = 0; b0 < cand.size(); b0 += kOvertureBatch) {
+        const size_t n = std::min(cand.size() - b0, size_t(kOvertureBatch));
+        std::fill(made.begin(), made.end(), 0);
+        bool done = loop.parallel_for(n, [&](size_t i, int t) {
+            ThreadStats& stats = loop.stats(t);
+            const int pixel = cand[b0 + i];
+            Sampler cs(loop.seed(), uint64_t(pixel), kCandidateSample);
+            SensorRay sr = sample_camera_ray(sensor, filter, pixel, cs);
+            Interaction it;
+            ++stats.rays;
+            if (!scene.intersect(sr.ray, it) || !cacheable(scene, it)) return;
+            Color e;
+            if (interpolate(it, 1.f, e)) return;
+            Sampler rs(loop.seed(), uint64_t(pixel), kRecordSample);
+            gather(scene, rs, it, stats, batch[i]);
+            made[i] = 1;
+        });
+        if (!done) return false;
+        for (size_t i = 0; i < n; ++i)
+            if (made[i]) {
+                insert(batch[i]);
+                ++cstats_.computed;
+            }
+    }
+    return true;
+}
+
+void IrrCache::finish_stats(RenderOutput& out) const {
+    const size_t n = records_.size();
+    NamedArray rec;
+    rec.name = "irrcache_records";
+    rec.columns = {"x", "y", "z", "nx", "ny", "nz", "radius", "E_r", "E_g", "E_b"};
+    rec.data.reserve(n * rec.columns.size());
+    for (const Record& r : records_)
+        for (float v : {r.p.x, r.p.y, r.p.z, r.n.x, r.n.y, r.n.z, r.r, r.e.x, r.e.y, r.e.z}) rec.data.push_back(v);
+    out.arrays.push_back(std::move(rec));
+    out.values.push_back({"irrcache_candidates", double(cstats_.candidates)});
+    out.values.push_back({"irrcache_computed", double(cstats_.computed)});
+    out.values.push_back({"irrcache_lookups", double(cstats_.lookups.load())});
+    out.values.push_back({"irrcache_misses", double(cstats_.misses.load())});
+    out.values.push_back({"irrcache_overture_seconds", cstats_.overture_seconds});
+    out.values.push_back({"irrcache_gather_rays", double(res_ * n_phi_)});
+}
+
+RenderOutput IrrCache::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
+    set_masks();
+    records_.clear();
+    Vec3 center;
+    float radius;
+    scene.bounding_sphere(center, radius);
+    octree_.reset(center, radius * 1.01f + 1e-4f);
+    r_min_ = min_spacing_ * radius;
+    r_max_ = max_spacing_ * radius;
+    cstats_.candidates = cstats_.computed = 0;
+    cstats_.misses = 0;
+    cstats_.lookups = 0;
+    PassLoop loop(scene, opts, poll);
+    // 1. The overture, the loop's setup (its time counts against a time budget).
+    auto t0 = Clock::now();
+    if (overture_ && mask[kIndirect] && !overture(loop)) return loop.cancelled_output();
+    cstats_.overture_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+    // 2. The camera passes, reading the cache.
+    IrrCachePass pass(*this);
+    pass.mask = mask;
+    RenderOutput out = render_camera_paths(loop, pass);
+    finish_stats(out);
+    out.seconds = loop.elapsed();
+    return out;
+}
+
+namespace {
+
+std::unique_ptr<Integrator> make_irrcache(ParamReader& p) { return std::make_unique<IrrCache>(p); }
+
+}  // namespace
+
+}  // namespace rm
