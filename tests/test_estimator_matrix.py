@@ -186,6 +186,16 @@ MEAN_BOUND_FACTOR = 2.0
 MEAN_BOUND = {"biased": MEAN_BOUND_FACTOR * 0.00263, "consistent": MEAN_BOUND_FACTOR * 0.00346}
 MEAN_POWER = 1.02
 
+# Biased estimators whose bias is confined to these classes, every other
+# class being an unbiased estimator's (irrcache: indirect light from its
+# cache, the rest path traced on path's own streams). On the analytic scenes,
+# whose indirect light is nothing (area lights, mirror caustic) or constant
+# (furnace: the cache is exact there, tests/test_irrcache.py), they take the
+# unbiased estimators' z-test at the scene's budget: at BIASED_SPP the
+# path-traced caustic of mirror_caustic alone put the image mean 4.5 % off
+# (measured 2026-12-02).
+BIAS_CONFINED = {"irrcache": ("indirect",)}
+
 SEED = 7
 # Biased and consistent estimators render with their declared defaults
 # (photonmapper: 250 000 photons per map, 32 final-gathering rays and 16
@@ -264,9 +274,16 @@ def render_cell(est, name, seed=SEED):
         integ["max_depth"] = md
     if caps["bias"] == "consistent" and "light_paths" in EST[est]["params"]:
         integ["light_paths"] = CONSISTENT_LIGHT_PATHS
-    spp = {"biased": BIASED_SPP, "consistent": CONSISTENT_SPP}.get(caps["bias"], cfg["spp"])
+    spp = {"biased": BIASED_SPP, "consistent": CONSISTENT_SPP}.get(_bias(est, spec), cfg["spp"])
     res = rm.render(scene, integrator=integ, spp=spp, seed=cfg.get("seed", seed), effects=complete if partial else None)
     return spec, cfg, res, ref, complete
+
+
+def _bias(est, spec):
+    """The declared bias, or "unbiased" on an analytic scene for an
+    estimator of BIAS_CONFINED."""
+    bias = EST[est]["capabilities"]["bias"]
+    return "unbiased" if spec.kind == "analytic" and est in BIAS_CONFINED else bias
 
 
 def _scaled(spec, cfg, image, variance):
@@ -345,7 +362,7 @@ def test_estimator_matrix(est, name):
         assert np.all(np.isfinite(a)), f"{where}: {what} has non-finite pixels"
         assert not np.any(np.asarray(a) < 0), f"{where}: {what} has negative values"
     image, variance = _target(spec, ref, complete)
-    bias = EST[est]["capabilities"]["bias"]
+    bias = _bias(est, spec)
     if spec.kind == "analytic":
         _check_classes(spec, cfg if bias == "unbiased" else {}, res, ref, complete, where)
     if bias == "unbiased":
