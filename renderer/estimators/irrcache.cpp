@@ -146,10 +146,10 @@ const float kSqrtOneMinusCos10 = std::sqrt(1.f - std::cos(10.f * kPi / 180.f));
 struct Record {
     Vec3 p, n;
     Color e;
-    float r = 0.f;       // validity radius (clamped)
-    float r_raw = 0.f;   // before the min/max clamp (what neighbour clamping compares)
-    Color tgrad[3];      // d E / d x_a, a = world axis
-    Color rgrad[3];      // rotational gradient, per world axis
+    float r = 0.f;      // validity radius (clamped)
+    float r_raw = 0.f;  // before the min/max clamp (what neighbour clamping compares)
+    Color tgrad[3];     // d E / d x_a, a = world axis
+    Color rgrad[3];     // rotational gradient, per world axis
 };
 
 // The loose octree of the file's first comment.
@@ -226,7 +226,8 @@ private:
         for (int i : nodes_[size_t(node)].items) f(i);
         float h = 0.5f * size;
         for (int k = 0; k < 8; ++k)
-            if (nodes_[size_t(node)].child[k] >= 0) sphere(nodes_[size_t(node)].child[k], child_lo(lo, h, k), h, c, r, f);
+            if (nodes_[size_t(node)].child[k] >= 0)
+                sphere(nodes_[size_t(node)].child[k], child_lo(lo, h, k), h, c, r, f);
     }
     std::vector<Node> nodes_;
     Vec3 lo_;
@@ -289,8 +290,7 @@ public:
     RenderOutput drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const override;
 
     // The camera passes' radiance along one camera ray (the file's first comment).
-    void radiance(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
-                  ThreadStats& stats) const {
+    void radiance(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out, ThreadStats& stats) const {
         Interaction it;
         ++stats.rays;
         bool hit = scene.intersect(ray, it);
@@ -323,8 +323,7 @@ private:
     bool cacheable(const Scene& scene, const Interaction& it) const {
         if (max_depth_ >= 0 && max_depth_ < 3) return false;
         const Bsdf& b = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
-        return b.flags() == kDiffuseReflection && it.to_local(it.wi).z > 0.f &&
-               scene.shapes[it.shape]->dipole < 0;
+        return b.flags() == kDiffuseReflection && it.to_local(it.wi).z > 0.f && scene.shapes[it.shape]->dipole < 0;
     }
     static Color albedo_over_pi(const Scene& scene, const Interaction& it) {
         const Bsdf& b = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
@@ -531,7 +530,6 @@ private:
     mutable RecordOctree octree_;
     mutable float r_min_ = 0.f, r_max_ = kInf;
     mutable CacheStats cstats_;
-
 };
 
 namespace {
