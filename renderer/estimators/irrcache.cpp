@@ -62,11 +62,7 @@
 // leaves the cache empty: every camera sample then gathers its own
 // irradiance, an unbiased estimate (final gathering without caching).
 //
-// The record index is a small loose octree of our own (after pbrt-v2's
-// irradiance cache octree: a record's sphere of influence is stored in the
-// nodes it overlaps down to its own size; a lookup walks one root-to-leaf
-// path): about 100 lines, built and read single-threaded or read-only,
-// where a general spatial library would bring a dependency for one use.
+// The record index: cache_common.h's loose octree (why our own: there).
 //
 // Bias: biased (interpolation error that more samples per pixel do not
 // remove; it falls as the records get denser, kappa up). Measured in
@@ -78,6 +74,7 @@
 #include <memory>
 #include <stdexcept>
 
+#include "estimators/cache_common.h"
 #include "render/pass_loop.h"
 #include "render/registry.h"
 #include "transport/camera_sample.h"
@@ -135,12 +132,6 @@ std::unique_ptr<Integrator> make_irrcache(ParamReader& p);
 
 using Clock = std::chrono::steady_clock;
 
-// Random streams of the overture (pixel index, one of these sample indices):
-// far from the camera passes' sample indices.
-constexpr uint64_t kCandidateSample = uint64_t(1) << 62;
-constexpr uint64_t kRecordSample = kCandidateSample + 1;
-constexpr int kOvertureBatch = 256;
-constexpr int kMaxChain = 8;  // delta vertices a gather ray follows to its first smooth vertex
 const float kSqrtOneMinusCos10 = std::sqrt(1.f - std::cos(10.f * kPi / 180.f));
 
 struct Record {
@@ -150,94 +141,6 @@ struct Record {
     float r_raw = 0.f;  // before the min/max clamp (what neighbour clamping compares)
     Color tgrad[3];     // d E / d x_a, a = world axis
     Color rgrad[3];     // rotational gradient, per world axis
-};
-
-// The loose octree of the file's first comment.
-class RecordOctree {
-public:
-    void reset(const Vec3& center, float half) {
-        lo_ = center - Vec3(half);
-        size_ = 2.f * half;
-        nodes_.assign(1, Node());
-    }
-    void insert(int rec, const Vec3& p, float reach) { insert(0, lo_, size_, rec, p, reach, 0); }
-    // f(record index) for every record stored on the path to x's leaf.
-    template <class F>
-    void lookup(const Vec3& x, F&& f) const {
-        int node = 0;
-        Vec3 lo = lo_;
-        float size = size_;
-        for (;;) {
-            for (int r : nodes_[size_t(node)].items) f(r);
-            float h = 0.5f * size;
-            int c = (x.x >= lo.x + h ? 1 : 0) | (x.y >= lo.y + h ? 2 : 0) | (x.z >= lo.z + h ? 4 : 0);
-            int next = nodes_[size_t(node)].child[c];
-            if (next < 0) return;
-            lo = child_lo(lo, h, c);
-            size = h;
-            node = next;
-        }
-    }
-    // f(record index) for every record stored in a node the sphere (c, r)
-    // overlaps (a record may come more than once).
-    template <class F>
-    void query_sphere(const Vec3& c, float r, F&& f) const {
-        sphere(0, lo_, size_, c, r, f);
-    }
-
-private:
-    struct Node {
-        int child[8] = {-1, -1, -1, -1, -1, -1, -1, -1};
-        std::vector<int> items;
-    };
-    static Vec3 child_lo(const Vec3& lo, float h, int c) {
-        return Vec3(lo.x + ((c & 1) ? h : 0.f), lo.y + ((c & 2) ? h : 0.f), lo.z + ((c & 4) ? h : 0.f));
-    }
-    static bool overlaps(const Vec3& lo, float size, const Vec3& c, float r) {
-        float d2 = 0.f;
-        for (int a = 0; a < 3; ++a) {
-            float v = c[a] < lo[a] ? lo[a] - c[a] : (c[a] > lo[a] + size ? c[a] - lo[a] - size : 0.f);
-            d2 += v * v;
-        }
-        return d2 <= r * r;
-    }
-    void insert(int node, Vec3 lo, float size, int rec, const Vec3& p, float reach, int depth) {
-        // Stored here once the node is no larger than the sphere's box.
-        if (size <= 2.f * reach || depth >= 20) {
-            nodes_[size_t(node)].items.push_back(rec);
-            return;
-        }
-        float h = 0.5f * size;
-        for (int c = 0; c < 8; ++c) {
-            Vec3 clo = child_lo(lo, h, c);
-            if (!overlaps(clo, h, p, reach)) continue;
-            int next = nodes_[size_t(node)].child[c];
-            if (next < 0) {
-                next = int(nodes_.size());
-                nodes_[size_t(node)].child[c] = next;
-                nodes_.emplace_back();
-            }
-            insert(next, clo, h, rec, p, reach, depth + 1);
-        }
-    }
-    template <class F>
-    void sphere(int node, Vec3 lo, float size, const Vec3& c, float r, F& f) const {
-        if (!overlaps(lo, size, c, r)) return;
-        for (int i : nodes_[size_t(node)].items) f(i);
-        float h = 0.5f * size;
-        for (int k = 0; k < 8; ++k)
-            if (nodes_[size_t(node)].child[k] >= 0)
-                sphere(nodes_[size_t(node)].child[k], child_lo(lo, h, k), h, c, r, f);
-    }
-    std::vector<Node> nodes_;
-    Vec3 lo_;
-    float size_ = 1.f;
-};
-
-struct CacheStats {
-    uint64_t candidates = 0, computed = 0;
-    double overture_seconds = 0;
-    std::atomic<uint64_t> misses{0}, lookups{0};
 };
 
 }  // namespace
@@ -255,33 +158,12 @@ public:
           clamp_(p.get_bool("neighbour_clamping")),
           min_spacing_(p.get_float("min_spacing")),
           max_spacing_(p.get_float("max_spacing")),
-          overture_(p.get_bool("overture")) {
+          overture_(p.get_bool("overture")),
+          paths_(max_depth_, p.get_int("rr_depth"), p.get_bool("hide_emitters")) {
         if (min_spacing_ > max_spacing_)
             p.fail("min_spacing", "min_spacing (" + std::to_string(min_spacing_) + ") exceeds max_spacing (" +
                                       std::to_string(max_spacing_) + ")");
         n_phi_ = std::max(1, int(std::lround(kPi * float(res_))));
-        // The path tracers it runs: the camera's (all classes, or all but
-        // indirect), and the gather rays' from their first smooth vertex y,
-        // one per length of the delta chain before y (max_depth counts from
-        // the camera: the camera segment and the chain come first).
-        const int rr = p.get_int("rr_depth");
-        const bool hide = p.get_bool("hide_emitters");
-        auto make_path = [&](int md, bool h) {
-            IntegratorDesc d;
-            d.type = "path";
-            d.params.set("max_depth", int64_t(md));
-            d.params.set("rr_depth", int64_t(rr));
-            d.params.set("hide_emitters", h);
-            return make_integrator(d, all_effects());
-        };
-        camera_path_ = make_path(max_depth_, hide);
-        camera_direct_ = make_path(max_depth_, hide);
-        for (int c = 0; c <= kMaxChain; ++c) {
-            int md = max_depth_ < 0 ? -1 : std::max(1, max_depth_ - 1 - c);
-            gather_path_.push_back(make_path(md, false));
-            gather_path_.back()->mask = effect_mask({kDirect, kCaustic, kIndirect});
-            gather_depth_ok_.push_back(max_depth_ < 0 || max_depth_ - 1 - c >= 2);
-        }
     }
 
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
@@ -295,10 +177,10 @@ public:
         ++stats.rays;
         bool hit = scene.intersect(ray, it);
         if (!hit || !mask[kIndirect] || !cacheable(scene, it)) {
-            camera_path_->sample(scene, sampler, ray, out, stats);
+            paths_.camera_all->sample(scene, sampler, ray, out, stats);
             return;
         }
-        camera_direct_->sample(scene, sampler, ray, out, stats);
+        paths_.camera_direct->sample(scene, sampler, ray, out, stats);
         Color e;
         cstats_.lookups.fetch_add(1, std::memory_order_relaxed);
         if (!interpolate(it, adjust_, e)) {
@@ -310,18 +192,11 @@ public:
         out.add(kIndirect, albedo_over_pi(scene, it) * e);
     }
 
-    void set_masks() const {
-        camera_path_->mask = mask;
-        EffectMask m = mask;
-        m[kIndirect] = false;
-        camera_direct_->mask = m;
-    }
-
 private:
     // x takes its indirect light from the cache: a Lambertian surface seen
     // from its front, and paths of 3 segments allowed.
     bool cacheable(const Scene& scene, const Interaction& it) const {
-        if (max_depth_ >= 0 && max_depth_ < 3) return false;
+        if (!paths_.indirect_possible()) return false;
         const Bsdf& b = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
         return b.flags() == kDiffuseReflection && it.to_local(it.wi).z > 0.f && scene.shapes[it.shape]->dipole < 0;
     }
@@ -329,36 +204,6 @@ private:
         const Bsdf& b = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
         BsdfContext ctx;
         return b.eval(ctx, it.to_local(it.wi), Vec3(0.f, 0.f, 1.f));  // f |cos| at the normal: rho / pi
-    }
-
-    // Radiance of class "light that scattered at a smooth vertex after x"
-    // arriving at x from direction d; `dist`: the first hit's distance (inf
-    // when the ray leaves the scene).
-    Color gather_radiance(const Scene& scene, Sampler& sampler, const Interaction& x, const Vec3& d, float& dist,
-                          ThreadStats& stats) const {
-        dist = kInf;
-        if (dot(d, x.n) <= 0.f) return Color(0.f);  // below the geometric surface
-        Ray ray = x.spawn(d);
-        Color w(1.f);
-        BsdfContext ctx;
-        for (int c = 0; c <= kMaxChain; ++c) {
-            Interaction h;
-            ++stats.rays;
-            if (!scene.intersect(ray, h)) return Color(0.f);
-            if (c == 0) dist = h.t;
-            const Bsdf& b = *scene.bsdfs[scene.shapes[h.shape]->bsdf];
-            if (b.has_smooth()) {
-                if (!gather_depth_ok_[size_t(c)]) return Color(0.f);
-                EffectRadiance er;
-                gather_path_[size_t(c)]->sample(scene, sampler, ray, er, stats);
-                return w * er.total();
-            }
-            BsdfSample bs = b.sample(ctx, h.to_local(h.wi), sampler.next_1d(), sampler.next_2d());
-            if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || !bs.is_delta) return Color(0.f);
-            w *= bs.weight;
-            ray = h.spawn(h.to_world(bs.wo));
-        }
-        return Color(0.f);
     }
 
     // A record at x: M x N stratified cosine-weighted gather rays, the
@@ -377,7 +222,7 @@ private:
                 float phi = 2.f * kPi * (float(k) + u.y) / float(N);
                 Vec3 d = x.to_world(Vec3(st * std::cos(phi), st * std::sin(phi), ct));
                 size_t i = size_t(j) * size_t(N) + size_t(k);
-                L[i] = gather_radiance(scene, sampler, x, d, r[i], stats);
+                L[i] = paths_.gather_radiance(scene, sampler, x, d, r[i], stats);
                 if (!is_finite(L[i])) L[i] = Color(0.f);
             }
         Color e(0.f);
@@ -521,9 +366,7 @@ private:
     bool gradients_, clamp_;
     float min_spacing_, max_spacing_;
     bool overture_;
-    std::unique_ptr<Integrator> camera_path_, camera_direct_;
-    std::vector<std::unique_ptr<Integrator>> gather_path_;
-    std::vector<bool> gather_depth_ok_;
+    CachePaths paths_;
     // The cache of one render (drive() fills it before the camera passes,
     // which only read it; one render at a time per integrator object).
     mutable std::vector<Record> records_;
@@ -554,48 +397,17 @@ private:
 }  // namespace
 
 bool IrrCache::overture(PassLoop& loop) const {
-    const Scene& scene = loop.scene();
-    const Sensor& sensor = *scene.sensor;
-    const int W = sensor.width;
-    // Candidates: one camera ray per pixel of the crop window, in
-    // coarse-to-fine grids (stride 16, 8, 4, 2, 1; each pixel once).
-    std::vector<int> cand;
-    const int cx = sensor.crop_x, cy = sensor.crop_y, cw = sensor.crop_w, ch = sensor.crop_h;
-    for (int s = 16; s >= 1; s /= 2)
-        for (int y = 0; y < ch; y += s)
-            for (int x = 0; x < cw; x += s) {
-                bool coarser = s < 16 && (x % (2 * s) == 0) && (y % (2 * s) == 0);
-                if (!coarser) cand.push_back((cy + y) * W + (cx + x));
-            }
-    cstats_.candidates = cand.size();
-    FilterSampler filter(scene.sensor_desc.rfilter, scene.sensor_desc.filter_radius, scene.sensor_desc.filter_stddev);
     std::vector<Record> batch(kOvertureBatch);
-    std::vector<char> made(kOvertureBatch);
-    for (size_t b0 = 0; b0 < cand.size(); b0 += kOvertureBatch) {
-        const size_t n = std::min(cand.size() - b0, size_t(kOvertureBatch));
-        std::fill(made.begin(), made.end(), 0);
-        bool done = loop.parallel_for(n, [&](size_t i, int t) {
-            ThreadStats& stats = loop.stats(t);
-            const int pixel = cand[b0 + i];
-            Sampler cs(loop.seed(), uint64_t(pixel), kCandidateSample);
-            SensorRay sr = sample_camera_ray(sensor, filter, pixel, cs);
-            Interaction it;
-            ++stats.rays;
-            if (!scene.intersect(sr.ray, it) || !cacheable(scene, it)) return;
+    return run_overture(
+        loop, cstats_,
+        [&](const Interaction& it) {
             Color e;
-            if (interpolate(it, 1.f, e)) return;
-            Sampler rs(loop.seed(), uint64_t(pixel), kRecordSample);
-            gather(scene, rs, it, stats, batch[i]);
-            made[i] = 1;
-        });
-        if (!done) return false;
-        for (size_t i = 0; i < n; ++i)
-            if (made[i]) {
-                insert(batch[i]);
-                ++cstats_.computed;
-            }
-    }
-    return true;
+            return cacheable(loop.scene(), it) && !interpolate(it, 1.f, e);
+        },
+        [&](size_t i, const Interaction& it, Sampler& rs, ThreadStats& stats) {
+            gather(loop.scene(), rs, it, stats, batch[i]);
+        },
+        [&](size_t i) { insert(batch[i]); });
 }
 
 void IrrCache::finish_stats(RenderOutput& out) const {
@@ -616,7 +428,7 @@ void IrrCache::finish_stats(RenderOutput& out) const {
 }
 
 RenderOutput IrrCache::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
-    set_masks();
+    paths_.set_masks(mask);
     records_.clear();
     Vec3 center;
     float radius;
@@ -624,9 +436,7 @@ RenderOutput IrrCache::drive(const Scene& scene, const RenderOptions& opts, cons
     octree_.reset(center, radius * 1.01f + 1e-4f);
     r_min_ = min_spacing_ * radius;
     r_max_ = max_spacing_ * radius;
-    cstats_.candidates = cstats_.computed = 0;
-    cstats_.misses = 0;
-    cstats_.lookups = 0;
+    cstats_.reset();
     PassLoop loop(scene, opts, poll);
     // 1. The overture, the loop's setup (its time counts against a time budget).
     auto t0 = Clock::now();
