@@ -111,8 +111,7 @@ std::unique_ptr<Integrator> make_irrcache(ParamReader& p);
         ParamSpec::real("quality_adjustment", 0.5,
                         "kappa (or 1 / a) of the camera passes' lookups relative to the overture's")
             .greater_than(0)
-            .at_most(1)
-            .alias("qualityAdjustment"),
+            .at_most(1),
         ParamSpec::boolean("gradients", true, "translational and rotational irradiance gradients"),
         ParamSpec::boolean("neighbour_clamping", true, "neighbour clamping of record radii (Krivanek et al. 2006)")
             .alias("clamp_neighbor")

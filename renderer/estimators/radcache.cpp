@@ -71,10 +71,10 @@ constexpr int kMaxOrder = 12;
         ParamSpec::integer("gather_resolution", 10, "cos-theta strata M of a record's gather (M x round(pi M) rays)")
             .at_least(1)
             .at_most(256),
-        ParamSpec::real("kappa", 1.0, "Tabellion's kappa: larger means denser records").greater_than(0).alias(
-            "quality"),
-        ParamSpec::real("quality_adjustment", 0.5,
-                        "kappa of the camera passes' lookups relative to the overture's")
+        ParamSpec::real("kappa", 1.0, "Tabellion's kappa: larger means denser records")
+            .greater_than(0)
+            .alias("quality"),
+        ParamSpec::real("quality_adjustment", 0.5, "kappa of the camera passes' lookups relative to the overture's")
             .greater_than(0)
             .at_most(1),
         ParamSpec::integer("lookup_samples", 4, "BSDF samples per lookup").at_least(1).at_most(1024),
@@ -337,7 +337,6 @@ private:
     mutable RecordOctree octree_;
     mutable float r_min_ = 0.f, r_max_ = kInf;
     mutable CacheStats cstats_;
-
 };
 
 namespace {
