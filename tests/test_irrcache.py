@@ -25,6 +25,7 @@ import pytest
 import radiometer as rm
 from radiometer.analysis.blocks import blocked_z_test
 from radiometer.reference_scenes import registry
+from radiometer.reference_scenes.caching import thin_wall
 from radiometer.reference_scenes.furnace.analytic import radiance as furnace_radiance
 from test_canonical_analytic import assert_clean
 
@@ -179,27 +180,6 @@ def test_bad_parameters_are_scene_errors():
         rm.render(furnace(4), integrator={"type": "irrcache", "min_spacing": 0.5, "max_spacing": 0.1}, spp=1)
     with pytest.raises(rm.SceneError, match="weight"):
         rm.render(furnace(4), integrator={"type": "irrcache", "weight": "gauss"}, spp=1)
-
-
-def thin_wall(res=32, thickness=0.01):
-    """A floor split by a thin wall (1 high): an area light low on the left
-    lights the left half; nothing can reach the right half (no ceiling, no
-    environment, the wall higher than the light), so its exact radiance is
-    0. Camera above, seeing both halves."""
-    def m(scale=(1, 1, 1), flip=False, at=(0, 0, 0)):
-        a = np.diag([scale[0], scale[1] * (-1 if flip else 1), scale[2] * (-1 if flip else 1), 1.0])
-        a[:3, 3] = at
-        return a
-
-    cam = np.array([[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, -1, 4], [0, 0, 0, 1]], float)
-    white = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.8, 0.8]}}
-    return {"type": "scene",
-            "sensor": {"type": "perspective", "fov": 36, "to_world": cam,
-                       "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}},
-            "floor": {"type": "rectangle", "to_world": m(), "bsdf": white},
-            "wall": {"type": "cube", "to_world": m((thickness / 2, 1, 0.5), at=(0, 0, 0.5)), "bsdf": white},
-            "light": {"type": "rectangle", "to_world": m((0.15, 0.15, 1), flip=True, at=(-0.5, 0, 0.3)),
-                      "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20.0, 20.0, 20.0]}}}}
 
 
 def _dark_side(img, res):

@@ -1,5 +1,7 @@
 """Bias report (not a test): irrcache's interpolation bias on the indirect
-class against record density, gradients, neighbour clamping and the weight.
+class against record density, gradients, neighbour clamping and the weight;
+and radcache's error against the order of its harmonics on a glossy floor
+(reference_scenes/caching.py's glossy_box).
 
     python -m radiometer.benchmarks.studies.irrcache_bias [--seeds 3] [--res 32]
 
@@ -9,7 +11,8 @@ long `path` render of the same class. The figure is the RMS over 4 x 4
 block means of (mean over seeds - reference) with the noise of both (the
 seeds' spread, the reference's variance) subtracted, relative to the
 reference's mean; also the signed mean error, the record count and the
-seconds per render. Writes a table to stdout and
+seconds per render. radcache: the RMS error of the block means (noise not
+subtracted), 4 spp per seed, `path` at 4096 spp. Writes a table to stdout and
 benchmarks/results/irrcache_bias.json (the studies' layout, studies/record.py).
 """
 from __future__ import annotations
@@ -22,6 +25,7 @@ import numpy as np
 import radiometer as rm
 from radiometer.benchmarks.studies import record
 from radiometer.reference_scenes import registry
+from radiometer.reference_scenes.caching import glossy_box
 
 SETTINGS = [
     ("kappa 4 (4x denser)", {"kappa": 4.0}),
@@ -82,7 +86,29 @@ def main(argv=None):
             rows.append(row)
             print(f"{name:12s} {label:26s} records {row['records']:7.0f}  RMS bias {row['rms_bias'] * 100:6.2f} %"
                   f"  (noise {row['noise'] * 100:5.2f} %)  mean {row['signed'] * 100:+6.2f} %  {row['seconds']:.2f} s")
-    print(f"wrote {record.write('irrcache_bias', record.params_of(args), {'rows': rows}, out=args.out)}")
+    scene = rm.load_dict(glossy_box(24))
+    ref = rm.render(scene, integrator={"type": "path"}, spp=args.ref_spp, seed=1000, effects=["indirect"],
+                    threads=args.threads)
+    rb, scale = blocks(ref.image), float(ref.image.mean())
+    orders = []
+    for order in (0, 1, 2, 4, 6, 8):
+        imgs, secs = [], []
+        for s in range(args.seeds):
+            t = time.time()
+            r = rm.render(scene, integrator={"type": "radcache", "order": order}, spp=4, seed=s + 1,
+                          effects=["indirect"], threads=args.threads)
+            secs.append(time.time() - t)
+            imgs.append(blocks(r.image))
+        m = np.mean(imgs, 0)
+        row = {"scene": "glossy_box", "order": order, "records": float(r.stats["radcache_computed"]),
+               "rms_error": float(np.sqrt(np.mean((m - rb) ** 2)) / scale),
+               "signed": float((m - rb).mean() / scale), "seconds": float(np.mean(secs))}
+        orders.append(row)
+        print(f"glossy_box radcache order {order}: RMS error {row['rms_error'] * 100:6.2f} %  mean "
+              f"{row['signed'] * 100:+6.2f} %  {row['seconds']:.2f} s")
+    out = record.write("irrcache_bias", record.params_of(args), {"rows": rows, "radcache_order": orders},
+                       out=args.out)
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":
