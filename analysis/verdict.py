@@ -35,6 +35,8 @@ from __future__ import annotations
 
 import math
 
+from typing import Optional
+
 import numpy as np
 
 TERMS = ("noise", "bias", "reference")
@@ -232,5 +234,67 @@ def render_error_budget(res) -> dict:
     if getattr(res, "effect_variance", None) is not None:
         effects = {e: se(v) for e, v in res.effect_variance.items() if np.any(np.asarray(res.effects[e]) != 0)}
     return {"noise": {"image_mean_se": se(res.variance), "effects_mean_se": effects},
-            "how": {"noise": "standard error of the image mean per channel, sqrt(sum of per-pixel variances) / "
-                             "pixels; per effect from the film's per-effect variances (render(effect_variance=True))"}}
+            "rounding": rounding_term(res),
+            "truncation": truncation_term(res),
+            "how": {"truncation": TRUNCATION_HOW,
+                    "noise": "standard error of the image mean per channel, sqrt(sum of per-pixel variances) / "
+                             "pixels; per effect from the film's per-effect variances (render(effect_variance=True))",
+                    "rounding": ROUNDING_HOW}}
+
+
+# The film sums samples in float64 and hands the image out in float32; the
+# samples themselves are float32 arithmetic. The first two are bounded here
+# (Higham 2002, sec. 4.2: a recursive sum of n terms is within (n - 1) u of
+# the exact sum of its terms, u = 2^-53, relative to the sum of magnitudes;
+# rounding to float32 is within 2^-24 relative). The third has no useful
+# a-priori bound: tests/test_effect_variance.py measures it on the closed
+# furnace, whose every sample is exact in real arithmetic.
+ROUNDING_HOW = ("relative bounds: float64 accumulation of spp samples per pixel, (spp - 1) 2^-53 (Higham 2002, "
+                "sec. 4.2); float32 image storage 2^-24; the samples' own float32 arithmetic is measured by the "
+                "test suite on the exact furnace (within one float32 ulp of 0.875 at max_depth 3), not bounded")
+
+
+def rounding_term(res) -> dict:
+    spp = max(int(getattr(res, "spp", 0) or 0), 1)
+    return {"accumulation_rel_bound": float((spp - 1) * 2.0 ** -53), "storage_rel_bound": float(2.0 ** -24)}
+
+
+TRUNCATION_HOW = ("the light max_depth cuts off, per channel, as a mean over the image, estimated in the same render: "
+                  "a fraction truncation_probe of the paths that max_depth stops go on past it with Russian roulette, "
+                  "weighted 1 / fraction, into a tally of their own (the image is unchanged); mean and standard error "
+                  "over the render's camera samples. 0 with an unbounded max_depth; None where the estimator (or "
+                  "its media loop) does not probe")
+
+
+def truncation_term(res) -> Optional[dict]:
+    """The truncation term of res.error_budget: the image mean's missing
+    light (per channel, its standard error, and relative to the image
+    mean), from the render's truncation probe; None where it has none."""
+    from .. import estimators
+
+    spec = dict(getattr(res, "integrator", None) or {})
+    st = getattr(res, "stats", None) or {}
+    params = estimators().get(spec.get("type"), {}).get("params", {})
+    if "truncation_probe" not in params:
+        return None
+
+    def value(name):
+        return spec.get(name, params[name]["default"]) if name in params else None
+
+    if value("max_depth") == -1:
+        return {"missing_mean": [0.0] * 3, "missing_se": [0.0] * 3, "relative": [0.0] * 3, "probes": 0,
+                "exact": True}
+    if "truncated_sum" not in st or value("truncation_probe") == 0 or getattr(st.get("features"), "has_media", False):
+        return None
+    img = np.asarray(res.image, np.float64)
+    n = max(int(res.spp) * img.shape[0] * img.shape[1], 2)  # camera samples, each on one pixel with weight 1
+    mean = np.asarray(st["truncated_sum"], np.float64) / n
+    var = np.maximum(np.asarray(st["truncated_sq_sum"], np.float64) / n - mean ** 2, 0.0) / (n - 1)
+    img_mean = img.reshape(-1, 3).mean(axis=0)
+    rel = np.divide(mean, img_mean, out=np.zeros(3), where=img_mean > 0)
+    probes = int(st.get("truncation_probes", 0))
+    # No path probed (none reached max_depth, or none drawn at this budget):
+    # nothing seen missing, and no standard error to say how little.
+    se = [float(x) for x in np.sqrt(var)] if probes > 0 else None
+    return {"missing_mean": [float(x) for x in mean], "missing_se": se, "relative": [float(x) for x in rel],
+            "probes": probes, "exact": False}

@@ -625,6 +625,9 @@ PYBIND11_MODULE(_core, m) {
             st["nan_samples"] = out.stats.nan_samples;
             st["inf_samples"] = out.stats.inf_samples;
             st["photons"] = out.stats.photons;
+            st["truncation_probes"] = out.stats.truncation_probes;
+            st["truncated_sum"] = std::vector<double>(out.stats.truncated, out.stats.truncated + 3);
+            st["truncated_sq_sum"] = std::vector<double>(out.stats.truncated_sq, out.stats.truncated_sq + 3);
             // Photon maps built (photon mapping estimators): which, how big, how long.
             py::dict maps;
             for (const PhotonMapStats& pm : out.photon_maps) {
@@ -640,13 +643,19 @@ PYBIND11_MODULE(_core, m) {
                 maps[py::str(pm.name)] = d;
             }
             st["photon_maps"] = maps;
-            for (const auto& kv : out.values) st[py::str(kv.first)] = kv.second;
-            for (NamedArray& a : out.arrays) {
-                py::ssize_t cols = py::ssize_t(std::max<size_t>(1, a.columns.size()));
-                py::ssize_t rows = py::ssize_t(a.data.size()) / cols;
-                st[py::str(a.name)] = to_numpy(std::move(a.data), {rows, cols});
-                st[py::str(a.name + "_columns")] = a.columns;
+            for (const auto& [name, values] : out.estimator_stats) {
+                if (values.size() == 1)
+                    st[py::str(name)] = values[0];
+                else
+                    st[py::str(name)] = py::cast(values);
             }
+            py::dict arrays;
+            for (OutputArray& a : out.arrays) {
+                if (!a.columns.empty()) st[py::str(a.name + "_columns")] = a.columns;
+                arrays[py::str(a.name)] =
+                    to_numpy(std::move(a.data), std::vector<py::ssize_t>(a.shape.begin(), a.shape.end()));
+            }
+            r["arrays"] = arrays;
             r["stats"] = st;
             py::list cps;
             for (auto& c : out.checkpoints)

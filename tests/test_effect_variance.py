@@ -81,3 +81,76 @@ def test_error_budget_noise_is_the_spread_of_the_image_mean(furnace, tmp_path):
     meta = rm.read_exr(p).metadata
     assert json.loads(meta["error_budget"])["noise"]["image_mean_se"] == pytest.approx(
         runs[0].error_budget["noise"]["image_mean_se"])
+
+
+def test_rounding_term_bounds_what_the_exact_furnace_shows():
+    """res.error_budget's rounding term: the accumulation and storage bounds,
+    and the furnace whose every sample is exact in real arithmetic (le 0.5,
+    rho 0.5, max_depth 3: 0.875, no Russian roulette before depth 5) lands
+    within one float32 ulp of 0.875 in every pixel, under every seed. The
+    check can fail: before the emitter-hit MIS weight took both densities
+    from the shading point (transport/scatter_origin.h), one grazing sample
+    in about 10^5 left its pixel 1,700 ulps low (0.8748992)."""
+    from conftest import furnace_dict, furnace_exact
+
+    scene = rm.load_dict(furnace_dict(le=0.5, rho=0.5, max_depth=3))
+    exact = furnace_exact(0.5, 0.5, 3)
+    ulp = float(np.spacing(np.float32(exact)))
+    for seed in range(4):
+        res = rm.render(scene, spp=128, seed=seed)
+        term = res.error_budget["rounding"]
+        assert term["accumulation_rel_bound"] == pytest.approx(127 * 2.0 ** -53)
+        assert term["storage_rel_bound"] == 2.0 ** -24
+        dev = float(np.abs(res.image.astype(np.float64) - exact).max())
+        assert dev <= ulp, (seed, dev / ulp)
+        # The power of the check: one pixel two ulps lower is seen.
+        bad = res.image.copy()
+        bad[0, 0] = np.nextafter(np.nextafter(bad[0, 0], np.float32(0)), np.float32(0))
+        assert float(np.abs(bad.astype(np.float64) - exact).max()) > ulp
+    assert "rounding" in res.error_budget["how"]
+
+
+def test_truncation_term_is_the_light_max_depth_cuts_off():
+    """res.error_budget's truncation term on the closed furnace, where the
+    light max_depth D cuts off is exact: le rho^D / (1 - rho) everywhere.
+    Every path continued (truncation_probe 1), 16 seeds: the mean of their
+    estimates passes a two-sided t-test (15 dof) at ALPHA = 0.01 (the
+    channels are equal: one test), and 3 % more (or less) missing light is
+    rejected. A t-test over seeds, not a z-test with each render's own
+    standard error: past the roulette depth the tail is heavy (Mitsuba's
+    rule keeps 3 % of the paths at depth 5, weighted 32), so one render's
+    variance estimate is itself noisy; it must still agree with the spread
+    over seeds within a factor of 2. With the default probe (1/16) the
+    image keeps its bytes, and an unbounded render says nothing is missing."""
+    from scipy import stats as st
+
+    from conftest import furnace_dict
+
+    alpha = 0.01
+    le, rho, depth = 0.5, 0.5, 3
+    exact = le * rho ** depth / (1.0 - rho)
+    scene = rm.load_dict(furnace_dict(le=le, rho=rho, max_depth=depth))
+    integ = {"type": "path", "max_depth": depth, "truncation_probe": 1.0}
+    terms = [rm.render(scene, integrator=integ, spp=32, seed=s).error_budget["truncation"] for s in range(16)]
+    m = np.array([np.mean(t["missing_mean"]) for t in terms])
+    own_se = np.array([np.mean(t["missing_se"]) for t in terms])
+    assert all(t["probes"] > 0 and not t["exact"] for t in terms)
+    assert st.ttest_1samp(m, exact).pvalue > alpha, (m.mean(), exact)
+    for wrong in (1.03 * exact, 0.97 * exact):
+        assert st.ttest_1samp(m, wrong).pvalue < alpha, (m.mean(), wrong)
+    assert 0.5 < np.median(own_se) / m.std(ddof=1) < 2.0, (np.median(own_se), m.std(ddof=1))
+    res = rm.render(scene, integrator=integ, spp=4, seed=1)
+    term = res.error_budget["truncation"]
+    assert np.mean(term["relative"]) == pytest.approx(np.mean(term["missing_mean"]) / float(res.image.mean()),
+                                                      rel=1e-6)
+
+    plain = rm.render(scene, integrator={"type": "path", "max_depth": depth, "truncation_probe": 0.0}, spp=8, seed=4)
+    probed = rm.render(scene, integrator={"type": "path", "max_depth": depth}, spp=8, seed=4)
+    assert plain.image.tobytes() == probed.image.tobytes()
+    assert plain.error_budget["truncation"] is None
+    assert probed.error_budget["truncation"]["probes"] > 0
+    unbounded = rm.render(scene, integrator={"type": "path", "max_depth": -1}, spp=2, seed=4)
+    assert unbounded.error_budget["truncation"]["exact"] and unbounded.error_budget["truncation"]["missing_mean"] == [
+        0.0, 0.0, 0.0]
+    # estimators without a probe say so
+    assert rm.render(scene, integrator="direct", spp=2, seed=4).error_budget["truncation"] is None

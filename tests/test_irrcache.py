@@ -109,7 +109,7 @@ def _renders(scene, **params):
                       effects=["indirect"])
         assert_clean(r)
         imgs.append(r.image)
-        recs.append(len(r.stats["irrcache_records"]))
+        recs.append(len(r.arrays["irrcache_records"]))
     return imgs, int(np.mean(recs))
 
 
@@ -153,7 +153,7 @@ def test_threads_do_not_change_the_bytes():
     a = rm.render(scene, integrator=integ, spp=2, seed=4, threads=1)
     b = rm.render(scene, integrator=integ, spp=2, seed=4, threads=2)
     assert a.image.tobytes() == b.image.tobytes()
-    assert a.stats["irrcache_records"].tobytes() == b.stats["irrcache_records"].tobytes()
+    assert a.arrays["irrcache_records"].tobytes() == b.arrays["irrcache_records"].tobytes()
     c = rm.render(scene, integrator=integ, spp=2, seed=5, threads=2)
     assert a.image.tobytes() != c.image.tobytes()  # the seed does change them
 
@@ -161,7 +161,7 @@ def test_threads_do_not_change_the_bytes():
 def test_records_in_stats():
     r = rm.render(cornell(16), integrator={"type": "irrcache", "max_depth": 8, "min_spacing": 0.01,
                                            "max_spacing": 0.2}, spp=1, seed=2)
-    rec = r.stats["irrcache_records"]
+    rec = r.arrays["irrcache_records"]
     cols = r.stats["irrcache_records_columns"]
     assert rec.shape == (int(r.stats["irrcache_computed"]), len(cols)) and rec.shape[0] > 10
     radius = rec[:, cols.index("radius")]

@@ -91,4 +91,4 @@ def test_threads_do_not_change_the_bytes():
     a = rm.render(scene, integrator=integ, spp=2, seed=4, threads=1)
     b = rm.render(scene, integrator=integ, spp=2, seed=4, threads=2)
     assert a.image.tobytes() == b.image.tobytes()
-    assert a.stats["radcache_records"].tobytes() == b.stats["radcache_records"].tobytes()
+    assert a.arrays["radcache_records"].tobytes() == b.arrays["radcache_records"].tobytes()

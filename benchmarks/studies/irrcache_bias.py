@@ -75,7 +75,7 @@ def main(argv=None):
                               effects=["indirect"], threads=args.threads)
                 secs.append(time.time() - t)
                 imgs.append(blocks(r.image))
-                recs.append(len(r.stats["irrcache_records"]))
+                recs.append(len(r.arrays["irrcache_records"]))
             b = np.array(imgs)
             m, vm = b.mean(0), b.var(0, ddof=1) / len(b)
             b2 = float(np.mean((m - rb) ** 2) - np.mean(vm + rv))

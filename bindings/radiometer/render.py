@@ -60,6 +60,10 @@ class RenderResult:
     # render_error_budget): the standard error of the image mean, and per
     # effect where effect_variance was kept.
     error_budget: dict = field(default_factory=dict)
+    # Arrays an estimator keeps beyond the images, by name (numpy, float32;
+    # the names of an array's last axis, where it has them, in
+    # stats[NAME + "_columns"]).
+    arrays: dict = field(default_factory=dict)
 
     def write_exr(self, path, **metadata):
         from .exr import write_exr
@@ -190,7 +194,8 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
                           seconds=r["seconds"], stats=stats, checkpoints=list(r["checkpoints"]), integrator=spec,
                           seed=int(seed), strategies=dict(r["strategies"]),
                           strategies_unweighted=dict(r["strategies_unweighted"]),
-                          effect_variance=None if r["effect_variance"] is None else dict(r["effect_variance"]))
+                          effect_variance=None if r["effect_variance"] is None else dict(r["effect_variance"]),
+                          arrays=dict(r["arrays"]))
     from .analysis.verdict import render_error_budget
 
     result.error_budget = render_error_budget(result)

@@ -134,6 +134,9 @@ struct CachePaths {
             d.params.set("max_depth", int64_t(md));
             d.params.set("rr_depth", int64_t(rr_depth));
             d.params.set("hide_emitters", h);
+            // No truncation probe: its tally would count the gather paths
+            // as camera samples, and the camera path's lacks the cached class.
+            d.params.set("truncation_probe", 0.0);
             return make_integrator(d, all_effects());
         };
         camera_all = make_path(max_depth, hide);

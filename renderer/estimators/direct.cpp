@@ -3,6 +3,7 @@
 // Veach's multi-sample model (Veach 1997, sec. 9.2.2).
 #include "render/registry.h"
 #include "transport/common.h"
+#include "transport/scatter_origin.h"
 
 namespace rm {
 
@@ -71,6 +72,8 @@ public:
             }
 
         // 3. BSDF samples that reach an emitter, each weighted 1 / n_bsdf.
+        ScatterOrigin origin;
+        origin.set(it, wi, &bsdf);
         for (int i = 0; i < n_bsdf_; ++i) {
             BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
             if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) continue;
@@ -91,9 +94,10 @@ public:
                 const Emitter& e = *scene.emitters[scene.shapes[hit2.shape]->emitter];
                 Color le = e.eval(hit2, hit2.wi);
                 if (!is_black(le)) {
-                    float w = bs.is_delta
-                                  ? 1.f
-                                  : mis_emission_hit(scene, e, r.o, &hit2, r.d, bs.pdf_w, light_frac_, bsdf_frac_);
+                    // Both densities from it.p, as estimate_direct's (scatter_origin.h).
+                    float w = bs.is_delta ? 1.f
+                                          : mis_emission_hit(scene, e, it.p, &hit2, r.d,
+                                                             origin.pdf_to(hit2.p, bs.pdf_w), light_frac_, bsdf_frac_);
                     c += le * w;
                 }
             }

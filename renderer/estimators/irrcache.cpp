@@ -67,7 +67,7 @@
 // Bias: biased (interpolation error that more samples per pixel do not
 // remove; it falls as the records get denser, kappa up). Measured in
 // docs/irrcache.md and tests/test_irrcache.py. Records (position, normal,
-// radius) come back in res.stats["irrcache_records"].
+// radius) come back in res.arrays["irrcache_records"].
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -411,19 +411,20 @@ bool IrrCache::overture(PassLoop& loop) const {
 
 void IrrCache::finish_stats(RenderOutput& out) const {
     const size_t n = records_.size();
-    NamedArray rec;
+    OutputArray rec;
     rec.name = "irrcache_records";
     rec.columns = {"x", "y", "z", "nx", "ny", "nz", "radius", "E_r", "E_g", "E_b"};
     rec.data.reserve(n * rec.columns.size());
     for (const Record& r : records_)
         for (float v : {r.p.x, r.p.y, r.p.z, r.n.x, r.n.y, r.n.z, r.r, r.e.x, r.e.y, r.e.z}) rec.data.push_back(v);
+    rec.shape = {int(rec.data.size() / rec.columns.size()), int(rec.columns.size())};
     out.arrays.push_back(std::move(rec));
-    out.values.push_back({"irrcache_candidates", double(cstats_.candidates)});
-    out.values.push_back({"irrcache_computed", double(cstats_.computed)});
-    out.values.push_back({"irrcache_lookups", double(cstats_.lookups.load())});
-    out.values.push_back({"irrcache_misses", double(cstats_.misses.load())});
-    out.values.push_back({"irrcache_overture_seconds", cstats_.overture_seconds});
-    out.values.push_back({"irrcache_gather_rays", double(res_ * n_phi_)});
+    out.estimator_stats.push_back({"irrcache_candidates", {double(cstats_.candidates)}});
+    out.estimator_stats.push_back({"irrcache_computed", {double(cstats_.computed)}});
+    out.estimator_stats.push_back({"irrcache_lookups", {double(cstats_.lookups.load())}});
+    out.estimator_stats.push_back({"irrcache_misses", {double(cstats_.misses.load())}});
+    out.estimator_stats.push_back({"irrcache_overture_seconds", {cstats_.overture_seconds}});
+    out.estimator_stats.push_back({"irrcache_gather_rays", {double(res_ * n_phi_)}});
 }
 
 RenderOutput IrrCache::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {

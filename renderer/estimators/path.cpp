@@ -16,6 +16,7 @@
 #include "render/registry.h"
 #include "transport/common.h"
 #include "transport/dipole_step.h"
+#include "transport/scatter_origin.h"
 
 namespace rm {
 
@@ -39,6 +40,7 @@ std::unique_ptr<Integrator> make_path(ParamReader& p);
                                     "illumination); in media, scattering vertices"),
         rr_depth_param(),
         hide_emitters_param(),
+        truncation_probe_param(),
     };
     e.caps.media = true;
     e.caps.dipole = true;
@@ -52,7 +54,11 @@ std::unique_ptr<Integrator> make_path(ParamReader& p);
 class PathIntegrator final : public Integrator {
 public:
     explicit PathIntegrator(const VolPathParams& prm)
-        : max_depth_(prm.max_depth), rr_depth_(prm.rr_depth), hide_(prm.hide), media_(make_volpath_integrator(prm)) {}
+        : max_depth_(prm.max_depth),
+          rr_depth_(prm.rr_depth),
+          hide_(prm.hide),
+          probe_(prm.truncation_probe),
+          media_(make_volpath_integrator(prm)) {}
 
     const Integrator& for_scene(const Scene& scene) const override {
         if (!scene.features.has_media) return *this;
@@ -70,8 +76,12 @@ public:
         PathClass pc;
         float prev_pdf_w = 0.f;
         bool prev_delta = true;
-        Vec3 prev_p;
+        ScatterOrigin prev;  // the vertex the current ray left (scatter_origin.h)
         BsdfContext ctx;
+        // Where contributions go: the image, or, once the truncation probe
+        // continued the path past max_depth, the light it would have cut off.
+        EffectRadiance tail;
+        EffectRadiance* sink = &out;
         for (int depth = 0;; ++depth) {
             // 1. Find the next vertex.
             Interaction it;
@@ -82,15 +92,26 @@ public:
 
             // 2. Emission reached by the previous BSDF sample (or the camera ray),
             //    weighted against next event estimation unless that sample was delta.
-            if (count_emission && mask[cls])
-                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_p, prev_pdf_w,
-                                    out);
+            if (count_emission && mask[cls]) {
+                float pdf_w = prev_pdf_w;
+                if (hit && !prev_delta && scene.shapes[it.shape]->emitter >= 0) pdf_w = prev.pdf_to(it.p, prev_pdf_w);
+                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev.p, pdf_w,
+                                    *sink);
+            }
             if (!hit) break;
             const Shape& shape = *scene.shapes[it.shape];
 
             // 3. Stop at max_depth (Mitsuba's meaning: depth + 1 segments so far),
             //    or when no requested effect class is reachable any more.
-            if (max_depth_ >= 0 && depth + 1 >= max_depth_) break;
+            // The truncation probe (volpath.h): a fraction `probe_` of the
+            //    paths stopped here go on, weighted 1 / probe_, into `tail`;
+            //    its draw follows every draw of the path's first max_depth
+            //    segments, so the image keeps its bytes.
+            if (max_depth_ >= 0 && depth + 1 >= max_depth_ && sink == &out) {
+                if (!(probe_ > 0.f) || !(sampler.next_1d() < probe_)) break;
+                beta /= probe_;
+                sink = &tail;
+            }
             if (!pc.can_reach(mask, scene.features.has_dipole)) break;
             const Bsdf* bsdf = scene.bsdfs[shape.bsdf].get();
             Vec3 wi = it.to_local(it.wi);
@@ -112,7 +133,7 @@ public:
                     int ncls = pn.classify();
                     if (mask[ncls]) {
                         Color ld = estimate_direct(scene, it, *bsdf, wi, sampler, stats);
-                        out.add(ncls, beta * ld);
+                        sink->add(ncls, beta * ld);
                     } else {
                         // Keep the random-number stream aligned whatever the mask is.
                         sampler.next_1d();
@@ -131,20 +152,24 @@ public:
             if (bsdf->flags() != kNull) pc.push(bs.is_delta);
             prev_pdf_w = bs.pdf_w;
             prev_delta = bs.is_delta;
+            prev.set(it, wi, bsdf);
             ray = it.spawn(it.to_world(bs.wo));
-            // MIS densities of what this ray hits are taken from where it starts.
-            prev_p = ray.o;
 
             // 6. Russian roulette (Mitsuba's rule, common.h).
             if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta) * eta_scale,
                                    sampler.next_1d(), beta))
                 break;
         }
+        if (sink == &tail) {
+            Color t = tail.total();
+            if (is_finite(t)) stats.add_truncated(t);
+        }
     }
 
 private:
     int max_depth_, rr_depth_;
     bool hide_;
+    float probe_;
     std::unique_ptr<Integrator> media_;  // the media-aware twin (volpath.cpp)
 };
 
@@ -155,6 +180,7 @@ std::unique_ptr<Integrator> make_path(ParamReader& p) {
     prm.max_depth = p.get_int("max_depth");
     prm.rr_depth = p.get_int("rr_depth");
     prm.hide = p.get_bool("hide_emitters");
+    prm.truncation_probe = p.get_float("truncation_probe");
     return std::make_unique<PathIntegrator>(prm);
 }
 

@@ -39,7 +39,7 @@
 // gradients; not implemented) and no neighbour clamping: the bias is the
 // interpolation's and the truncation at `order` (measured against the
 // order in docs/irrcache.md).
-// Bias: biased. Records in res.stats["radcache_records"].
+// Bias: biased. Records in res.arrays["radcache_records"].
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
@@ -376,18 +376,19 @@ RenderOutput RadCache::drive(const Scene& scene, const RenderOptions& opts, cons
     RadCachePass pass(*this);
     pass.mask = mask;
     RenderOutput out = render_camera_paths(loop, pass);
-    NamedArray rec;
+    OutputArray rec;
     rec.name = "radcache_records";
     rec.columns = {"x", "y", "z", "nx", "ny", "nz", "radius"};
     for (const RadRecord& r : records_)
         for (float v : {r.p.x, r.p.y, r.p.z, r.f.n.x, r.f.n.y, r.f.n.z, r.r}) rec.data.push_back(v);
+    rec.shape = {int(rec.data.size() / rec.columns.size()), int(rec.columns.size())};
     out.arrays.push_back(std::move(rec));
-    out.values.push_back({"radcache_candidates", double(cstats_.candidates)});
-    out.values.push_back({"radcache_computed", double(cstats_.computed)});
-    out.values.push_back({"radcache_lookups", double(cstats_.lookups.load())});
-    out.values.push_back({"radcache_misses", double(cstats_.misses.load())});
-    out.values.push_back({"radcache_overture_seconds", cstats_.overture_seconds});
-    out.values.push_back({"radcache_coefficients", double(hsh_.count())});
+    out.estimator_stats.push_back({"radcache_candidates", {double(cstats_.candidates)}});
+    out.estimator_stats.push_back({"radcache_computed", {double(cstats_.computed)}});
+    out.estimator_stats.push_back({"radcache_lookups", {double(cstats_.lookups.load())}});
+    out.estimator_stats.push_back({"radcache_misses", {double(cstats_.misses.load())}});
+    out.estimator_stats.push_back({"radcache_overture_seconds", {cstats_.overture_seconds}});
+    out.estimator_stats.push_back({"radcache_coefficients", {double(hsh_.count())}});
     out.seconds = loop.elapsed();
     return out;
 }

@@ -40,6 +40,7 @@
 #include "transport/common.h"
 #include "transport/dipole_step.h"
 #include "transport/media_common.h"
+#include "transport/scatter_origin.h"
 
 namespace rm {
 
@@ -57,7 +58,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
     PathClass pc;
     float prev_pdf_w = 0.f;
     bool prev_delta = true;
-    Vec3 prev_p;
+    ScatterOrigin prev;  // the vertex the current ray left (scatter_origin.h)
     BsdfContext ctx;
     int depth = 0;  // scattering vertices so far (surface or medium; null boundaries excluded)
     SpectralThroughput th(std::min(int(sampler.next_1d() * 3.f), 2));
@@ -117,7 +118,8 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                 beta *= ps.weight;
                 prev_pdf_w = ps.pdf_w;
                 prev_delta = false;
-                prev_p = mi.p;
+                prev.p = mi.p;  // a medium vertex: the ray leaves mi.p itself
+                prev.bsdf = nullptr;
                 ray = Ray{mi.p, ps.wo, 0.f, kInf};
                 if (!roulette(sampler.next_1d())) break;
                 if (!pc.can_reach(mask, true)) break;
@@ -127,8 +129,11 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         int cls = pc.classify();
 
         // 5. Emission reached by the previous BSDF / phase sample (or the camera ray).
-        if (count_emission && mask[cls])
-            add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_p, prev_pdf_w, out);
+        if (count_emission && mask[cls]) {
+            float pdf_w = prev_pdf_w;
+            if (hit && !prev_delta && scene.shapes[it.shape]->emitter >= 0) pdf_w = prev.pdf_to(it.p, prev_pdf_w);
+            add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev.p, pdf_w, out);
+        }
         if (!hit) break;
         const Shape& shape = *scene.shapes[it.shape];
         const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
@@ -186,8 +191,8 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         prev_delta = bs.is_delta;
         Vec3 wo = it.to_world(bs.wo);
         mt.cross(it, wo, false);
+        prev.set(it, wi, bsdf_at);
         ray = it.spawn(wo);
-        prev_p = ray.o;
         if (!roulette(sampler.next_1d())) break;
     }
 }

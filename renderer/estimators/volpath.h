@@ -7,6 +7,12 @@ namespace rm {
 struct VolPathParams {
     int max_depth = -1, rr_depth = 5;
     bool hide = false;
+    // The truncation probe (path's surface loop): the fraction of the paths
+    // that max_depth stops which go on past it, with Russian roulette and
+    // weight 1 / probe, to estimate the light max_depth cuts off
+    // (ThreadStats::truncated, res.error_budget's truncation term) without
+    // changing the image. 0: off. The media loop does not probe yet.
+    float truncation_probe = 0.f;
 };
 
 // Radiance along one camera ray through a scene with media, split by effect class.

@@ -19,6 +19,19 @@ namespace rm {
 struct ThreadStats {
     uint64_t rays = 0, shadow_rays = 0, paths = 0, nan_samples = 0, inf_samples = 0;
     uint64_t photons = 0;  // photons stored (photon mapping estimators)
+    // The truncation probe (path.cpp): the light that max_depth cuts off,
+    // per camera sample (0 for the samples not probed), summed over samples
+    // with its square per channel; probes: the samples continued. Sums of
+    // doubles merged per thread: equal to rounding whatever the thread count.
+    double truncated[3] = {0, 0, 0}, truncated_sq[3] = {0, 0, 0};
+    uint64_t truncation_probes = 0;
+    void add_truncated(const Color& c) {
+        ++truncation_probes;
+        for (int i = 0; i < 3; ++i) {
+            truncated[i] += double(c[i]);
+            truncated_sq[i] += double(c[i]) * double(c[i]);
+        }
+    }
     void merge(const ThreadStats& o) {
         rays += o.rays;
         shadow_rays += o.shadow_rays;
@@ -26,6 +39,11 @@ struct ThreadStats {
         nan_samples += o.nan_samples;
         inf_samples += o.inf_samples;
         photons += o.photons;
+        truncation_probes += o.truncation_probes;
+        for (int i = 0; i < 3; ++i) {
+            truncated[i] += o.truncated[i];
+            truncated_sq[i] += o.truncated_sq[i];
+        }
     }
 };
 

@@ -198,6 +198,15 @@ ParamSpec hide_emitters_param() {
     return ParamSpec::boolean("hide_emitters", false, "directly visible emitters appear black");
 }
 
+ParamSpec truncation_probe_param() {
+    return ParamSpec::real("truncation_probe", 0.0625,
+                           "fraction of the paths stopped by max_depth that go on past it (Russian roulette, weight "
+                           "1 / fraction) to estimate the light max_depth cuts off, in res.error_budget; the image "
+                           "is unchanged; 0: off")
+        .at_least(0.0)
+        .at_most(1.0);
+}
+
 ParamSpec mis_param() {
     return ParamSpec::string("mis", "power", "MIS weights: the power or balance heuristic, or uniform weights")
         .one_of({"power", "balance", "uniform"});

@@ -105,6 +105,8 @@ struct ParamSpec {
 ParamSpec max_depth_param();
 ParamSpec rr_depth_param();
 ParamSpec hide_emitters_param();
+// The truncation probe of the estimators that estimate what max_depth cuts off.
+ParamSpec truncation_probe_param();
 ParamSpec strategy_images_param();
 // The MIS heuristic of the bidirectional estimators (bdpt, vcm, bpm) and
 // the power heuristic's exponent.

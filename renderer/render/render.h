@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "render/integrator.h"
@@ -43,12 +44,14 @@ struct PhotonMapStats {
     uint64_t max_paths = 0;      // the give-up bound on paths (photon_trace.h; 0 for sppm's)
 };
 
-// A table an estimator reports in res.stats under `name`: rows of
-// columns.size() floats (irrcache's records).
-struct NamedArray {
+// An array an estimator keeps for Python beyond the images (res.arrays):
+// a cache's records, precomputed transfer vectors; row-major, `columns`
+// naming the last axis where it has names (res.stats[NAME + "_columns"]).
+struct OutputArray {
     std::string name;
+    std::vector<int> shape;
+    std::vector<float> data;
     std::vector<std::string> columns;
-    std::vector<float> data;  // row-major
 };
 
 struct RenderOutput {
@@ -71,10 +74,11 @@ struct RenderOutput {
     std::vector<Checkpoint> checkpoints;
     ThreadStats stats;
     std::vector<PhotonMapStats> photon_maps;
-    // Estimator-specific entries of res.stats: numbers, and tables (a numpy
-    // array of shape (rows, columns) beside NAME_columns).
-    std::vector<std::pair<std::string, double>> values;
-    std::vector<NamedArray> arrays;
+    // What an estimator reports of its own: named figures for res.stats
+    // (one value becomes a number, several a list: Metropolis' acceptance
+    // per chain, a solver's residual) and arrays for res.arrays.
+    std::vector<std::pair<std::string, std::vector<double>>> estimator_stats;
+    std::vector<OutputArray> arrays;
     int threads = 0;
     double setup_seconds = 0;
 };
