@@ -6,6 +6,7 @@
 #pragma once
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -240,6 +241,48 @@ bool run_overture(PassLoop& loop, CacheStats& cs, Wanted&& wanted, Compute&& com
             }
     }
     return true;
+}
+
+// The camera passes of a caching estimator C (its radiance()), through the
+// camera driver.
+template <class C>
+class CachePass final : public Integrator {
+public:
+    explicit CachePass(const C& c) : c_(c) {
+        type = c.type;
+        caps = c.caps;
+        caps.driver = Driver::Camera;
+        mask = c.mask;
+    }
+    void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
+                ThreadStats& stats) const override {
+        c_.radiance(scene, sampler, ray, out, stats);
+    }
+
+private:
+    const C& c_;
+};
+
+// One render of a caching estimator: reset(center, radius) empties its cache
+// for the scene's bounding sphere; when `fill`, overture(loop) fills it (the
+// loop's setup: its time counts against a time budget); then the camera
+// passes read it.
+template <class C, class Reset, class Overture>
+RenderOutput drive_cache(const C& c, const Scene& scene, const RenderOptions& opts, const PollFn& poll, CacheStats& cs,
+                         bool fill, Reset&& reset, Overture&& overture) {
+    Vec3 center;
+    float radius;
+    scene.bounding_sphere(center, radius);
+    reset(center, radius);
+    cs.reset();
+    PassLoop loop(scene, opts, poll);
+    auto t0 = std::chrono::steady_clock::now();
+    if (fill && !overture(loop)) return loop.cancelled_output();
+    cs.overture_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    CachePass<C> pass(c);
+    RenderOutput out = render_camera_paths(loop, pass);
+    out.seconds = loop.elapsed();
+    return out;
 }
 
 }  // namespace rm

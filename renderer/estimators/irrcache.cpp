@@ -69,7 +69,6 @@
 // docs/irrcache.md and tests/test_irrcache.py. Records (position, normal,
 // radius) come back in res.arrays["irrcache_records"].
 #include <atomic>
-#include <chrono>
 #include <cmath>
 #include <memory>
 #include <stdexcept>
@@ -128,8 +127,6 @@ std::unique_ptr<Integrator> make_irrcache(ParamReader& p);
     e.factory = make_irrcache;
     return e;
 }());
-
-using Clock = std::chrono::steady_clock;
 
 const float kSqrtOneMinusCos10 = std::sqrt(1.f - std::cos(10.f * kPi / 180.f));
 
@@ -374,27 +371,6 @@ private:
     mutable CacheStats cstats_;
 };
 
-namespace {
-
-// The camera passes, through the camera driver.
-class IrrCachePass final : public Integrator {
-public:
-    explicit IrrCachePass(const IrrCache& ic) : ic_(ic) {
-        type = ic.type;
-        caps = ic.caps;
-        caps.driver = Driver::Camera;
-    }
-    void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
-                ThreadStats& stats) const override {
-        ic_.radiance(scene, sampler, ray, out, stats);
-    }
-
-private:
-    const IrrCache& ic_;
-};
-
-}  // namespace
-
 bool IrrCache::overture(PassLoop& loop) const {
     std::vector<Record> batch(kOvertureBatch);
     return run_overture(
@@ -429,25 +405,15 @@ void IrrCache::finish_stats(RenderOutput& out) const {
 
 RenderOutput IrrCache::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
     paths_.set_masks(mask);
-    records_.clear();
-    Vec3 center;
-    float radius;
-    scene.bounding_sphere(center, radius);
-    octree_.reset(center, radius * 1.01f + 1e-4f);
-    r_min_ = min_spacing_ * radius;
-    r_max_ = max_spacing_ * radius;
-    cstats_.reset();
-    PassLoop loop(scene, opts, poll);
-    // 1. The overture, the loop's setup (its time counts against a time budget).
-    auto t0 = Clock::now();
-    if (overture_ && mask[kIndirect] && !overture(loop)) return loop.cancelled_output();
-    cstats_.overture_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-    // 2. The camera passes, reading the cache.
-    IrrCachePass pass(*this);
-    pass.mask = mask;
-    RenderOutput out = render_camera_paths(loop, pass);
+    auto reset = [&](const Vec3& center, float radius) {
+        records_.clear();
+        octree_.reset(center, radius * 1.01f + 1e-4f);
+        r_min_ = min_spacing_ * radius;
+        r_max_ = max_spacing_ * radius;
+    };
+    RenderOutput out = drive_cache(*this, scene, opts, poll, cstats_, overture_ && mask[kIndirect], reset,
+                                   [&](PassLoop& loop) { return overture(loop); });
     finish_stats(out);
-    out.seconds = loop.elapsed();
     return out;
 }
 

@@ -40,7 +40,6 @@
 // interpolation's and the truncation at `order` (measured against the
 // order in docs/irrcache.md).
 // Bias: biased. Records in res.arrays["radcache_records"].
-#include <chrono>
 #include <cmath>
 #include <stdexcept>
 
@@ -339,43 +338,16 @@ private:
     mutable CacheStats cstats_;
 };
 
-namespace {
-
-class RadCachePass final : public Integrator {
-public:
-    explicit RadCachePass(const RadCache& rc) : rc_(rc) {
-        type = rc.type;
-        caps = rc.caps;
-        caps.driver = Driver::Camera;
-    }
-    void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
-                ThreadStats& stats) const override {
-        rc_.radiance(scene, sampler, ray, out, stats);
-    }
-
-private:
-    const RadCache& rc_;
-};
-
-}  // namespace
-
 RenderOutput RadCache::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
     paths_.set_masks(mask);
-    records_.clear();
-    Vec3 center;
-    float radius;
-    scene.bounding_sphere(center, radius);
-    octree_.reset(center, radius * 1.01f + 1e-4f);
-    r_min_ = min_spacing_ * radius;
-    r_max_ = max_spacing_ * radius;
-    cstats_.reset();
-    PassLoop loop(scene, opts, poll);
-    auto t0 = std::chrono::steady_clock::now();
-    if (overture_ && mask[kIndirect] && !overture(loop)) return loop.cancelled_output();
-    cstats_.overture_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    RadCachePass pass(*this);
-    pass.mask = mask;
-    RenderOutput out = render_camera_paths(loop, pass);
+    auto reset = [&](const Vec3& center, float radius) {
+        records_.clear();
+        octree_.reset(center, radius * 1.01f + 1e-4f);
+        r_min_ = min_spacing_ * radius;
+        r_max_ = max_spacing_ * radius;
+    };
+    RenderOutput out = drive_cache(*this, scene, opts, poll, cstats_, overture_ && mask[kIndirect], reset,
+                                   [&](PassLoop& loop) { return overture(loop); });
     OutputArray rec;
     rec.name = "radcache_records";
     rec.columns = {"x", "y", "z", "nx", "ny", "nz", "radius"};
@@ -389,7 +361,6 @@ RenderOutput RadCache::drive(const Scene& scene, const RenderOptions& opts, cons
     out.estimator_stats.push_back({"radcache_misses", {double(cstats_.misses.load())}});
     out.estimator_stats.push_back({"radcache_overture_seconds", {cstats_.overture_seconds}});
     out.estimator_stats.push_back({"radcache_coefficients", {double(hsh_.count())}});
-    out.seconds = loop.elapsed();
     return out;
 }
 
