@@ -184,6 +184,25 @@ struct CachePaths {
         }
         return Color(0.f);
     }
+    // The camera side of a caching estimator's radiance(): intersects `ray`
+    // into `x`; where x takes its indirect light from the cache (the class
+    // asked for and cacheable(x)) runs camera_direct and returns true (the
+    // caller adds the cache's part), else camera_all and false.
+    template <class F>
+    bool camera(const Scene& scene, Sampler& sampler, const Ray& ray, const EffectMask& mask, F&& cacheable,
+                Interaction& x, EffectRadiance& out, ThreadStats& stats) const {
+        ++stats.rays;
+        bool hit = scene.intersect(ray, x);
+        bool cached = hit && mask[kIndirect] && cacheable(static_cast<const Interaction&>(x));
+        (cached ? camera_direct : camera_all)->sample(scene, sampler, ray, out, stats);
+        return cached;
+    }
+    // The factories' check of min_spacing <= max_spacing.
+    static void check_spacing(ParamReader& p, float min_spacing, float max_spacing) {
+        if (min_spacing > max_spacing)
+            p.fail("min_spacing", "min_spacing (" + std::to_string(min_spacing) + ") exceeds max_spacing (" +
+                                      std::to_string(max_spacing) + ")");
+    }
     // Whether paths of 3 segments (camera, x, y) are allowed at all.
     bool indirect_possible() const { return max_depth_ < 0 || max_depth_ >= 3; }
 

@@ -156,9 +156,7 @@ public:
           max_spacing_(p.get_float("max_spacing")),
           overture_(p.get_bool("overture")),
           paths_(max_depth_, p.get_int("rr_depth"), p.get_bool("hide_emitters")) {
-        if (min_spacing_ > max_spacing_)
-            p.fail("min_spacing", "min_spacing (" + std::to_string(min_spacing_) + ") exceeds max_spacing (" +
-                                      std::to_string(max_spacing_) + ")");
+        CachePaths::check_spacing(p, min_spacing_, max_spacing_);
         n_phi_ = std::max(1, int(std::lround(kPi * float(res_))));
     }
 
@@ -170,13 +168,8 @@ public:
     // The camera passes' radiance along one camera ray (the file's first comment).
     void radiance(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out, ThreadStats& stats) const {
         Interaction it;
-        ++stats.rays;
-        bool hit = scene.intersect(ray, it);
-        if (!hit || !mask[kIndirect] || !cacheable(scene, it)) {
-            paths_.camera_all->sample(scene, sampler, ray, out, stats);
-            return;
-        }
-        paths_.camera_direct->sample(scene, sampler, ray, out, stats);
+        auto can = [&](const Interaction& x) { return cacheable(scene, x); };
+        if (!paths_.camera(scene, sampler, ray, mask, can, it, out, stats)) return;
         Color e;
         cstats_.lookups.fetch_add(1, std::memory_order_relaxed);
         if (!interpolate(it, adjust_, e)) {
