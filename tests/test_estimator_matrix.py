@@ -187,6 +187,18 @@ MEAN_BOUND_FACTOR = 2.0
 MEAN_BOUND = {"biased": MEAN_BOUND_FACTOR * 0.00263, "consistent": MEAN_BOUND_FACTOR * 0.00346}
 MEAN_POWER = 1.02
 
+# Biased estimators whose bias is confined to the indirect class, every
+# other class being path's own (irrcache, radcache: indirect light from their
+# cache, the rest path traced on path's streams), and the analytic scenes on
+# which that class is exact for them: nothing to cache (area lights, mirror
+# caustic) or, for irrcache, constant (furnace: exact to 1e-4 there,
+# tests/test_irrcache.py; radcache's harmonics projection is not). There they
+# take the unbiased estimators' z-test at the scene's budget: at BIASED_SPP
+# the path-traced caustic of mirror_caustic alone put irrcache's image mean
+# 4.5 % off (measured 2026-12-02).
+_NO_INDIRECT = ("area_lights_disk", "area_lights_rect", "mirror_caustic")
+BIAS_CONFINED = {"irrcache": _NO_INDIRECT + ("furnace",), "radcache": _NO_INDIRECT}
+
 SEED = 7
 # Biased and consistent estimators render with their declared defaults
 # (photonmapper: 250 000 photons per map, 32 final-gathering rays and 16
@@ -271,10 +283,16 @@ def render_cell(est, name, seed=SEED):
         integ["max_depth"] = md
     if caps["bias"] == "consistent" and "light_paths" in EST[est]["params"]:
         integ["light_paths"] = CONSISTENT_LIGHT_PATHS
-    spp = {"biased": BIASED_SPP, "consistent": CONSISTENT_SPP}.get(caps["bias"], cfg["spp"])
-    res = rm.render(scene, integrator=integ, spp=spp, seed=cfg.get("seed", seed),
-                    effects=complete if partial else None)
+    spp = {"biased": BIASED_SPP, "consistent": CONSISTENT_SPP}.get(_bias(est, spec), cfg["spp"])
+    res = rm.render(scene, integrator=integ, spp=spp, seed=cfg.get("seed", seed), effects=complete if partial else None)
     return spec, cfg, res, ref, complete
+
+
+def _bias(est, spec):
+    """The declared bias, or "unbiased" on the scenes BIAS_CONFINED lists
+    for the estimator."""
+    bias = EST[est]["capabilities"]["bias"]
+    return "unbiased" if spec.name in BIAS_CONFINED.get(est, ()) else bias
 
 
 def _scaled(spec, cfg, image, variance):
@@ -353,7 +371,7 @@ def test_estimator_matrix(est, name):
         assert np.all(np.isfinite(a)), f"{where}: {what} has non-finite pixels"
         assert not np.any(np.asarray(a) < 0), f"{where}: {what} has negative values"
     image, variance = _target(spec, ref, complete)
-    bias = EST[est]["capabilities"]["bias"]
+    bias = _bias(est, spec)
     if spec.kind == "analytic":
         _check_classes(spec, cfg if bias == "unbiased" else {}, res, ref, complete, where)
     if bias == "unbiased":
