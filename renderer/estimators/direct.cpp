@@ -84,7 +84,7 @@ public:
                 for (const Emitter* e : scene.environment) {
                     float w = bs.is_delta
                                   ? 1.f
-                                  : mis_emission_hit(scene, *e, r.o, nullptr, r.d, bs.pdf_w, light_frac_, bsdf_frac_);
+                                  : mis_emission_hit(scene, *e, light_context(it), r.o, nullptr, r.d, bs.pdf_w, light_frac_, bsdf_frac_);
                     c += e->eval_environment(r.d) * w;
                 }
             } else if (scene.shapes[hit2.shape]->emitter >= 0) {
@@ -93,7 +93,7 @@ public:
                 if (!is_black(le)) {
                     float w = bs.is_delta
                                   ? 1.f
-                                  : mis_emission_hit(scene, e, r.o, &hit2, r.d, bs.pdf_w, light_frac_, bsdf_frac_);
+                                  : mis_emission_hit(scene, e, light_context(it), r.o, &hit2, r.d, bs.pdf_w, light_frac_, bsdf_frac_);
                     c += le * w;
                 }
             }

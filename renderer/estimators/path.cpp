@@ -71,6 +71,7 @@ public:
         float prev_pdf_w = 0.f;
         bool prev_delta = true;
         Vec3 prev_p;
+        LightContext prev_ctx{};  // where the light sample competing with the BSDF sample was selected from
         BsdfContext ctx;
         for (int depth = 0;; ++depth) {
             // 1. Find the next vertex.
@@ -83,7 +84,7 @@ public:
             // 2. Emission reached by the previous BSDF sample (or the camera ray),
             //    weighted against next event estimation unless that sample was delta.
             if (count_emission && mask[cls])
-                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_p, prev_pdf_w,
+                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev_p, prev_pdf_w,
                                     out);
             if (!hit) break;
             const Shape& shape = *scene.shapes[it.shape];
@@ -134,6 +135,7 @@ public:
             ray = it.spawn(it.to_world(bs.wo));
             // MIS densities of what this ray hits are taken from where it starts.
             prev_p = ray.o;
+            prev_ctx = light_context(it);
 
             // 6. Russian roulette (Mitsuba's rule, common.h).
             if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta) * eta_scale,

@@ -58,6 +58,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
     float prev_pdf_w = 0.f;
     bool prev_delta = true;
     Vec3 prev_p;
+    LightContext prev_ctx{};
     BsdfContext ctx;
     int depth = 0;  // scattering vertices so far (surface or medium; null boundaries excluded)
     SpectralThroughput th(std::min(int(sampler.next_1d() * 3.f), 2));
@@ -118,6 +119,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                 prev_pdf_w = ps.pdf_w;
                 prev_delta = false;
                 prev_p = mi.p;
+                prev_ctx = light_context(mi);
                 ray = Ray{mi.p, ps.wo, 0.f, kInf};
                 if (!roulette(sampler.next_1d())) break;
                 if (!pc.can_reach(mask, true)) break;
@@ -128,7 +130,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
 
         // 5. Emission reached by the previous BSDF / phase sample (or the camera ray).
         if (count_emission && mask[cls])
-            add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_p, prev_pdf_w, out);
+            add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev_p, prev_pdf_w, out);
         if (!hit) break;
         const Shape& shape = *scene.shapes[it.shape];
         const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
@@ -188,6 +190,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         mt.cross(it, wo, false);
         ray = it.spawn(wo);
         prev_p = ray.o;
+        prev_ctx = light_context(it);
         if (!roulette(sampler.next_1d())) break;
     }
 }
