@@ -229,7 +229,8 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
             // over N synthetic emitters (points, or one-sided squares of half-size
             // `half_size` facing `normals`), its build time, memory and depth, and the mean
             // time of one selection (sample) and one probability (pmf) from `queries`
-            // random points with random normals in the emitters' box.
+            // random points with random normals in the emitters' box. A zero normal
+            // makes that emitter a point light.
             auto pos = flat<float>(positions, 3, "positions");
             auto phi = flat<float>(power, 1, "power");
             size_t n = pos.size() / 3;
@@ -241,15 +242,14 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
             Vec3 lo(kInf), hi(-kInf);
             for (size_t i = 0; i < n; ++i) {
                 Vec3 p(pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]);
-                b[i].lo = p - Vec3(half_size);
-                b[i].hi = p + Vec3(half_size);
+                Vec3 nv = nn.empty() ? Vec3(0.f) : Vec3(nn[3 * i], nn[3 * i + 1], nn[3 * i + 2]);
+                float len = length(nv);
+                bool square = len > 0.f;  // a zero normal: a point light
+                b[i].lo = p - Vec3(square ? half_size : 0.f);
+                b[i].hi = p + Vec3(square ? half_size : 0.f);
                 b[i].phi = phi[i];
-                if (nn.empty()) {
-                    b[i].cos_o = -1.f;
-                } else {
-                    b[i].w = normalize(Vec3(nn[3 * i], nn[3 * i + 1], nn[3 * i + 2]));
-                    b[i].cos_o = 1.f;
-                }
+                b[i].w = square ? nv / len : Vec3(0.f, 0.f, 1.f);
+                b[i].cos_o = square ? 1.f : -1.f;
                 b[i].cos_e = 0.f;
                 lo = vmin(lo, b[i].lo);
                 hi = vmax(hi, b[i].hi);
