@@ -88,13 +88,15 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 auto uu = flat<float>(u, 4, "u");
                 size_t n = r.size() / 3;
                 if (uu.size() != 4 * n) throw py::value_error("u must be (N, 4) for N reference points");
-                std::vector<float> nn = normal.is_none() ? std::vector<float>(3 * n, 0.f) : flat<float>(normal, 3, "normal");
+                std::vector<float> nn =
+                    normal.is_none() ? std::vector<float>(3 * n, 0.f) : flat<float>(normal, 3, "normal");
                 if (nn.size() != 3 * n) throw py::value_error("normal must be (N, 3) for N reference points");
                 std::vector<float> d(3 * n), pdf(n), rad(3 * n), delta(n);
                 for (size_t i = 0; i < n; ++i) {
                     if (s.emitters.empty()) continue;
                     DirectSample ds;
-                    LightContext ctx{Vec3(r[3 * i], r[3 * i + 1], r[3 * i + 2]), Vec3(nn[3 * i], nn[3 * i + 1], nn[3 * i + 2])};
+                    LightContext ctx{Vec3(r[3 * i], r[3 * i + 1], r[3 * i + 2]),
+                                     Vec3(nn[3 * i], nn[3 * i + 1], nn[3 * i + 2])};
                     sample_light(s, ctx, uu[4 * i], Vec2(uu[4 * i + 1], uu[4 * i + 2]), uu[4 * i + 3], ds);
                     for (int k = 0; k < 3; ++k) {
                         d[3 * i + k] = ds.d[k];
@@ -190,7 +192,8 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 const LightSampler& ls = s.light_sampler(parse_light_sampler(light_sampler));
                 auto r = flat<float>(ref, 3, "ref");
                 size_t n = r.size() / 3;
-                std::vector<float> nn = normal.is_none() ? std::vector<float>(3 * n, 0.f) : flat<float>(normal, 3, "normal");
+                std::vector<float> nn =
+                    normal.is_none() ? std::vector<float>(3 * n, 0.f) : flat<float>(normal, 3, "normal");
                 if (nn.size() != 3 * n) throw py::value_error("normal must be (N, 3) for N points");
                 auto uu = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(u);
                 if (!uu || uu.ndim() != 2 || size_t(uu.shape(0)) != n)
@@ -203,7 +206,8 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                     Vec3 p(r[3 * i], r[3 * i + 1], r[3 * i + 2]), nv(nn[3 * i], nn[3 * i + 1], nn[3 * i + 2]);
                     for (size_t k = 0; k < m; ++k) {
                         float uk = uu.data()[i * m + k];
-                        idx[i * m + k] = start ? ls.sample_start(uk, pick[i * m + k]) : ls.sample(p, nv, uk, pick[i * m + k]);
+                        idx[i * m + k] =
+                            start ? ls.sample_start(uk, pick[i * m + k]) : ls.sample(p, nv, uk, pick[i * m + k]);
                     }
                     for (size_t e = 0; e < ne; ++e)
                         table[i * ne + e] = start ? ls.pmf_start(int(e)) : ls.pmf(p, nv, int(e));

@@ -17,6 +17,7 @@ decades (tests/light_sampler_scenes.py):
 """
 import numpy as np
 import pytest
+from scipy import stats as _st
 
 import radiometer as rm
 from light_sampler_scenes import many_powers
@@ -160,11 +161,12 @@ ESTIMATORS = {
     "sppm": ({"type": "sppm", "photon_count": 4000, "max_depth": 4}, 16),
 }
 SEEDS = 8
-# The bias each power check injects: 4 %; 10 % for direct; 25 % for the
-# photon-map estimators, whose noise at these budgets (a map rebuilt per
-# render, merging near the point lights) hides 10 % in some seed sets
-# (measured under RADIOMETER_SEED_OFFSET 0..3).
-POWER = {"direct": 1.10, **{est: 1.25 for est in ("photonmapper", "bpm", "ppm", "sppm")}}
+# The bias each power check injects, the smallest that these budgets reject
+# under RADIOMETER_SEED_OFFSET 0..3: 4 % for path, bdpt, ptracer; 10 % for
+# direct, whitted, vcm; 50 % for the photon-map estimators, whose noise here
+# (a map rebuilt per render, merging near the point lights) is large: their
+# test only shows that no sampler moves them by more than that.
+POWER = {"direct": 1.10, "whitted": 1.10, "vcm": 1.10, **{e: 1.5 for e in ("photonmapper", "bpm", "ppm", "sppm")}}
 RES = 12
 BLOCK = 6
 N_ZTESTS = len(ESTIMATORS) * 2  # the per-estimator tests share ALPHA (Sidak)
@@ -190,6 +192,16 @@ def scene():
     return rm.load_dict(many_powers(res=RES))
 
 
+def _agree(runs, base, level):
+    """Two parts at level / 2 each: per-block Welch t-tests over the seeds
+    (Sidak over the blocks, analysis/pixels.py) and a Welch t-test of the
+    whole image's mean (the most power for a bias spread over the image).
+    Returns (passed, message)."""
+    r = two_sample_t_test(runs, base, alpha=level / 2)
+    p_mean = float(_st.ttest_ind(runs.mean(axis=(1, 2, 3)), base.mean(axis=(1, 2, 3)), equal_var=False).pvalue)
+    return r.passed and p_mean >= level / 2, f"{r.summary()}; image mean p {p_mean:.3g}"
+
+
 @pytest.mark.parametrize("est", sorted(ESTIMATORS))
 def test_estimator_unchanged_in_expectation(scene, est):
     integ, spp = ESTIMATORS[est]
@@ -197,10 +209,11 @@ def test_estimator_unchanged_in_expectation(scene, est):
     level = 1.0 - (1.0 - ALPHA) ** (1.0 / N_ZTESTS)
     for k, kind in enumerate(("power", "tree")):
         runs = _runs(scene, integ, spp, kind, 200 + 100 * k)
-        r = two_sample_t_test(runs, base, alpha=level)
-        assert r.passed, f"{est} {kind}: {r.summary()}"
+        ok, msg = _agree(runs, base, level)
+        assert ok, f"{est} {kind}: {msg}"
         # power check: the same renders a few % brighter are rejected
-        assert not two_sample_t_test(runs * POWER.get(est, 1.04), base, alpha=level).passed, f"{est} {kind}: no power"
+        ok, msg = _agree(runs * POWER.get(est, 1.04), base, level)
+        assert not ok, f"{est} {kind}: no power ({msg})"
 
 
 @pytest.mark.parametrize("kind", ["power", "tree"])
@@ -215,3 +228,41 @@ def test_thread_count_does_not_change_the_image(scene, kind):
 def test_bad_light_sampler_is_a_clear_error(scene):
     with pytest.raises(rm.SceneError, match="light_sampler"):
         rm.render(scene, integrator={"type": "path", "light_sampler": "bvh"}, spp=1)
+
+
+# Stress: 10^4 dim point lights and one 10^9 times brighter; 64 coincident
+# point lights. Every estimator (cheap budgets), every sampler: no NaN, Inf
+# or negative pixel, the same bytes with 1 and 2 threads.
+STRESS_BUDGET = {"path": 2, "direct": 2, "whitted": 2, "ptracer": 2, "bdpt": 1, "vcm": 1, "bpm": 1, "ppm": 1,
+                 "photonmapper": 1, "sppm": 1}
+
+
+@pytest.fixture(scope="module")
+def stress_scenes():
+    from light_sampler_scenes import grid_of_points
+    return {"bright_among_10k": rm.load_dict(grid_of_points(100, 1e-6, bright=1e3, res=6)),
+            "coincident": rm.load_dict(grid_of_points(8, 0.05, coincident=True, res=6))}
+
+
+@pytest.mark.parametrize("name", ["bright_among_10k", "coincident"])
+@pytest.mark.parametrize("kind", KINDS)
+def test_stress_scenes_clean_and_deterministic(stress_scenes, name, kind):
+    scene = stress_scenes[name]
+    for est, spp in STRESS_BUDGET.items():
+        integ = dict(ESTIMATORS[est][0], light_sampler=kind)
+        if est == "photonmapper":
+            integ.update(global_photons=500, caustic_photons=100)
+        if est == "sppm":
+            integ.update(photon_count=500)
+        a = rm.render(scene, integrator=integ, spp=spp, seed=4, threads=1)
+        b = rm.render(scene, integrator=integ, spp=spp, seed=4, threads=2)
+        img = np.asarray(a.image)
+        assert np.all(np.isfinite(img)) and img.min() >= 0.0, (name, est, kind)
+        assert img.max() > 0.0, (name, est, kind)  # the lights reach the camera
+        assert np.array_equal(a.image, b.image), (name, est, kind)
+    if name == "bright_among_10k" and kind != "uniform":
+        # the bright light takes almost every selection from the floor
+        core = scene.core()
+        r = core.light_selection(kind, np.float32([[0, -1, 0]]), np.float32([[0, 1, 0]]),
+                                 np.zeros((1, 1), np.float32))
+        assert r["pmf"][0, -1] > 0.99

@@ -55,7 +55,7 @@ def main(argv=None):
             runs = []
             for _ in range(args.repeats if kind == "tree" else 1):
                 # tiles of half-size 0.1 / sqrt(N); a zero normal makes the rest point lights
-                r = _core.light_sampler_scale(pos, power, normals, half_size=0.1 / np.sqrt(n), kind=kind,
+                r = _core.light_sampler_scale(pos, power[:, None], normals, half_size=0.1 / np.sqrt(n), kind=kind,
                                               queries=args.queries, seed=1)
                 runs.append(r)
             best = {k: statistics.median([r[k] for r in runs]) for k in ("build_seconds", "sample_ns", "pmf_ns")}

@@ -82,18 +82,18 @@ public:
             Color c(0.f);
             if (!scene.intersect(r, hit2)) {
                 for (const Emitter* e : scene.environment) {
-                    float w = bs.is_delta
-                                  ? 1.f
-                                  : mis_emission_hit(scene, *e, light_context(it), r.o, nullptr, r.d, bs.pdf_w, light_frac_, bsdf_frac_);
+                    float w = bs.is_delta ? 1.f
+                                          : mis_emission_hit(scene, *e, light_context(it), r.o, nullptr, r.d, bs.pdf_w,
+                                                             light_frac_, bsdf_frac_);
                     c += e->eval_environment(r.d) * w;
                 }
             } else if (scene.shapes[hit2.shape]->emitter >= 0) {
                 const Emitter& e = *scene.emitters[scene.shapes[hit2.shape]->emitter];
                 Color le = e.eval(hit2, hit2.wi);
                 if (!is_black(le)) {
-                    float w = bs.is_delta
-                                  ? 1.f
-                                  : mis_emission_hit(scene, e, light_context(it), r.o, &hit2, r.d, bs.pdf_w, light_frac_, bsdf_frac_);
+                    float w = bs.is_delta ? 1.f
+                                          : mis_emission_hit(scene, e, light_context(it), r.o, &hit2, r.d, bs.pdf_w,
+                                                             light_frac_, bsdf_frac_);
                     c += le * w;
                 }
             }

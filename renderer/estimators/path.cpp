@@ -84,8 +84,8 @@ public:
             // 2. Emission reached by the previous BSDF sample (or the camera ray),
             //    weighted against next event estimation unless that sample was delta.
             if (count_emission && mask[cls])
-                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev_p, prev_pdf_w,
-                                    out);
+                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev_p,
+                                    prev_pdf_w, out);
             if (!hit) break;
             const Shape& shape = *scene.shapes[it.shape];
 

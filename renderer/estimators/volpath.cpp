@@ -130,7 +130,8 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
 
         // 5. Emission reached by the previous BSDF / phase sample (or the camera ray).
         if (count_emission && mask[cls])
-            add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev_p, prev_pdf_w, out);
+            add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev_p,
+                                prev_pdf_w, out);
         if (!hit) break;
         const Shape& shape = *scene.shapes[it.shape];
         const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];

@@ -73,9 +73,9 @@ double cluster_cost(const LightBounds& b, double kr) {
     double theta_e = std::acos(std::clamp(double(b.cos_e), -1.0, 1.0));
     double theta_w = std::min(theta_o + theta_e, kPiD);
     double sin_o = safe_sqrt_d(1.0 - double(b.cos_o) * b.cos_o);
-    double m_omega = 2.0 * kPiD * (1.0 - b.cos_o) + kPiD / 2.0 *
-                                                       (2.0 * theta_w * sin_o - std::cos(theta_o - 2.0 * theta_w) -
-                                                        2.0 * theta_o * sin_o + b.cos_o);
+    double m_omega =
+        2.0 * kPiD * (1.0 - b.cos_o) +
+        kPiD / 2.0 * (2.0 * theta_w * sin_o - std::cos(theta_o - 2.0 * theta_w) - 2.0 * theta_o * sin_o + b.cos_o);
     DVec d = sub(dv(b.hi), dv(b.lo));
     double area = 2.0 * (d.x * d.y + d.y * d.z + d.z * d.x) + 1e-3 * ddot(d, d);
     return double(b.phi) * m_omega * kr * area;
@@ -256,19 +256,20 @@ int LightSampler::build(std::vector<uint32_t>& idx, size_t lo, size_t hi, int pa
                 ++count[b];
             }
             double kr = ext[dim] > 0.f ? double(ext_max) / double(ext[dim]) : 1.0;
+            // Prefix and suffix unions: buckets 0..s and s+1..B-1.
+            LightBounds left[kBuckets], right[kBuckets];
+            int nl[kBuckets], nr[kBuckets];
+            for (int b = 0; b < kBuckets; ++b) {
+                left[b] = b > 0 ? bounds_union(left[b - 1], bucket[b]) : bucket[0];
+                nl[b] = (b > 0 ? nl[b - 1] : 0) + count[b];
+            }
+            for (int b = kBuckets - 1; b >= 0; --b) {
+                right[b] = b < kBuckets - 1 ? bounds_union(right[b + 1], bucket[b]) : bucket[b];
+                nr[b] = (b < kBuckets - 1 ? nr[b + 1] : 0) + count[b];
+            }
             for (int s = 0; s < kBuckets - 1; ++s) {
-                LightBounds left, right;
-                int nl = 0, nr = 0;
-                for (int b = 0; b <= s; ++b) {
-                    left = bounds_union(left, bucket[b]);
-                    nl += count[b];
-                }
-                for (int b = s + 1; b < kBuckets; ++b) {
-                    right = bounds_union(right, bucket[b]);
-                    nr += count[b];
-                }
-                if (nl == 0 || nr == 0) continue;
-                double cost = cluster_cost(left, kr) + cluster_cost(right, kr);
+                if (nl[s] == 0 || nr[s + 1] == 0) continue;
+                double cost = cluster_cost(left[s], kr) + cluster_cost(right[s + 1], kr);
                 if (cost < best) {
                     best = cost;
                     best_dim = dim;
@@ -365,7 +366,8 @@ float LightSampler::pmf(const Vec3& p, const Vec3& n, int light) const {
     int k = 0;
     while (node != 0) {
         int par = parent_[size_t(node)];
-        double i0 = nodes_[size_t(par) + 1].b.importance(p, n), i1 = nodes_[nodes_[size_t(par)].child].b.importance(p, n);
+        double i0 = nodes_[size_t(par) + 1].b.importance(p, n),
+               i1 = nodes_[nodes_[size_t(par)].child].b.importance(p, n);
         sanitize(i0, i1);
         double tot = i0 + i1;
         double self = node == par + 1 ? i0 : i1;

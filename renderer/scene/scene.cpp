@@ -237,7 +237,8 @@ LightSamplerUse::LightSamplerUse(const Scene& scene, LightSamplerKind kind) : sc
     if (scene.lights_users_ > 0 && scene.active_lights_ != &want)
         throw std::invalid_argument(std::string("light_sampler '") + light_sampler_name(kind) +
                                     "': another render of this scene is running with light_sampler '" +
-                                    light_sampler_name(scene.active_lights_->kind()) + "'; render them one after the other");
+                                    light_sampler_name(scene.active_lights_->kind()) +
+                                    "'; render them one after the other");
     scene.active_lights_ = &want;
     ++scene.lights_users_;
 }

@@ -9,8 +9,7 @@ bool sample_light(const Scene& scene, const LightContext& ctx, Sampler& sampler,
     return sample_light(scene, ctx, u_pick, u, u_extra, ds);
 }
 
-bool sample_light(const Scene& scene, const LightContext& ctx, float u_pick, Vec2 u, float u_extra,
-                  DirectSample& ds) {
+bool sample_light(const Scene& scene, const LightContext& ctx, float u_pick, Vec2 u, float u_extra, DirectSample& ds) {
     float pick = 0.f;
     const Emitter* e = pick_emitter(scene, ctx, u_pick, pick);
     if (!e) return false;
@@ -48,8 +47,8 @@ bool trace_counting_emission(const Scene& scene, const Ray& ray, Interaction& it
 }
 
 void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* it, const Color& beta, int cls,
-                         int depth, bool prev_delta, const LightContext& prev_ctx, const Vec3& prev_p,
-                         float prev_pdf_w, EffectRadiance& out) {
+                         int depth, bool prev_delta, const LightContext& prev_ctx, const Vec3& prev_p, float prev_pdf_w,
+                         EffectRadiance& out) {
     const bool weighted = !(depth == 0 || prev_delta);
     if (!it) {
         for (const Emitter* e : scene.environment) {

@@ -85,8 +85,7 @@ inline bool survives_roulette(RouletteRule rule, int depth, int rr_depth, float 
 // emitter or the sample carries nothing.
 bool sample_light(const Scene& scene, const LightContext& ctx, Sampler& sampler, DirectSample& ds);
 // The same for given random numbers (u_pick picks the emitter).
-bool sample_light(const Scene& scene, const LightContext& ctx, float u_pick, Vec2 u, float u_extra,
-                  DirectSample& ds);
+bool sample_light(const Scene& scene, const LightContext& ctx, float u_pick, Vec2 u, float u_extra, DirectSample& ds);
 
 // Solid-angle density with which sample_light from `ctx` reaches emitter
 // `e` at `it` (an area emitter's point), or along a direction to the
@@ -117,8 +116,8 @@ float mis_emission_hit(const Scene& scene, const Emitter& e, const LightContext&
 // (mis_emission_hit, from prev_ctx and prev_p) unless the sample came from
 // the camera (depth 0) or a delta lobe.
 void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* it, const Color& beta, int cls,
-                         int depth, bool prev_delta, const LightContext& prev_ctx, const Vec3& prev_p,
-                         float prev_pdf_w, EffectRadiance& out);
+                         int depth, bool prev_delta, const LightContext& prev_ctx, const Vec3& prev_p, float prev_pdf_w,
+                         EffectRadiance& out);
 
 // One step of a camera path for estimators that take emission found along
 // it without an MIS weight (photonmapper, sppm, whitted: their only other route to
