@@ -4,6 +4,8 @@
 // check, ParamReader) rather than a copy of it.
 #include <pybind11/functional.h>
 
+#include <chrono>
+
 #include "bindings.h"
 #include "convert.h"
 #include "core/sampler.h"
@@ -78,26 +80,31 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
             py::arg("medium"), py::arg("o"), py::arg("d"), py::arg("t1"), py::arg("n"), py::arg("seed") = 0)
         .def(
             "sample_emitter_direction",
-            [](const Scene& s, py::object ref, py::object u) {
+            [](const Scene& s, py::object ref, py::object u, const std::string& light_sampler, py::object normal) {
                 // Next event estimation's light sample (sample_light, as estimate_direct
                 // takes it): u columns = (pick, u.x, u.y, u_extra); pdf includes the pick.
+                // `normal`: None (a point in a medium) or one per reference point.
                 if (!s.committed()) throw py::value_error("scene is not committed");
+                LightSamplerUse use(s, parse_light_sampler(light_sampler));
                 auto r = flat<float>(ref, 3, "ref");
                 auto uu = flat<float>(u, 4, "u");
                 size_t n = r.size() / 3;
                 if (uu.size() != 4 * n) throw py::value_error("u must be (N, 4) for N reference points");
+                std::vector<float> nn =
+                    normal.is_none() ? std::vector<float>(3 * n, 0.f) : flat<float>(normal, 3, "normal");
+                if (nn.size() != 3 * n) throw py::value_error("normal must be (N, 3) for N reference points");
                 std::vector<float> d(3 * n), pdf(n), rad(3 * n), delta(n);
-                const float pick = emitter_pick_prob(s);
                 for (size_t i = 0; i < n; ++i) {
                     if (s.emitters.empty()) continue;
                     DirectSample ds;
-                    sample_light(s, Vec3(r[3 * i], r[3 * i + 1], r[3 * i + 2]), uu[4 * i],
-                                 Vec2(uu[4 * i + 1], uu[4 * i + 2]), uu[4 * i + 3], ds);
+                    LightContext ctx{Vec3(r[3 * i], r[3 * i + 1], r[3 * i + 2]),
+                                     Vec3(nn[3 * i], nn[3 * i + 1], nn[3 * i + 2])};
+                    sample_light(s, ctx, uu[4 * i], Vec2(uu[4 * i + 1], uu[4 * i + 2]), uu[4 * i + 3], ds);
                     for (int k = 0; k < 3; ++k) {
                         d[3 * i + k] = ds.d[k];
                         rad[3 * i + k] = ds.radiance[k];
                     }
-                    pdf[i] = ds.pdf_w * pick;
+                    pdf[i] = ds.pdf_w * ds.pick;
                     delta[i] = ds.is_delta ? 1.f : 0.f;
                 }
                 py::dict out;
@@ -108,7 +115,7 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 out["is_delta"] = to_numpy(std::move(delta), {N});
                 return out;
             },
-            py::arg("ref"), py::arg("u"))
+            py::arg("ref"), py::arg("u"), py::arg("light_sampler") = "uniform", py::arg("normal") = py::none())
         .def(
             "sample_sensor_rays",
             [](const Scene& s, py::object film, py::object u) {
@@ -140,10 +147,13 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
             py::arg("film"), py::arg("u"))
         .def(
             "pdf_emitter_direction",
-            [](const Scene& s, py::object ref, py::object dirs) {
+            [](const Scene& s, py::object ref, py::object dirs, const std::string& light_sampler, py::object normal) {
                 // The light-sampling density that MIS assigns to a ray leaving ref
-                // along d (light_pdf_w, as mis_emission_hit takes it).
+                // along d (light_pdf_w, as mis_emission_hit takes it); `normal`
+                // as sample_emitter_direction's (one, or one per ref).
                 if (!s.committed()) throw py::value_error("scene is not committed");
+                LightSamplerUse use(s, parse_light_sampler(light_sampler));
+                std::vector<float> nn = normal.is_none() ? std::vector<float>() : flat<float>(normal, 3, "normal");
                 auto r = flat<float>(ref, 3, "ref");
                 auto dd = flat<float>(dirs, 3, "d");
                 size_t n = dd.size() / 3;
@@ -157,19 +167,141 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                         Ray ray;
                         ray.o = Vec3(r[3 * j], r[3 * j + 1], r[3 * j + 2]);
                         ray.d = normalize(Vec3(dd[3 * i], dd[3 * i + 1], dd[3 * i + 2]));
+                        LightContext ctx{ray.o, Vec3(0.f)};
+                        if (nn.size() >= 3 * (j + 1)) ctx.n = Vec3(nn[3 * j], nn[3 * j + 1], nn[3 * j + 2]);
                         Interaction it;
                         if (s.intersect(ray, it)) {
                             int e = s.shapes[it.shape]->emitter;
-                            if (e >= 0) out[i] = light_pdf_w(s, *s.emitters[e], ray.o, &it, ray.d);
+                            if (e >= 0) out[i] = light_pdf_w(s, *s.emitters[e], ctx, ray.o, &it, ray.d);
                         } else {
                             for (const Emitter* env : s.environment)
-                                out[i] += light_pdf_w(s, *env, ray.o, nullptr, ray.d);
+                                out[i] += light_pdf_w(s, *env, ctx, ray.o, nullptr, ray.d);
                         }
                     }
                 }
                 return to_numpy(std::move(out), {py::ssize_t(n)});
             },
-            py::arg("ref"), py::arg("d"));
+            py::arg("ref"), py::arg("d"), py::arg("light_sampler") = "uniform", py::arg("normal") = py::none())
+        .def(
+            "light_selection",
+            [](const Scene& s, const std::string& light_sampler, py::object ref, py::object normal, py::object u,
+               bool start) {
+                // Emitter selection (scene/light_sampler.h) from N points (normals: None for
+                // none): the index that each u picks and its probability, and the (N, E)
+                // matrix of every emitter's probability from each point. start: a light
+                // path's selection (no point).
+                if (!s.committed()) throw py::value_error("scene is not committed");
+                const LightSampler& ls = s.light_sampler(parse_light_sampler(light_sampler));
+                auto r = flat<float>(ref, 3, "ref");
+                size_t n = r.size() / 3;
+                std::vector<float> nn =
+                    normal.is_none() ? std::vector<float>(3 * n, 0.f) : flat<float>(normal, 3, "normal");
+                if (nn.size() != 3 * n) throw py::value_error("normal must be (N, 3) for N points");
+                auto uu = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(u);
+                if (!uu || uu.ndim() != 2 || size_t(uu.shape(0)) != n)
+                    throw py::value_error("u must be (N, M): M numbers per point");
+                size_t m = size_t(uu.shape(1));
+                size_t ne = s.emitters.size();
+                std::vector<int> idx(n * m);
+                std::vector<float> pick(n * m), table(n * ne);
+                for (size_t i = 0; i < n; ++i) {
+                    Vec3 p(r[3 * i], r[3 * i + 1], r[3 * i + 2]), nv(nn[3 * i], nn[3 * i + 1], nn[3 * i + 2]);
+                    for (size_t k = 0; k < m; ++k) {
+                        float uk = uu.data()[i * m + k];
+                        idx[i * m + k] =
+                            start ? ls.sample_start(uk, pick[i * m + k]) : ls.sample(p, nv, uk, pick[i * m + k]);
+                    }
+                    for (size_t e = 0; e < ne; ++e)
+                        table[i * ne + e] = start ? ls.pmf_start(int(e)) : ls.pmf(p, nv, int(e));
+                }
+                py::dict out;
+                py::array_t<int> ia({py::ssize_t(n), py::ssize_t(m)});
+                std::copy(idx.begin(), idx.end(), ia.mutable_data());
+                out["index"] = ia;
+                out["pick"] = to_numpy(std::move(pick), {py::ssize_t(n), py::ssize_t(m)});
+                out["pmf"] = to_numpy(std::move(table), {py::ssize_t(n), py::ssize_t(ne)});
+                out["nodes"] = ls.node_count();
+                out["depth"] = ls.depth();
+                out["bytes"] = ls.memory_bytes();
+                return out;
+            },
+            py::arg("light_sampler"), py::arg("ref"), py::arg("normal"), py::arg("u"), py::arg("start") = false);
+
+    m.def(
+        "light_sampler_scale",
+        [](py::object positions, py::object power, py::object normals, float half_size, const std::string& kind,
+           int queries, uint64_t seed) {
+            // The light-tree scale study (benchmarks/studies/light_tree_scale.py): a sampler
+            // over N synthetic emitters (points, or one-sided squares of half-size
+            // `half_size` facing `normals`), its build time, memory and depth, and the mean
+            // time of one selection (sample) and one probability (pmf) from `queries`
+            // random points with random normals in the emitters' box. A zero normal
+            // makes that emitter a point light.
+            auto pos = flat<float>(positions, 3, "positions");
+            auto phi = flat<float>(power, 1, "power");
+            size_t n = pos.size() / 3;
+            if (phi.size() != n) throw py::value_error("power: one per position");
+            std::vector<float> nn = normals.is_none() ? std::vector<float>() : flat<float>(normals, 3, "normals");
+            if (!nn.empty() && nn.size() != 3 * n) throw py::value_error("normals: one per position");
+            LightSamplerKind k = parse_light_sampler(kind);
+            std::vector<LightBounds> b(n);
+            Vec3 lo(kInf), hi(-kInf);
+            for (size_t i = 0; i < n; ++i) {
+                Vec3 p(pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]);
+                Vec3 nv = nn.empty() ? Vec3(0.f) : Vec3(nn[3 * i], nn[3 * i + 1], nn[3 * i + 2]);
+                float len = length(nv);
+                bool square = len > 0.f;  // a zero normal: a point light
+                b[i].lo = p - Vec3(square ? half_size : 0.f);
+                b[i].hi = p + Vec3(square ? half_size : 0.f);
+                b[i].phi = phi[i];
+                b[i].w = square ? nv / len : Vec3(0.f, 0.f, 1.f);
+                b[i].cos_o = square ? 1.f : -1.f;
+                b[i].cos_e = 0.f;
+                lo = vmin(lo, b[i].lo);
+                hi = vmax(hi, b[i].hi);
+            }
+            py::dict out;
+            py::gil_scoped_release nogil;
+            auto t0 = std::chrono::steady_clock::now();
+            LightSampler ls(k, std::move(b), std::vector<bool>(n, false));
+            auto t1 = std::chrono::steady_clock::now();
+            Sampler sampler(seed, 0, 0);
+            const size_t nq = size_t(std::max(queries, 0));
+            std::vector<Vec3> qp(nq), qn(nq);
+            std::vector<float> qu(nq);
+            for (int q = 0; q < queries; ++q) {
+                Vec3 u3(sampler.next_1d(), sampler.next_1d(), sampler.next_1d());
+                qp[size_t(q)] = lo + (hi - lo) * u3;
+                Vec2 u = sampler.next_2d();
+                float z = 1.f - 2.f * u.x, r = std::sqrt(std::max(0.f, 1.f - z * z)), a = 2.f * kPi * u.y;
+                qn[size_t(q)] = Vec3(r * std::cos(a), r * std::sin(a), z);
+                qu[size_t(q)] = sampler.next_1d();
+            }
+            std::vector<int> picked(nq);
+            double check = 0.0;
+            auto t2 = std::chrono::steady_clock::now();
+            for (int q = 0; q < queries; ++q) {
+                float pm;
+                picked[size_t(q)] = ls.sample(qp[size_t(q)], qn[size_t(q)], qu[size_t(q)], pm);
+                check += pm;
+            }
+            auto t3 = std::chrono::steady_clock::now();
+            for (int q = 0; q < queries; ++q) check += ls.pmf(qp[size_t(q)], qn[size_t(q)], picked[size_t(q)]);
+            auto t4 = std::chrono::steady_clock::now();
+            auto sec = [](auto a, auto b) { return std::chrono::duration<double>(b - a).count(); };
+            py::gil_scoped_acquire gil;
+            out["build_seconds"] = sec(t0, t1);
+            out["sample_ns"] = 1e9 * sec(t2, t3) / std::max(queries, 1);
+            out["pmf_ns"] = 1e9 * sec(t3, t4) / std::max(queries, 1);
+            out["bytes"] = ls.memory_bytes();
+            out["nodes"] = ls.node_count();
+            out["depth"] = ls.depth();
+            out["checksum"] = check;
+            return out;
+        },
+        py::arg("positions"), py::arg("power"), py::arg("normals") = py::none(), py::arg("half_size") = 0.f,
+        py::arg("kind") = "tree", py::arg("queries") = 100000, py::arg("seed") = 0,
+        "test hook: build and query a light sampler over synthetic emitters (the light-tree scale study)");
 
     m.def(
         "bdpt_mis_check",
@@ -180,6 +312,7 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
             std::vector<int> strategy;
             {
                 py::gil_scoped_release nogil;
+                LightSamplerUse lights(scene, bdpt->light_sampler);
                 bdpt_mis_check(scene, *bdpt, seed, n, fast, brute, sums, strategy);
             }
             return py::make_tuple(
@@ -199,6 +332,7 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
             std::vector<int> technique;
             {
                 py::gil_scoped_release nogil;
+                LightSamplerUse lights(scene, vcm->light_sampler);
                 vcm_mis_check(scene, *vcm, seed, n, iteration, mutation, fast, brute, technique, sums, own_fast,
                               own_brute);
             }
@@ -274,6 +408,7 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                         break;
                 }
             }
+            reader.get_string("light_sampler");  // read by make_integrator for every estimator
             reader.report_unused();
             return from_param_set(resolved);
         },

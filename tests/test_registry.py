@@ -149,7 +149,8 @@ def test_numbers_convert_as_declared():
     # An integer is a number; numpy scalars are plain values.
     assert _resolve("bdpt", beta=3)["beta"] == 3.0 and type(_resolve("bdpt", beta=3)["beta"]) is float
     assert _resolve("path", max_depth=np.int64(4), hide_emitters=np.bool_(True)) == {
-        "max_depth": 4, "rr_depth": 5, "hide_emitters": True, "truncation_probe": 0.0625}
+        "max_depth": 4, "rr_depth": 5, "hide_emitters": True, "truncation_probe": 0.0625,
+        "light_sampler": "uniform"}
     _raises({"type": "bdpt", "beta": math.nan}, "parameter 'beta'", "finite")
     _raises({"type": "sppm", "initial_radius": math.inf}, "parameter 'initial_radius'", "finite")
     _raises({"type": "path", "max_depth": 1 << 40}, "parameter 'max_depth'", "32-bit")
@@ -162,7 +163,8 @@ def test_direct_counts():
     _raises({"type": "direct", "emitter_samples": 0, "bsdf_samples": 0}, "integrator 'direct'", "not both 0")
     assert _resolve("direct", emitter_samples=0)["bsdf_samples"] == 1
     # Mitsuba's shading_samples sets both counts; with one of them it is refused.
-    assert _resolve("direct", shading_samples=3) == {"emitter_samples": 3, "bsdf_samples": 3, "hide_emitters": False}
+    assert _resolve("direct", shading_samples=3) == {"emitter_samples": 3, "bsdf_samples": 3, "hide_emitters": False,
+                                                     "light_sampler": "uniform"}
     _raises({"type": "direct", "shading_samples": 3, "bsdf_samples": 2}, "parameter 'shading_samples'", "give either")
     _raises({"type": "direct", "shading_samples": -1}, "parameter 'shading_samples'", ">= 0")
 

@@ -62,7 +62,8 @@ FullPath full_path(const BdptMisProbe& bd, const Scene& scene, int s, int t) {
     for (int i = k; i >= 1; --i) {
         double p;
         if (i == k) {  // next event estimation's density (strategy s' = 1); p_le below for s' >= 2
-            p = em->is_delta() ? emitter_pick_prob(scene) : light_origin_pdf(scene, x[k], x[k - 1]);
+            p = em->is_delta() ? emitter_pick_prob(scene, vertex_light_context(x[k - 1]), *em)
+                               : light_origin_pdf(scene, x[k], x[k - 1]);
         } else {
             if (x[i + 1].delta) continue;
             p = i == k - 1 ? emitter_pdf_to(scene, x[k], x[i]) : pdf_to(scene, x[i + 1], &x[i + 2], x[i]);
@@ -74,8 +75,12 @@ FullPath full_path(const BdptMisProbe& bd, const Scene& scene, int s, int t) {
     // (Where next event estimation cannot reach x_k, both keep the
     // remapped density, as nee_over_emission's ratio of 1 does.)
     fp.p_le = pl[k];
+    if (em->is_delta() && !x[k].infinite && pl[k] > 0.0) {
+        double a = double(start_pick_prob(scene, *em));
+        if (a > 0.0) fp.p_le = a;
+    }
     if (!em->is_delta() && !x[k].infinite && light_origin_pdf(scene, x[k], x[k - 1]) > 0.f) {
-        double a = double(emitter_pick_prob(scene)) * em->pdf_emission_a(x[k].it.p);
+        double a = double(emission_origin_pdf(scene, *em, x[k].it.p));
         if (a > 0.0) fp.p_le = a;
     }
     return fp;

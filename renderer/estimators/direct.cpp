@@ -85,9 +85,9 @@ public:
             Color c(0.f);
             if (!scene.intersect(r, hit2)) {
                 for (const Emitter* e : scene.environment) {
-                    float w = bs.is_delta
-                                  ? 1.f
-                                  : mis_emission_hit(scene, *e, r.o, nullptr, r.d, bs.pdf_w, light_frac_, bsdf_frac_);
+                    float w = bs.is_delta ? 1.f
+                                          : mis_emission_hit(scene, *e, light_context(it), r.o, nullptr, r.d, bs.pdf_w,
+                                                             light_frac_, bsdf_frac_);
                     c += e->eval_environment(r.d) * w;
                 }
             } else if (scene.shapes[hit2.shape]->emitter >= 0) {
@@ -96,7 +96,7 @@ public:
                 if (!is_black(le)) {
                     // Both densities from it.p, as estimate_direct's (scatter_origin.h).
                     float w = bs.is_delta ? 1.f
-                                          : mis_emission_hit(scene, e, it.p, &hit2, r.d,
+                                          : mis_emission_hit(scene, e, light_context(it), it.p, &hit2, r.d,
                                                              origin.pdf_to(hit2.p, bs.pdf_w), light_frac_, bsdf_frac_);
                     c += le * w;
                 }

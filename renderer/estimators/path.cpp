@@ -77,6 +77,7 @@ public:
         float prev_pdf_w = 0.f;
         bool prev_delta = true;
         ScatterOrigin prev;  // the vertex the current ray left (scatter_origin.h)
+        LightContext prev_ctx{};  // where the light sample competing with the BSDF sample was selected from
         BsdfContext ctx;
         // Where contributions go: the image, or, once the truncation probe
         // continued the path past max_depth, the light it would have cut off.
@@ -97,7 +98,7 @@ public:
             if (count_emission && mask[cls]) {
                 float pdf_w = prev_pdf_w;
                 if (hit && !prev_delta && scene.shapes[it.shape]->emitter >= 0) pdf_w = prev.pdf_to(it.p, prev_pdf_w);
-                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev.p, pdf_w,
+                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev.p, pdf_w,
                                     *sink);
             }
             if (!hit) break;
@@ -156,6 +157,7 @@ public:
             prev_delta = bs.is_delta;
             prev.set(it, wi, bsdf);
             ray = it.spawn(it.to_world(bs.wo));
+            prev_ctx = light_context(it);
 
             // 6. Russian roulette (Mitsuba's rule, common.h).
             if (!survives_roulette(RouletteRule::Capped, depth + 1, rr_depth_, max_component(beta) * eta_scale,

@@ -105,7 +105,7 @@ public:
     void trace_light_path(const Scene& scene, Sampler& sampler, int, std::vector<Splat>& out,
                           ThreadStats& stats) const override {
         // 1. The light subpath y0 y1 .. (subpath.h: an emitter picked
-        //    uniformly, a ray of light leaving it, the adjoint random walk),
+        //    by the light sampler, a ray of light leaving it, the adjoint random walk),
         //    stopped where no requested class can follow. Vertex y_i joined
         //    to the sensor makes a path of i + 1 segments: y0 .. y_{max_depth - 1}.
         std::vector<PathVertex>& light = tl_light();
@@ -115,7 +115,7 @@ public:
         VertexVisitor visit(reach);
         if (!scene.emitters.empty()) ++stats.paths;
         if (!light_subpath(scene, sampler, max_vertices, rr_depth_, light, es, stats, &visit, false)) return;
-        const float inv_pick = 1.f / emitter_pick_prob(scene);
+        const float inv_pick = 1.f / start_pick_prob(scene, *light[0].emitter);
 
         // 2. The emitter seen directly: its sampled origin (or, at infinity,
         //    its sampled direction) connected to the sensor, s = 1, t = 1.

@@ -135,7 +135,7 @@ double VcmWeights::emission(const Scene& scene, const PathVertex* cam, const Vcm
     double p_nee = light_origin_pdf(scene, e, zm);
     double p_le = p_nee;
     if (!e.infinite) {
-        double a = double(emitter_pick_prob(scene)) * e.emitter->pdf_emission_a(e.it.p);
+        double a = double(emission_origin_pdf(scene, *e.emitter, e.it.p));
         if (a > 0.0) p_le = a;
     }
     if (!(p_nee > 0.0)) p_nee = p_le;

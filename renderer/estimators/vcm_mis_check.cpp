@@ -62,12 +62,13 @@ Full full_path(const Scene& scene, const VcmWeights& w, const std::vector<PathVe
             i == k - 1 ? w.film_pixels * camera_pdf_a(scene, x[k], x[k - 1]) : pdf_to(scene, x[i + 1], &x[i + 2], x[i]);
         f.pc[i] = p != 0.0 ? p : 1.0;
     }
-    const float pick = emitter_pick_prob(scene);
     if (em->is_delta()) {
-        f.p_le = f.p_nee = pick;
+        f.p_le = start_pick_prob(scene, *em);
+        f.p_nee = x[0].infinite ? f.p_le : emitter_pick_prob(scene, vertex_light_context(x[1]), *em);
+        if (!(f.p_le > 0.0) || !(f.p_nee > 0.0)) f.p_nee = f.p_le;  // as nee_over_emission's ratio of 1
     } else {
         f.p_nee = light_origin_pdf(scene, x[0], x[1]);
-        f.p_le = x[0].infinite ? f.p_nee : double(pick) * em->pdf_emission_a(x[0].it.p);
+        f.p_le = x[0].infinite ? f.p_nee : double(emission_origin_pdf(scene, *em, x[0].it.p));
         if (!(f.p_le > 0.0)) f.p_le = f.p_nee;
         if (!(f.p_nee > 0.0)) f.p_nee = f.p_le;  // as nee_over_emission's ratio of 1
     }

@@ -59,6 +59,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
     float prev_pdf_w = 0.f;
     bool prev_delta = true;
     ScatterOrigin prev;  // the vertex the current ray left (scatter_origin.h)
+    LightContext prev_ctx{};
     BsdfContext ctx;
     int depth = 0;  // scattering vertices so far (surface or medium; null boundaries excluded)
     SpectralThroughput th(std::min(int(sampler.next_1d() * 3.f), 2));
@@ -120,6 +121,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                 prev_delta = false;
                 prev.p = mi.p;  // a medium vertex: the ray leaves mi.p itself
                 prev.bsdf = nullptr;
+                prev_ctx = light_context(mi);
                 ray = Ray{mi.p, ps.wo, 0.f, kInf};
                 if (!roulette(sampler.next_1d())) break;
                 if (!pc.can_reach(mask, true)) break;
@@ -132,7 +134,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         if (count_emission && mask[cls]) {
             float pdf_w = prev_pdf_w;
             if (hit && !prev_delta && scene.shapes[it.shape]->emitter >= 0) pdf_w = prev.pdf_to(it.p, prev_pdf_w);
-            add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev.p, pdf_w, out);
+            add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev.p, pdf_w, out);
         }
         if (!hit) break;
         const Shape& shape = *scene.shapes[it.shape];
@@ -193,6 +195,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         mt.cross(it, wo, false);
         prev.set(it, wi, bsdf_at);
         ray = it.spawn(wo);
+        prev_ctx = light_context(it);
         if (!roulette(sampler.next_1d())) break;
     }
 }

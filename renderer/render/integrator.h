@@ -210,6 +210,9 @@ public:
     virtual void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
                         ThreadStats& stats) const = 0;
     EffectMask mask = all_effects();
+    // The emitter selection of its renders (the `light_sampler` parameter;
+    // render() makes it the scene's for the render's duration).
+    LightSamplerKind light_sampler = LightSamplerKind::Uniform;
 };
 
 // The estimator `desc` names, its parameters checked against its declaration

@@ -184,6 +184,13 @@ std::string ParamSpec::check(const ParamValue& v) const {
     return "must be " + r;
 }
 
+ParamSpec light_sampler_param() {
+    return ParamSpec::string("light_sampler", "uniform",
+                             "emitter selection: 'uniform' (each emitter alike), 'power' (in proportion to its "
+                             "power), 'tree' (a light tree seen from the shading point; light paths start by power)")
+        .one_of({"uniform", "power", "tree"});
+}
+
 ParamSpec max_depth_param() {
     return ParamSpec::integer("max_depth", -1, "longest path in segments")
         .at_least(1)
@@ -354,6 +361,8 @@ bool convert(const ParamValue& v, ParamType type, ParamValue& out) {
 
 bool register_estimator(EstimatorInfo info) {
     Registry& r = registry();
+    // Every estimator selects its emitters by light_sampler, read by build().
+    if (!info.param("light_sampler")) info.params.push_back(light_sampler_param());
     std::string err = declaration_error(info, r);
     if (!err.empty()) {
         r.errors.push_back("estimator '" + info.name + "': " + err);
@@ -447,7 +456,9 @@ std::unique_ptr<Integrator> build(const IntegratorDesc& desc, ParamSet& resolved
     resolved = resolve_params(info, desc.type, desc.params);
     ParamReader reader(info, desc.type, resolved);
     std::unique_ptr<Integrator> r = info.factory(reader);
+    LightSamplerKind lights = parse_light_sampler(reader.get_string("light_sampler"));
     reader.report_unused();
+    r->light_sampler = lights;
     r->type = desc.type;
     r->caps = info.caps;
     return r;

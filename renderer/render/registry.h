@@ -103,6 +103,10 @@ struct ParamSpec {
 
 // The parameters several estimators share, declared once.
 ParamSpec max_depth_param();
+// Emitter selection (scene/light_sampler.h), shared by every estimator:
+// register_estimator adds it to each declaration and make_integrator reads
+// it into Integrator::light_sampler, so an estimator's own code never does.
+ParamSpec light_sampler_param();
 ParamSpec rr_depth_param();
 ParamSpec hide_emitters_param();
 // The truncation probe of the estimators that estimate what max_depth cuts off.

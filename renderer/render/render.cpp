@@ -33,6 +33,7 @@ RenderOutput render(const Scene& scene, const Integrator& requested, const Rende
                                     "'): only the camera-path estimators sample its "
                                     "exit points; use integrator 'path' (or 'volpath')");
     }
+    LightSamplerUse lights(scene, requested.light_sampler);
     if (integrator.owns_driver()) return integrator.drive(scene, opts, poll);
     if (integrator.is_light_tracer()) return render_light_paths(scene, integrator, opts, poll);
     return render_camera_paths(scene, integrator, opts, poll);

@@ -84,6 +84,15 @@ public:
         return radiance_ * (c / es.pdf_a);
     }
     float pdf_emission_a(const Vec3&) const override { return 1.f / shape_->area(); }
+    // pi L A: a cosine emitter on one side of every point.
+    float power(float) const override { return luminance(radiance_) * kPi * shape_->area(); }
+    bool light_bounds(LightBounds& b) const override {
+        b.lo = shape_->bbox_min();
+        b.hi = shape_->bbox_max();
+        shape_->normal_cone(b.w, b.cos_o);
+        b.cos_e = 0.f;  // cos(pi / 2): emits over the hemisphere of each normal
+        return true;
+    }
     float pdf_emission_w(const Vec3& n, const Vec3& w) const override {
         float c = dot(n, w);
         return c > 0.f ? c * kInvPi : 0.f;
@@ -128,6 +137,14 @@ public:
     }
     Color emitted_towards(const EmissionSample&, const Vec3&) const override { return intensity_; }
     float pdf_emission_w(const Vec3&, const Vec3&) const override { return warp::square_to_uniform_sphere_pdf_w(); }
+    float power(float) const override { return luminance(intensity_) * 4.f * kPi; }
+    bool light_bounds(LightBounds& b) const override {
+        b.lo = b.hi = pos_;
+        b.w = Vec3(0.f, 0.f, 1.f);
+        b.cos_o = -1.f;
+        b.cos_e = 0.f;
+        return true;
+    }
 
 private:
     Color intensity_;
@@ -195,6 +212,21 @@ public:
         float theta = std::atan2(std::sqrt(local.x * local.x + local.y * local.y), local.z);
         return theta <= cutoff_ ? 1.f / (2.f * kPi * 2.f * sqr(std::sin(0.5f * cutoff_))) : 0.f;
     }
+    // I 2 pi ((1 - cos beam) + (cos beam - cos cutoff) / 2), as pbrt-v4's SpotLight::Phi.
+    float power(float) const override {
+        float cb = std::cos(beam_), cc = std::cos(cutoff_);
+        return luminance(intensity_) * 2.f * kPi * ((1.f - cb) + (cb - cc) / 2.f);
+    }
+    // Full intensity within the beam, falling off to 0 at the cutoff: the
+    // spread beyond the beam widened by 1e-3 rad, so rounding never drops
+    // a lit direction.
+    bool light_bounds(LightBounds& b) const override {
+        b.lo = b.hi = pos_;
+        b.w = normalize(xf_.vector(Vec3(0.f, 0.f, 1.f)));
+        b.cos_o = std::cos(beam_);
+        b.cos_e = std::cos(std::min(cutoff_ - beam_ + 1e-3f, kPi));
+        return true;
+    }
 
 private:
     Color intensity_;
@@ -239,6 +271,11 @@ public:
         return es;
     }
 
+    float power(float radius) const override {
+        float r = infinite_disk_radius(radius);
+        return luminance(irradiance_) * kPi * r * r;
+    }
+
 private:
     Color irradiance_;
     Vec3 dir_;
@@ -278,6 +315,11 @@ public:
         es.pdf_w = warp::square_to_uniform_sphere_pdf_w();
         es.weight = radiance_ * (4.f * kPi * kPi * r * r);
         return es;
+    }
+
+    float power(float radius) const override {
+        float r = infinite_disk_radius(radius);
+        return luminance(radiance_) * 4.f * kPi * kPi * r * r;
     }
 
 private:
@@ -391,6 +433,12 @@ public:
         es.pdf_w = pdf;
         es.weight = eval_environment(w) * (kPi * r * r / pdf);
         return es;
+    }
+
+    // total_ is the integral of luminance over the sphere (the cell weights).
+    float power(float radius) const override {
+        float r = infinite_disk_radius(radius);
+        return float(total_) * kPi * r * r;
     }
 
 private:

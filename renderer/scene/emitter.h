@@ -7,6 +7,7 @@
 #include "core/math.h"
 #include "core/spectrum.h"
 #include "scene/desc.h"
+#include "scene/light_sampler.h"
 #include "scene/records.h"
 
 namespace rm {
@@ -22,6 +23,7 @@ struct DirectSample {
     bool is_delta = false;
     Color radiance{0.f};  // radiance arriving along -d (for point/spot: intensity / dist^2)
     float eps = 0.f;      // offset that clears p's floating-point error (area emitters)
+    float pick = 0.f;     // the probability that the emitter was selected (set by sample_light)
 };
 
 // A ray of light leaving an emitter, for light-path estimators (ptracer, later
@@ -78,6 +80,13 @@ public:
     virtual float pdf_emission_w(const Vec3& n, const Vec3& w) const { return 0.f; }
     // Area density of sample_emission's origin at p (area emitters; 0 otherwise).
     virtual float pdf_emission_a(const Vec3& p) const { return 0.f; }
+    // Light selection (scene/light_sampler.h): the luminance of the flux it
+    // emits (emitters at infinity: through the disk of scene_radius, as
+    // pbrt-v4's Light::Phi), and for a finite emitter the bounds of its
+    // light with phi = 0 (the sampler sets it); false at infinity.
+    virtual float power(float scene_radius) const = 0;
+    virtual bool light_bounds(LightBounds& b) const { return false; }
+    int index = -1;  // in Scene::emitters
     bool is_delta() const { return delta_; }
     bool is_environment() const { return environment_; }
     // At infinity: directional and environment emitters (their light rays

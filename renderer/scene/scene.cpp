@@ -115,12 +115,14 @@ void Scene::add_area_emitter(int shape, const EmitterDesc& desc) {
     if (shapes[shape]->emitter >= 0)
         throw std::invalid_argument("shape '" + shapes[shape]->id + "' already has an emitter");
     emitters.push_back(make_area_emitter(desc, shapes[shape].get()));
+    emitters.back()->index = int(emitters.size()) - 1;
     shapes[shape]->emitter = int(emitters.size()) - 1;
     features.has_area_emitters = true;
 }
 
 void Scene::add_emitter(const EmitterDesc& desc) {
     emitters.push_back(make_emitter(desc));
+    emitters.back()->index = int(emitters.size()) - 1;
     const Emitter* e = emitters.back().get();
     if (e->is_environment()) {
         environment.push_back(e);
@@ -206,6 +208,44 @@ void Scene::commit() {
     }
     if (sensor_desc.medium >= 0) features.has_media = true;
     committed_ = true;
+    active_lights_ = &light_sampler(LightSamplerKind::Uniform);
+}
+
+const LightSampler& Scene::light_sampler(LightSamplerKind kind) const {
+    if (!committed_) throw std::logic_error("light_sampler: the scene is not committed");
+    std::lock_guard<std::mutex> lock(lights_mutex_);
+    std::unique_ptr<LightSampler>& slot = lights_[int(kind)];
+    if (!slot) {
+        Vec3 c;
+        float r;
+        bounding_sphere(c, r);
+        std::vector<LightBounds> b(emitters.size());
+        std::vector<bool> inf(emitters.size());
+        if (kind != LightSamplerKind::Uniform)
+            for (size_t i = 0; i < emitters.size(); ++i) {
+                inf[i] = kind == LightSamplerKind::Tree ? !emitters[i]->light_bounds(b[i]) : true;
+                b[i].phi = emitters[i]->power(r);
+            }
+        slot = std::make_unique<LightSampler>(kind, std::move(b), std::move(inf));
+    }
+    return *slot;
+}
+
+LightSamplerUse::LightSamplerUse(const Scene& scene, LightSamplerKind kind) : scene_(scene) {
+    const LightSampler& want = scene.light_sampler(kind);
+    std::lock_guard<std::mutex> lock(scene.lights_mutex_);
+    if (scene.lights_users_ > 0 && scene.active_lights_ != &want)
+        throw std::invalid_argument(std::string("light_sampler '") + light_sampler_name(kind) +
+                                    "': another render of this scene is running with light_sampler '" +
+                                    light_sampler_name(scene.active_lights_->kind()) +
+                                    "'; render them one after the other");
+    scene.active_lights_ = &want;
+    ++scene.lights_users_;
+}
+
+LightSamplerUse::~LightSamplerUse() {
+    std::lock_guard<std::mutex> lock(scene_.lights_mutex_);
+    if (--scene_.lights_users_ == 0) scene_.active_lights_ = scene_.lights_[int(LightSamplerKind::Uniform)].get();
 }
 
 static bool ray_in_range(const Ray& ray) {

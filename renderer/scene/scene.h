@@ -5,6 +5,7 @@
 #include <embree3/rtcore.h>
 
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -12,6 +13,7 @@
 #include "scene/desc.h"
 #include "scene/dipole.h"
 #include "scene/emitter.h"
+#include "scene/light_sampler.h"
 #include "scene/medium.h"
 #include "scene/records.h"
 #include "scene/sensor.h"
@@ -83,6 +85,13 @@ public:
         return dot(d, it.n) > 0.f ? it.medium_outside : it.medium_inside;
     }
 
+    // Emitter selection (scene/light_sampler.h): the sampler of `kind`
+    // over this scene's emitters, built on first use (committed scenes).
+    const LightSampler& light_sampler(LightSamplerKind kind) const;
+    // The one the render in progress uses (LightSamplerUse); uniform
+    // outside renders. Every light sample and light path selects here.
+    const LightSampler& lights() const { return *active_lights_; }
+
     std::vector<std::unique_ptr<Shape>> shapes;
     std::vector<std::unique_ptr<Bsdf>> bsdfs;
     std::vector<std::unique_ptr<Emitter>> emitters;
@@ -107,11 +116,31 @@ public:
     }
 
 private:
+    friend class LightSamplerUse;
+    mutable std::mutex lights_mutex_;
+    mutable std::unique_ptr<LightSampler> lights_[3];
+    mutable const LightSampler* active_lights_ = nullptr;
+    mutable int lights_users_ = 0;
     int add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals);
     RTCDevice device_ = nullptr;
     RTCScene scene_ = nullptr;
     bool committed_ = false;
     int sensor_shape_ = -1;
+};
+
+// Makes `kind` the scene's selection for its lifetime (one render): the
+// sampler every estimator's light samples and light paths use. Renders of
+// one scene at the same time must agree on it (std::invalid_argument
+// otherwise, naming both).
+class LightSamplerUse {
+public:
+    LightSamplerUse(const Scene& scene, LightSamplerKind kind);
+    ~LightSamplerUse();
+    LightSamplerUse(const LightSamplerUse&) = delete;
+    LightSamplerUse& operator=(const LightSamplerUse&) = delete;
+
+private:
+    const Scene& scene_;
 };
 
 }  // namespace rm

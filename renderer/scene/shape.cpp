@@ -3,6 +3,7 @@
 #include <stdexcept>
 
 #include "core/warp.h"
+#include "scene/light_sampler.h"
 
 namespace rm {
 
@@ -51,6 +52,22 @@ RTCGeometry Mesh::create_geometry(RTCDevice device, unsigned geom_id) {
                                triangle_count());
     rtcCommitGeometry(g);
     return g;
+}
+
+void Mesh::normal_cone(Vec3& w, float& cos_theta) const {
+    DirectionCone c;
+    for (const Vec3& n : face_n_) c = cone_union(c, cone_of(n));
+    for (size_t i = 0; i + 2 < normals_.size(); i += 3) {
+        Vec3 n(normals_[i], normals_[i + 1], normals_[i + 2]);
+        float l = length(n);
+        if (!(l > 0.f) || !std::isfinite(l)) continue;
+        c = cone_union(c, cone_of(flip_normals ? -(n / l) : n / l));
+    }
+    w = c.w;
+    cos_theta = c.empty ? -1.f : c.cos_theta;
+    // Interpolated shading normals stay inside a cone narrower than a
+    // hemisphere (it is convex), not inside a wider one.
+    if (!normals_.empty() && cos_theta < 0.f) cos_theta = -1.f;
 }
 
 void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const {

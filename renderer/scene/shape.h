@@ -45,6 +45,14 @@ public:
     virtual float area() const = 0;
     virtual Vec3 bbox_min() const = 0;
     virtual Vec3 bbox_max() const = 0;
+    // A cone holding every normal of the surface (flip_normals applied,
+    // shading normals included; valid after the scene's commit), for the
+    // light tree (scene/light_sampler.h): axis w, cosine of its half-angle
+    // (-1: the whole sphere, the default).
+    virtual void normal_cone(Vec3& w, float& cos_theta) const {
+        w = Vec3(0.f, 0.f, 1.f);
+        cos_theta = -1.f;
+    }
 };
 
 class Mesh final : public Shape {
@@ -60,6 +68,7 @@ public:
     size_t triangle_count() const { return indices_.size() / 3; }
     // Corner j (0..2) of triangle f, world space (the patches of radiosity).
     Vec3 corner(size_t f, int j) const { return vertex(indices_[3 * f + size_t(j)]); }
+    void normal_cone(Vec3& w, float& cos_theta) const override;
 
 private:
     Vec3 vertex(uint32_t i) const { return {pos_[3 * i], pos_[3 * i + 1], pos_[3 * i + 2]}; }
@@ -96,6 +105,10 @@ public:
     float area() const override { return area_; }
     Vec3 bbox_min() const override { return lo_; }
     Vec3 bbox_max() const override { return hi_; }
+    void normal_cone(Vec3& w, float& cos_theta) const override {
+        w = flip_normals ? -normal_ : normal_;
+        cos_theta = 1.f;
+    }
     Transform xf_;
 
 private:

@@ -2,31 +2,33 @@
 
 namespace rm {
 
-bool sample_light(const Scene& scene, const Vec3& p, Sampler& sampler, DirectSample& ds) {
+bool sample_light(const Scene& scene, const LightContext& ctx, Sampler& sampler, DirectSample& ds) {
     float u_pick = sampler.next_1d();
     Vec2 u = sampler.next_2d();
     float u_extra = sampler.next_1d();
-    return sample_light(scene, p, u_pick, u, u_extra, ds);
+    return sample_light(scene, ctx, u_pick, u, u_extra, ds);
 }
 
-bool sample_light(const Scene& scene, const Vec3& p, float u_pick, Vec2 u, float u_extra, DirectSample& ds) {
-    const Emitter* e = pick_emitter(scene, u_pick);
+bool sample_light(const Scene& scene, const LightContext& ctx, float u_pick, Vec2 u, float u_extra, DirectSample& ds) {
+    float pick = 0.f;
+    const Emitter* e = pick_emitter(scene, ctx, u_pick, pick);
     if (!e) return false;
-    ds = e->sample_direct(p, u, u_extra);
+    ds = e->sample_direct(ctx.p, u, u_extra);
+    ds.pick = pick;
     return ds.pdf_w > 0.f && !is_black(ds.radiance);
 }
 
 Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsdf, const Vec3& wi_local,
                       Sampler& sampler, ThreadStats& stats, float light_frac, float bsdf_frac) {
     DirectSample ds;
-    if (!sample_light(scene, it.p, sampler, ds)) return Color(0.f);
+    if (!sample_light(scene, light_context(it), sampler, ds)) return Color(0.f);
     BsdfContext ctx;
     Vec3 wo = it.to_local(ds.d);
     Color f = bsdf.eval(ctx, wi_local, wo);
     if (is_black(f)) return Color(0.f);
     ++stats.shadow_rays;
     if (!scene.visible(it, ds)) return Color(0.f);
-    float light_pdf = ds.pdf_w * emitter_pick_prob(scene);
+    float light_pdf = ds.pdf_w * ds.pick;
     float w = ds.is_delta ? 1.f : mis_power(light_pdf * light_frac, bsdf.pdf_w(ctx, wi_local, wo) * bsdf_frac);
     return f * ds.radiance * (w / light_pdf);
 }
@@ -45,11 +47,12 @@ bool trace_counting_emission(const Scene& scene, const Ray& ray, Interaction& it
 }
 
 void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* it, const Color& beta, int cls,
-                         int depth, bool prev_delta, const Vec3& prev_p, float prev_pdf_w, EffectRadiance& out) {
+                         int depth, bool prev_delta, const LightContext& prev_ctx, const Vec3& prev_p, float prev_pdf_w,
+                         EffectRadiance& out) {
     const bool weighted = !(depth == 0 || prev_delta);
     if (!it) {
         for (const Emitter* e : scene.environment) {
-            float w = weighted ? mis_emission_hit(scene, *e, prev_p, nullptr, ray.d, prev_pdf_w) : 1.f;
+            float w = weighted ? mis_emission_hit(scene, *e, prev_ctx, prev_p, nullptr, ray.d, prev_pdf_w) : 1.f;
             out.add(cls, beta * e->eval_environment(ray.d) * w);
         }
         return;
@@ -59,18 +62,19 @@ void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* 
     const Emitter& e = *scene.emitters[shape.emitter];
     Color le = e.eval(*it, it->wi);
     if (is_black(le)) return;
-    float w = weighted ? mis_emission_hit(scene, e, prev_p, it, ray.d, prev_pdf_w) : 1.f;
+    float w = weighted ? mis_emission_hit(scene, e, prev_ctx, prev_p, it, ray.d, prev_pdf_w) : 1.f;
     out.add(cls, beta * le * w);
 }
 
-float light_pdf_w(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it, const Vec3& d) {
+float light_pdf_w(const Scene& scene, const Emitter& e, const LightContext& ctx, const Vec3& prev_p,
+                  const Interaction* it, const Vec3& d) {
     float light_pdf = it ? e.pdf_direct(prev_p, it->p, it->n) : e.pdf_environment(d);
-    return light_pdf * emitter_pick_prob(scene);
+    return light_pdf * emitter_pick_prob(scene, ctx, e);
 }
 
-float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it, const Vec3& d,
-                       float bsdf_pdf_w, float light_frac, float bsdf_frac) {
-    return mis_power(bsdf_pdf_w * bsdf_frac, light_pdf_w(scene, e, prev_p, it, d) * light_frac);
+float mis_emission_hit(const Scene& scene, const Emitter& e, const LightContext& ctx, const Vec3& prev_p,
+                       const Interaction* it, const Vec3& d, float bsdf_pdf_w, float light_frac, float bsdf_frac) {
+    return mis_power(bsdf_pdf_w * bsdf_frac, light_pdf_w(scene, e, ctx, prev_p, it, d) * light_frac);
 }
 
 }  // namespace rm

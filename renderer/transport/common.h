@@ -5,14 +5,40 @@
 
 namespace rm {
 
-// Uniform emitter selection, as Mitsuba 3's Scene::sample_emitter: the
-// emitter that u in [0, 1) picks, each with probability emitter_pick_prob;
-// null in a scene without emitters. Every light sample and every light
-// subpath picks its emitter here.
-inline float emitter_pick_prob(const Scene& s) { return s.emitters.empty() ? 0.f : 1.f / float(s.emitters.size()); }
-inline const Emitter* pick_emitter(const Scene& s, float u) {
-    size_t n = s.emitters.size();
-    return n == 0 ? nullptr : s.emitters[std::min(size_t(u * float(n)), n - 1)].get();
+// Emitter selection, by the sampler of the render in progress
+// (scene/light_sampler.h; every estimator's `light_sampler` parameter).
+// Seen from a point: a LightContext, the point and its geometric normal
+// (zero in a medium), which the tree's probabilities depend on; the same
+// context must reach every place the probability of the same selection
+// is needed (the light sample, and the MIS weight of the emitter that a
+// BSDF sample from that point finds).
+struct LightContext {
+    Vec3 p, n;
+};
+inline LightContext light_context(const Interaction& it) {
+    return {it.p, it.kind == VertexKind::Medium ? Vec3(0.f) : it.n};
+}
+// The emitter u in [0, 1) picks from `ctx`, its probability in `pick`;
+// null when none (no emitters, or none lights the point).
+inline const Emitter* pick_emitter(const Scene& s, const LightContext& ctx, float u, float& pick) {
+    int i = s.lights().sample(ctx.p, ctx.n, u, pick);
+    return i < 0 ? nullptr : s.emitters[size_t(i)].get();
+}
+// The probability that pick_emitter from `ctx` picks `e`.
+inline float emitter_pick_prob(const Scene& s, const LightContext& ctx, const Emitter& e) {
+    return s.lights().pmf(ctx.p, ctx.n, e.index);
+}
+// A light path's start, seen from nowhere: by power under `power` and
+// `tree`, uniform under `uniform` (LightSampler::sample_start).
+inline const Emitter* pick_start_emitter(const Scene& s, float u, float& pick) {
+    int i = s.lights().sample_start(u, pick);
+    return i < 0 ? nullptr : s.emitters[size_t(i)].get();
+}
+inline float start_pick_prob(const Scene& s, const Emitter& e) { return s.lights().pmf_start(e.index); }
+// The area density p_LE with which a light path starts at p on the area
+// emitter e, its selection included (the MIS weights of bdpt and vcm).
+inline float emission_origin_pdf(const Scene& s, const Emitter& e, const Vec3& p) {
+    return start_pick_prob(s, e) * e.pdf_emission_a(p);
 }
 
 // Russian roulette (Arvo and Kirk 1990; Veach 1997, sec. 2.6.2): after a
@@ -53,17 +79,21 @@ inline bool survives_roulette(RouletteRule rule, int depth, int rr_depth, float 
     return true;
 }
 
-// Light sampling from `p`: an emitter picked uniformly and a point on it
-// (or a direction to it); always draws the same 4 random numbers. False
-// when the scene has no emitter or the sample carries nothing.
-bool sample_light(const Scene& scene, const Vec3& p, Sampler& sampler, DirectSample& ds);
+// Light sampling from ctx.p: an emitter picked (pick_emitter; its
+// probability in ds.pick) and a point on it (or a direction to it);
+// always draws the same 4 random numbers. False when the scene has no
+// emitter or the sample carries nothing.
+bool sample_light(const Scene& scene, const LightContext& ctx, Sampler& sampler, DirectSample& ds);
 // The same for given random numbers (u_pick picks the emitter).
-bool sample_light(const Scene& scene, const Vec3& p, float u_pick, Vec2 u, float u_extra, DirectSample& ds);
+bool sample_light(const Scene& scene, const LightContext& ctx, float u_pick, Vec2 u, float u_extra, DirectSample& ds);
 
-// Solid-angle density with which sample_light from `prev_p` reaches emitter
+// Solid-angle density with which sample_light from `ctx` reaches emitter
 // `e` at `it` (an area emitter's point), or along a direction to the
-// environment (`it` null) along the unit direction d, the emitter's pick included.
-float light_pdf_w(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it, const Vec3& d);
+// environment (`it` null) along the unit direction d, the emitter's pick
+// included; the point on the emitter is seen from `prev_p` (ctx.p, or
+// the ray origin offset from it that found the emitter).
+float light_pdf_w(const Scene& scene, const Emitter& e, const LightContext& ctx, const Vec3& prev_p,
+                  const Interaction* it, const Vec3& d);
 
 // Next event estimation at `it` (Veach 1997, sec. 9.2: light sample weighted by
 // the power heuristic against BSDF sampling). Returns the contribution before
@@ -73,18 +103,21 @@ Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsd
                       Sampler& sampler, ThreadStats& stats, float light_frac = 1.f, float bsdf_frac = 1.f);
 
 // MIS weight of emission reached by a BSDF sample of density bsdf_pdf_w from
-// `prev`, landing on `it` (an area emitter) or escaping along the unit direction d.
-float mis_emission_hit(const Scene& scene, const Emitter& e, const Vec3& prev_p, const Interaction* it, const Vec3& d,
-                       float bsdf_pdf_w, float light_frac = 1.f, float bsdf_frac = 1.f);
+// `prev` (ctx and prev_p as light_pdf_w's), landing on `it` (an area
+// emitter) or escaping along the unit direction d.
+float mis_emission_hit(const Scene& scene, const Emitter& e, const LightContext& ctx, const Vec3& prev_p,
+                       const Interaction* it, const Vec3& d, float bsdf_pdf_w, float light_frac = 1.f,
+                       float bsdf_frac = 1.f);
 
 // Emission a camera path's last sample reached (path.cpp, volpath.cpp):
 // what the environment shows along `ray` when the ray left the scene (`it`
 // null), else the hit shape's area emitter, times `beta`, under class
 // `cls`; weighted by the power heuristic against next event estimation
-// (mis_emission_hit) unless the sample came from the camera (depth 0) or a
-// delta lobe.
+// (mis_emission_hit, from prev_ctx and prev_p) unless the sample came from
+// the camera (depth 0) or a delta lobe.
 void add_emission_at_hit(const Scene& scene, const Ray& ray, const Interaction* it, const Color& beta, int cls,
-                         int depth, bool prev_delta, const Vec3& prev_p, float prev_pdf_w, EffectRadiance& out);
+                         int depth, bool prev_delta, const LightContext& prev_ctx, const Vec3& prev_p, float prev_pdf_w,
+                         EffectRadiance& out);
 
 // One step of a camera path for estimators that take emission found along
 // it without an MIS weight (photonmapper, sppm, whitted: their only other route to

@@ -120,14 +120,14 @@ template <typename EvalF, typename PdfF>
 Color direct_through_media(const Scene& scene, const Interaction& it, int medium, Sampler& sampler, ThreadStats& stats,
                            EvalF f_of, PdfF pdf_of) {
     DirectSample ds;
-    if (!sample_light(scene, it.p, sampler, ds)) return Color(0.f);
+    if (!sample_light(scene, light_context(it), sampler, ds)) return Color(0.f);
     Color f = f_of(ds.d);
     if (is_black(f)) return Color(0.f);
     ++stats.shadow_rays;
     int m = it.kind == VertexKind::Medium ? medium : Scene::medium_after(it, ds.d, medium);
     Color tr = scene.transmittance(it, ds, m, stats.rays, sampler);
     if (is_black(tr)) return Color(0.f);
-    float light_pdf = ds.pdf_w * emitter_pick_prob(scene);
+    float light_pdf = ds.pdf_w * ds.pick;
     float w = 1.f;
     if constexpr (!std::is_same_v<PdfF, std::nullptr_t>)
         if (!ds.is_delta) w = mis_power(light_pdf, pdf_of(ds.d));

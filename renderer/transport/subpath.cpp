@@ -67,24 +67,42 @@ float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, co
     return to_area(v.bsdf->pdf_w(ctx, v.it.to_local(wi), v.it.to_local(d)), v.it.p, next);
 }
 
+LightContext vertex_light_context(const PathVertex& v) {
+    return {v.it.p, v.type == VType::Medium ? Vec3(0.f) : v.it.n};
+}
+
 float light_origin_pdf(const Scene& scene, const PathVertex& v, const PathVertex& ref) {
+    const LightContext ctx = vertex_light_context(ref);
     if (v.infinite) {
+        // Whichever emitter at infinity was picked: the sum over them.
         float sum = 0.f;
+        if (scene.lights().kind() == LightSamplerKind::Uniform) {  // one probability for all
+            for (const auto& e : scene.emitters)
+                if (e->is_infinite()) sum += e->pdf_direct(ref.it.p, v.it.p, Vec3(0.f));
+            return (scene.emitters.empty() ? 0.f : 1.f / float(scene.emitters.size())) * sum;
+        }
         for (const auto& e : scene.emitters)
-            if (e->is_infinite()) sum += e->pdf_direct(ref.it.p, v.it.p, Vec3(0.f));
-        return emitter_pick_prob(scene) * sum;
+            if (e->is_infinite()) sum += emitter_pick_prob(scene, ctx, *e) * e->pdf_direct(ref.it.p, v.it.p, Vec3(0.f));
+        return sum;
     }
     float pd = v.emitter->pdf_direct(ref.it.p, v.it.p, v.it.n);
     Vec3 d = v.it.p - ref.it.p;
     float d2 = length_sq(d);
     if (!(pd > 0.f) || !(d2 > 0.f)) return 0.f;
     float cos_l = absdot(v.it.n, d) / std::sqrt(d2);
-    return emitter_pick_prob(scene) * pd * cos_l / d2;
+    return emitter_pick_prob(scene, ctx, *v.emitter) * pd * cos_l / d2;
 }
 
 float nee_over_emission(const Scene& scene, const PathVertex& y0, const PathVertex& adj) {
-    if (y0.infinite || !y0.emitter || y0.emitter->is_delta()) return 1.f;
-    float le = emitter_pick_prob(scene) * y0.emitter->pdf_emission_a(y0.it.p);
+    if (y0.infinite || !y0.emitter) return 1.f;
+    if (y0.emitter->is_delta()) {
+        // A delta position: the two densities differ only by the selection.
+        float le = start_pick_prob(scene, *y0.emitter);
+        float nee = emitter_pick_prob(scene, vertex_light_context(adj), *y0.emitter);
+        if (!(le > 0.f) || !(nee > 0.f) || nee == le || !std::isfinite(nee / le)) return 1.f;
+        return nee / le;
+    }
+    float le = emission_origin_pdf(scene, *y0.emitter, y0.it.p);
     float nee = light_origin_pdf(scene, y0, adj);
     if (!(le > 0.f) || !(nee > 0.f) || !std::isfinite(nee / le)) return 1.f;
     return nee / le;
@@ -206,7 +224,8 @@ Color connect_emitter_sample(const Scene& scene, const PathVertex& z, float u_pi
                              Sampler& sampler, ThreadStats& stats, PathVertex& y0) {
     Color L(0.f);
     if (!z.connectible() || (z.type != VType::Surface && z.type != VType::Medium)) return L;
-    const Emitter* picked = pick_emitter(scene, u_pick);
+    float pick = 0.f;
+    const Emitter* picked = pick_emitter(scene, vertex_light_context(z), u_pick, pick);
     if (!picked) return L;
     const Emitter& e = *picked;
     DirectSample ds = e.sample_direct(z.it.p, u_l, u_extra);
@@ -215,7 +234,6 @@ Color connect_emitter_sample(const Scene& scene, const PathVertex& z, float u_pi
     if (is_black(f)) return L;
     Color tr = connection_transmittance(scene, z, ds, sampler, stats);
     if (is_black(tr)) return L;
-    float pick = emitter_pick_prob(scene);
     L = z.beta * f * tr * ds.radiance / (ds.pdf_w * pick);
     y0 = PathVertex();
     y0.type = VType::Light;

@@ -70,6 +70,8 @@ float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, co
 // the solid-angle density of its direction, summed over the emitters at
 // infinity (pbrt-v4's InfiniteLightDensity).
 float light_origin_pdf(const Scene& scene, const PathVertex& v, const PathVertex& ref);
+// Where light selection from vertex v sees it from (common.h's LightContext).
+LightContext vertex_light_context(const PathVertex& v);
 
 // A point along `ray` beyond the scene's bounding sphere, where a vertex at
 // infinity in the ray's direction is placed.
@@ -79,9 +81,9 @@ Vec3 far_point(const Scene& scene, const Ray& ray);
 // (sample_emission) but by light sampling from its neighbour `adj` in next
 // event estimation (s = 1), which for a sphere samples the cone it
 // subtends: the two densities differ. Returns p_NEE(y0) / p_LE(y0), both
-// per unit area with the emitter pick, for the MIS weights (1 for delta
-// and infinite emitters, whose two densities are the same, and where either
-// is 0).
+// per unit area with the emitter pick, for the MIS weights (for a delta
+// position the ratio of the two selection probabilities; 1 for infinite
+// emitters, whose two densities are the same, and where either is 0).
 float nee_over_emission(const Scene& scene, const PathVertex& y0, const PathVertex& adj);
 
 // The walk hands each new vertex (path.back()) to a visitor as soon as it
@@ -124,7 +126,7 @@ void random_walk(const Scene& scene, Sampler& sampler, Ray ray, Color beta, Tran
                  const MediumTracker* media = nullptr, bool densities = true);
 
 // The light subpath y0 y1 .. of every light-tracing estimator (ptracer,
-// bdpt, photon tracing): an emitter picked uniformly (as next event
+// bdpt, photon tracing): an emitter picked by the light sampler (as next event
 // estimation), a ray of light leaving it (`es`), then the walk, each
 // vertex (y0 included) handed to `visit`. Always draws the same random
 // numbers for its start. Returns false (and leaves `light` empty) when the
@@ -172,7 +174,7 @@ Color connection_transmittance(const Scene& scene, const PathVertex& z, const Di
                                ThreadStats& stats);
 
 // Next event estimation from camera vertex z (the s = 1 strategy of bdpt
-// and vcm) with the random numbers given: an emitter picked uniformly, a
+// and vcm) with the random numbers given: an emitter picked from z, a
 // point on it by light sampling. Returns z.beta f Tr Le / (p_w pick)
 // (black when z cannot connect, the sample fails or is occluded) and the
 // emitter vertex y0 with its area density (pdf_fwd) as the MIS weights

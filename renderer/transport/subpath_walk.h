@@ -179,14 +179,16 @@ bool light_subpath_with(const Scene& scene, Sampler& sampler, int max_vertices, 
                         std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats, Visit& visit,
                         bool densities) {
     light.clear();
-    // 1. An emitter picked uniformly (as next event estimation) and a ray of
-    //    light leaving it, its weight the flux Le |cos| / (pdf_a pdf_w) / pick
-    //    (Jensen 2001, sec. 5.1); the same random numbers whatever happens.
+    // 1. An emitter picked (pick_start_emitter: by the render's light
+    //    sampler, without a point) and a ray of light leaving it, its weight
+    //    the flux Le |cos| / (pdf_a pdf_w) / pick (Jensen 2001, sec. 5.1);
+    //    the same random numbers whatever happens.
     float u_pick = sampler.next_1d();
     Vec2 u_pos = sampler.next_2d();
     float u_extra = sampler.next_1d();
     Vec2 u_dir = sampler.next_2d();
-    const Emitter* e = pick_emitter(scene, u_pick);
+    float pick = 0.f;
+    const Emitter* e = pick_start_emitter(scene, u_pick, pick);
     if (!e) return false;
     Vec3 center;
     float radius;
@@ -196,7 +198,6 @@ bool light_subpath_with(const Scene& scene, Sampler& sampler, int max_vertices, 
     // 2. y0 and its density. At infinity that is the density of its
     //    direction under light sampling (pbrt-v4's GenerateLightSubpath);
     //    y1's comes from the origin disk through emitter_pdf_to.
-    float pick = emitter_pick_prob(scene);
     PathVertex& y0 = light.emplace_back();
     y0.type = VType::Light;
     y0.emitter = e;
