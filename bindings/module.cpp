@@ -640,6 +640,12 @@ PYBIND11_MODULE(_core, m) {
                 maps[py::str(pm.name)] = d;
             }
             st["photon_maps"] = maps;
+            for (auto& [name, values] : out.estimator_stats) {
+                if (values.size() == 1)
+                    st[py::str(name)] = values[0];
+                else
+                    st[py::str(name)] = py::cast(values);
+            }
             r["stats"] = st;
             py::list cps;
             for (auto& c : out.checkpoints)

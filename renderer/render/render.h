@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "render/integrator.h"
@@ -63,6 +64,9 @@ struct RenderOutput {
     std::vector<Checkpoint> checkpoints;
     ThreadStats stats;
     std::vector<PhotonMapStats> photon_maps;
+    // Figures of the estimator's own for res.stats (name, values): one
+    // value becomes a number, more a list (Metropolis' acceptance per chain).
+    std::vector<std::pair<std::string, std::vector<double>>> estimator_stats;
     int threads = 0;
     double setup_seconds = 0;
 };
