@@ -55,6 +55,16 @@
 // run of consecutive rejections of each chain, the stuck-chain symptom),
 // "mlt_dead_chains" (chains whose bootstrap found no light: they add 0).
 //
+// `mmlt`: multiplexed MLT (Hachisuka, Kaplanyan and Dachsbacher 2014) on
+// the same chains: after the pixel, two more coordinates choose a depth d
+// in 1..max_depth and one strategy (s, t) of bdpt with s + t = d + 1, each
+// uniformly; the sample is that strategy alone on subpaths of s and t
+// vertices (bdpt_internal.h), its MIS-weighted contribution times
+// max_depth (d + 1), so its expectation is bdpt's image truncated at
+// max_depth. Small steps keep the strategy mostly fixed, large steps
+// change it; "mlt_acceptance_per_depth" in res.stats. pbrt-v4's
+// MLTIntegrator runs separate chains per depth instead.
+//
 // Limits: no participating media, no dipole (refused by name: caps); no
 // per-strategy images; the path tracer's samples reach only their pixel
 // (filter importance sampling, as the camera driver's).
@@ -64,6 +74,7 @@
 #include <memory>
 #include <numeric>
 
+#include "estimators/bdpt_internal.h"
 #include "estimators/mlt_sampler.h"
 #include "render/memory.h"
 #include "render/pass_loop.h"
@@ -113,6 +124,44 @@ std::unique_ptr<Integrator> make_pssmlt(ParamReader& p);
     return e;
 }());
 
+std::unique_ptr<Integrator> make_mmlt(ParamReader& p);
+
+// mmlt: the chains of pssmlt over one bdpt strategy per sample.
+[[maybe_unused]] const bool kRegisteredMmlt = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "mmlt";
+    e.doc =
+        "multiplexed Metropolis light transport: one bdpt strategy per sample, chosen by a mutated coordinate "
+        "(Hachisuka et al. 2014)";
+    e.params = {
+        ParamSpec::integer("max_depth", 5, "longest path in segments (the depths a sample chooses among)")
+            .at_least(1)
+            .at_most(64),
+        rr_depth_param(),
+        hide_emitters_param(),
+        ParamSpec::integer("chains", 256, "independent Markov chains (the variance's batches: min(32, chains))")
+            .at_least(2)
+            .at_most(1 << 20),
+        ParamSpec::integer("bootstrap_samples", 16384,
+                           "independent samples estimating b, shared out among the chains (each gets at least one)")
+            .at_least(1)
+            .at_most(int64_t(1) << 30),
+        ParamSpec::integer("mutations_per_pixel", 1, "mutations per pixel in one sample per pixel of the budget")
+            .at_least(1)
+            .at_most(1 << 16),
+        ParamSpec::real("large_step_probability", 0.3, "probability of a large step (a fresh independent sample)")
+            .greater_than(0)
+            .at_most(1),
+        ParamSpec::real("sigma", 0.01, "standard deviation of a small step in primary sample space")
+            .greater_than(0)
+            .at_most(1),
+    };
+    e.caps.driver = Driver::OwnPasses;
+    e.caps.bias = Bias::Unbiased;
+    e.factory = make_mmlt;
+    return e;
+}());
+
 // Mutation index m goes to chain m mod C: chain c's share of the first n.
 inline uint64_t chain_share(uint64_t n, uint64_t chains, uint64_t c) { return n / chains + (c < n % chains ? 1 : 0); }
 
@@ -120,11 +169,12 @@ inline uint64_t chain_share(uint64_t n, uint64_t chains, uint64_t c) { return n 
 
 class PssmltIntegrator final : public Integrator {
 public:
-    explicit PssmltIntegrator(ParamReader& p)
+    PssmltIntegrator(ParamReader& p, bool multiplexed)
         : max_depth_(p.get_int("max_depth")),
           rr_depth_(p.get_int("rr_depth")),
           hide_(p.get_bool("hide_emitters")),
-          bidir_(p.get_bool("bidirectional")),
+          bidir_(multiplexed || p.get_bool("bidirectional")),
+          multiplexed_(multiplexed),
           chains_(p.get_int("chains")),
           bootstrap_(p.get_int("bootstrap_samples")),
           mpp_(p.get_int("mutations_per_pixel")),
@@ -140,7 +190,7 @@ public:
 
 private:
     int max_depth_, rr_depth_;
-    bool hide_, bidir_;
+    bool hide_, bidir_, multiplexed_;
     int chains_, bootstrap_, mpp_;
     float large_p_, sigma_;
 };
@@ -273,6 +323,20 @@ public:
         st.push_back({"mlt_small_step_acceptance", {ratio(acc - lacc, prop - lprop)}});
         st.push_back({"mlt_acceptance_per_chain", per_chain});
         st.push_back({"mlt_max_rejections_per_chain", max_rej});
+        if (m_.multiplexed_) {
+            // Acceptance by the proposal's depth 1 .. max_depth.
+            std::vector<double> per_depth;
+            for (int d = 1; d <= m_.max_depth_; ++d) {
+                uint64_t a = 0, p = 0;
+                for (const Chain& ch : chains_)
+                    if (size_t(d) < ch.depth_proposed.size()) {
+                        a += ch.depth_accepted[size_t(d)];
+                        p += ch.depth_proposed[size_t(d)];
+                    }
+                per_depth.push_back(ratio(a, p));
+            }
+            st.push_back({"mlt_acceptance_per_depth", per_depth});
+        }
     }
 
 private:
@@ -289,18 +353,28 @@ private:
         uint64_t accepted = 0, proposed = 0;  // acceptance counts
         uint64_t large_accepted = 0, large_proposed = 0;
         uint64_t run = 0, max_run = 0;  // consecutive rejections: now, longest
+        std::vector<uint64_t> depth_accepted, depth_proposed;  // mmlt: by the proposal's depth
     };
 
     // The sample of the point `pss` holds: its splats inside the crop
     // window (finite ones; the others are counted) and f, their luminance.
-    float evaluate(PssSampler& pss, std::vector<Splat>& out, ThreadStats& stats) const {
+    float evaluate(PssSampler& pss, std::vector<Splat>& out, ThreadStats& stats, int* depth = nullptr) const {
         out.clear();
         Sampler sampler(&pss);
         const Vec2 u = sampler.next_2d();
         const int x = std::min(int(u.x * float(W_)), W_ - 1), y = std::min(int(u.y * float(H_)), H_ - 1);
         const int pixel = y * W_ + x;
         const float film_scale = float(W_) * float(H_);
-        if (m_.bidir_) {
+        if (m_.multiplexed_) {
+            // mmlt (Hachisuka et al. 2014, sec. 4): a depth d in 1..D and a
+            // strategy (s, t), s + t = d + 1, each chosen uniformly by a
+            // coordinate of its own; the contribution times D (d + 1).
+            const int D = m_.max_depth_;
+            const int d = 1 + std::min(int(sampler.next_1d() * float(D)), D - 1);
+            const int s = std::min(int(sampler.next_1d() * float(d + 1)), d);
+            if (depth) *depth = d;
+            bdpt_trace_strategy(inner_, scene_, sampler, pixel, s, d + 1 - s, float(D) * float(d + 1), out, stats);
+        } else if (m_.bidir_) {
             // bdpt's camera splats (pixel >= 0) are already scaled by W H:
             // its samples pick their pixel uniformly, as here.
             inner_.trace_light_path(scene_, sampler, pixel, out, stats);
@@ -376,7 +450,13 @@ private:
         PssSampler& pss = ch.pss;
         pss.start_iteration();
         const bool large = pss.large_step();
-        const float fy = evaluate(pss, ch.prop, stats);
+        int depth = 0;
+        const float fy = evaluate(pss, ch.prop, stats, &depth);
+        if (m_.multiplexed_) {
+            ch.depth_proposed.resize(size_t(m_.max_depth_) + 1, 0);
+            ch.depth_accepted.resize(size_t(m_.max_depth_) + 1, 0);
+            ++ch.depth_proposed[size_t(depth)];
+        }
         const double a = std::min(1.0, double(fy) / double(ch.f_cur));
         ++ch.proposed;
         if (large) ++ch.large_proposed;
@@ -389,6 +469,7 @@ private:
             pss.accept();
             ++ch.accepted;
             if (large) ++ch.large_accepted;
+            if (m_.multiplexed_) ++ch.depth_accepted[size_t(depth)];
             ch.run = 0;
         } else {
             pss.reject();
@@ -476,7 +557,8 @@ RenderOutput PssmltIntegrator::drive(const Scene& scene, const RenderOptions& op
 
 namespace {
 
-std::unique_ptr<Integrator> make_pssmlt(ParamReader& p) { return std::make_unique<PssmltIntegrator>(p); }
+std::unique_ptr<Integrator> make_pssmlt(ParamReader& p) { return std::make_unique<PssmltIntegrator>(p, false); }
+std::unique_ptr<Integrator> make_mmlt(ParamReader& p) { return std::make_unique<PssmltIntegrator>(p, true); }
 
 }  // namespace
 
