@@ -120,6 +120,7 @@ std::unique_ptr<Integrator> make_pssmlt(ParamReader& p);
     };
     e.caps.driver = Driver::OwnPasses;
     e.caps.bias = Bias::Unbiased;
+    e.caps.correlated_pixels = true;
     e.factory = make_pssmlt;
     return e;
 }());
@@ -136,13 +137,13 @@ std::unique_ptr<Integrator> make_mmlt(ParamReader& p);
     e.params = {
         ParamSpec::integer("max_depth", 5, "longest path in segments (the depths a sample chooses among)")
             .at_least(1)
-            .at_most(64),
+            .at_most(1024),
         rr_depth_param(),
         hide_emitters_param(),
         ParamSpec::integer("chains", 256, "independent Markov chains (the variance's batches: min(32, chains))")
             .at_least(2)
             .at_most(1 << 20),
-        ParamSpec::integer("bootstrap_samples", 16384,
+        ParamSpec::integer("bootstrap_samples", 65536,
                            "independent samples estimating b, shared out among the chains (each gets at least one)")
             .at_least(1)
             .at_most(int64_t(1) << 30),
@@ -158,6 +159,7 @@ std::unique_ptr<Integrator> make_mmlt(ParamReader& p);
     };
     e.caps.driver = Driver::OwnPasses;
     e.caps.bias = Bias::Unbiased;
+    e.caps.correlated_pixels = true;
     e.factory = make_mmlt;
     return e;
 }());
