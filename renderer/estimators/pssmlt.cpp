@@ -354,7 +354,7 @@ private:
         std::vector<Splat> out;               // this chunk's splats, values weighted
         uint64_t accepted = 0, proposed = 0;  // acceptance counts
         uint64_t large_accepted = 0, large_proposed = 0;
-        uint64_t run = 0, max_run = 0;  // consecutive rejections: now, longest
+        uint64_t run = 0, max_run = 0;                         // consecutive rejections: now, longest
         std::vector<uint64_t> depth_accepted, depth_proposed;  // mmlt: by the proposal's depth
     };
 
