@@ -88,23 +88,13 @@ namespace {
 constexpr int kMaxBatches = 32;
 constexpr uint64_t kChunkMutations = uint64_t(1) << 19;  // mutations of all chains between commits (bounds memory)
 
-std::unique_ptr<Integrator> make_pssmlt(ParamReader& p);
-
-[[maybe_unused]] const bool kRegistered = register_estimator([] {
-    EstimatorInfo e;
-    e.name = "pssmlt";
-    e.doc =
-        "primary-sample-space Metropolis light transport over path or bdpt (Kelemen et al. 2002), independent "
-        "chains with their own bootstrap";
-    e.params = {
-        max_depth_param(),
-        rr_depth_param(),
-        hide_emitters_param(),
-        ParamSpec::boolean("bidirectional", true, "mutate bdpt's samples (false: the unidirectional path tracer's)"),
+// The chains' parameters, shared by pssmlt and mmlt (`bootstrap`: the default sample count).
+std::vector<ParamSpec> chain_params(int64_t bootstrap) {
+    return {
         ParamSpec::integer("chains", 256, "independent Markov chains (the variance's batches: min(32, chains))")
             .at_least(2)
             .at_most(1 << 20),
-        ParamSpec::integer("bootstrap_samples", 16384,
+        ParamSpec::integer("bootstrap_samples", bootstrap,
                            "independent samples estimating b, shared out among the chains (each gets at least one)")
             .at_least(1)
             .at_most(int64_t(1) << 30),
@@ -118,6 +108,23 @@ std::unique_ptr<Integrator> make_pssmlt(ParamReader& p);
             .greater_than(0)
             .at_most(1),
     };
+}
+
+std::unique_ptr<Integrator> make_pssmlt(ParamReader& p);
+
+[[maybe_unused]] const bool kRegistered = register_estimator([] {
+    EstimatorInfo e;
+    e.name = "pssmlt";
+    e.doc =
+        "primary-sample-space Metropolis light transport over path or bdpt (Kelemen et al. 2002), independent "
+        "chains with their own bootstrap";
+    e.params = {
+        max_depth_param(),
+        rr_depth_param(),
+        hide_emitters_param(),
+        ParamSpec::boolean("bidirectional", true, "mutate bdpt's samples (false: the unidirectional path tracer's)"),
+    };
+    for (ParamSpec& q : chain_params(16384)) e.params.push_back(q);
     e.caps.driver = Driver::OwnPasses;
     e.caps.bias = Bias::Unbiased;
     e.caps.correlated_pixels = true;
@@ -140,23 +147,8 @@ std::unique_ptr<Integrator> make_mmlt(ParamReader& p);
             .at_most(1024),
         rr_depth_param(),
         hide_emitters_param(),
-        ParamSpec::integer("chains", 256, "independent Markov chains (the variance's batches: min(32, chains))")
-            .at_least(2)
-            .at_most(1 << 20),
-        ParamSpec::integer("bootstrap_samples", 65536,
-                           "independent samples estimating b, shared out among the chains (each gets at least one)")
-            .at_least(1)
-            .at_most(int64_t(1) << 30),
-        ParamSpec::integer("mutations_per_pixel", 1, "mutations per pixel in one sample per pixel of the budget")
-            .at_least(1)
-            .at_most(1 << 16),
-        ParamSpec::real("large_step_probability", 0.3, "probability of a large step (a fresh independent sample)")
-            .greater_than(0)
-            .at_most(1),
-        ParamSpec::real("sigma", 0.01, "standard deviation of a small step in primary sample space")
-            .greater_than(0)
-            .at_most(1),
     };
+    for (ParamSpec& q : chain_params(65536)) e.params.push_back(q);
     e.caps.driver = Driver::OwnPasses;
     e.caps.bias = Bias::Unbiased;
     e.caps.correlated_pixels = true;
