@@ -122,6 +122,7 @@ py::dict estimator_schema(const EstimatorInfo& e) {
     caps["dipole"] = e.caps.dipole;
     caps["driver"] = driver_name(e.caps.driver);
     caps["bias"] = bias_name(e.caps.bias);
+    caps["correlated_pixels"] = e.caps.correlated_pixels;
     py::list effects;
     for (int k = 0; k < kNumEffects; ++k)
         if (e.caps.effects[k]) effects.append(effect_name(k));

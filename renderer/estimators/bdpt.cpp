@@ -152,9 +152,10 @@ public:
     }
 
     // Steps 1 and 2 of trace_light_path: the two subpaths, into cam_ref()
-    // and light_ref(); `es` keeps the emission sample.
-    void generate_subpaths(const Scene& scene, Sampler& sampler, int pixel, EmissionSample& es,
-                           ThreadStats& stats) const {
+    // and light_ref(); `es` keeps the emission sample. `cam_limit`,
+    // `light_limit` (>= 0): at most that many vertices (mmlt's one strategy).
+    void generate_subpaths(const Scene& scene, Sampler& sampler, int pixel, EmissionSample& es, ThreadStats& stats,
+                           int cam_limit = -1, int light_limit = -1) const {
         const Sensor& sensor = *scene.sensor;
         std::vector<PathVertex>& cam = cam_ref();
         std::vector<PathVertex>& light = light_ref();
@@ -173,6 +174,7 @@ public:
         z0.pdf_fwd = 1.f;
         z0.delta = !sensor.has_importance();                      // a radiance meter: no t = 1 (the file's head)
         int max_cam = max_depth_ < 0 ? INT_MAX : max_depth_ + 1;  // z0 .. z_max_depth
+        if (cam_limit >= 0) max_cam = std::min(max_cam, cam_limit);
         if (!scene.features.has_media) {
             cam.push_back(z0);
             random_walk(scene, sampler, sr.ray, sr.weight, TransportMode::Radiance, max_cam, rr_depth_, cam, stats);
@@ -194,7 +196,40 @@ public:
 
         // 2. The light subpath: an emitter picked uniformly (as NEE), a ray of light leaving it.
         int max_light = max_depth_ < 0 ? INT_MAX : max_depth_;  // y0 .. y_{max_depth - 1}
-        light_subpath(scene, sampler, max_light, rr_depth_, light, es, stats);
+        if (light_limit >= 0) max_light = std::min(max_light, light_limit);
+        if (max_light > 0) light_subpath(scene, sampler, max_light, rr_depth_, light, es, stats);
+    }
+
+    // Multiplexed MLT's sample (Hachisuka, Kaplanyan and Dachsbacher 2014,
+    // sec. 4): strategy (s, t) alone, on subpaths of just s and t
+    // vertices, its MIS-weighted contribution times `n_strategies` (the
+    // strategies of its depth it was chosen among uniformly); the splat
+    // conventions of trace_light_path. Nothing when (s, t) cannot be made.
+    void trace_strategy(const Scene& scene, Sampler& sampler, int pixel, int s, int t, float n_strategies,
+                        std::vector<Splat>& out, ThreadStats& stats) const {
+        const float film_scale = float(scene.sensor->width) * float(scene.sensor->height);
+        EmissionSample es;
+        generate_subpaths(scene, sampler, pixel, es, stats, t, s == 1 ? 0 : s);
+        std::vector<PathVertex>& cam = cam_ref();
+        std::vector<PathVertex>& light = light_ref();
+        const int depth = s + t - 1;
+        if (int(cam.size()) < t || (s != 1 && int(light.size()) < s)) return;
+        if (s == 1 && scene.emitters.empty()) return;
+        if (t == 1 && cam[0].delta) return;
+        if (s > 0 && cam[t - 1].type == VType::Light) return;
+        if (depth < 1 || (s == 1 && t == 1)) return;
+        if (max_depth_ >= 0 && depth > max_depth_) return;
+        Splat sp;
+        float w = 0.f;
+        Color L = connect(scene, sampler, es, s, t, sp.film, sp.effect, w, hide_ && depth == 1, stats);
+        if (is_black(L) || !(w > 0.f)) return;
+        sp.value = L * (w * n_strategies);
+        sp.weight = w;
+        if (t > 1) {
+            sp.pixel = pixel;
+            sp.value *= film_scale;
+        }
+        out.push_back(sp);
     }
 
     void trace_light_path(const Scene& scene, Sampler& sampler, int pixel, std::vector<Splat>& out,
@@ -469,6 +504,11 @@ public:
 private:
     const BdptIntegrator& b_;
 };
+
+void bdpt_trace_strategy(const Integrator& bdpt, const Scene& scene, Sampler& sampler, int pixel, int s, int t,
+                         float n_strategies, std::vector<Splat>& out, ThreadStats& stats) {
+    static_cast<const BdptIntegrator&>(bdpt).trace_strategy(scene, sampler, pixel, s, t, n_strategies, out, stats);
+}
 
 std::unique_ptr<BdptMisProbe> make_bdpt_mis_probe(const Scene& scene, const Integrator& bdpt) {
     const auto* b = dynamic_cast<const BdptIntegrator*>(&bdpt);

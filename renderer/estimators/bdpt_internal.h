@@ -30,4 +30,11 @@ public:
 // A bdpt integrator of desc `d`, checked against `scene` (check_scene).
 std::unique_ptr<BdptMisProbe> make_bdpt_mis_probe(const Scene& scene, const Integrator& bdpt);
 
+// Multiplexed MLT's use of bdpt (pssmlt.cpp's mmlt): strategy (s, t) alone
+// on subpaths of s and t vertices, its weighted contribution times
+// n_strategies appended to `out` (trace_light_path's splat conventions).
+// `bdpt` must be a bdpt integrator checked against `scene` (check_scene).
+void bdpt_trace_strategy(const Integrator& bdpt, const Scene& scene, Sampler& sampler, int pixel, int s, int t,
+                         float n_strategies, std::vector<Splat>& out, ThreadStats& stats);
+
 }  // namespace rm

@@ -169,6 +169,10 @@ struct Capabilities {
     // density-estimation radius, Jensen 2001, ch. 7). The estimator matrix
     // test (tests/test_estimator_matrix.py) holds each to what it declares.
     Bias bias = Bias::Unbiased;
+    // Its pixels' estimates are correlated beyond a pixel filter's reach
+    // (Metropolis chains linger over neighbouring pixels), so a block's
+    // variance is not the sum of its pixels' (tests use a bound instead).
+    bool correlated_pixels = false;
     // The effect classes it renders completely; the others it renders only
     // in part or not at all, by construction (whitted: no indirect light).
     EffectMask effects = all_effects();
