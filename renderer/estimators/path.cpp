@@ -76,7 +76,7 @@ public:
         PathClass pc;
         float prev_pdf_w = 0.f;
         bool prev_delta = true;
-        ScatterOrigin prev;  // the vertex the current ray left (scatter_origin.h)
+        ScatterOrigin prev;       // the vertex the current ray left (scatter_origin.h)
         LightContext prev_ctx{};  // where the light sample competing with the BSDF sample was selected from
         BsdfContext ctx;
         // Where contributions go: the image, or, once the truncation probe
@@ -98,8 +98,8 @@ public:
             if (count_emission && mask[cls]) {
                 float pdf_w = prev_pdf_w;
                 if (hit && !prev_delta && scene.shapes[it.shape]->emitter >= 0) pdf_w = prev.pdf_to(it.p, prev_pdf_w);
-                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev.p, pdf_w,
-                                    *sink);
+                add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev.p,
+                                    pdf_w, *sink);
             }
             if (!hit) break;
             const Shape& shape = *scene.shapes[it.shape];

@@ -134,7 +134,8 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         if (count_emission && mask[cls]) {
             float pdf_w = prev_pdf_w;
             if (hit && !prev_delta && scene.shapes[it.shape]->emitter >= 0) pdf_w = prev.pdf_to(it.p, prev_pdf_w);
-            add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev.p, pdf_w, out);
+            add_emission_at_hit(scene, ray, hit ? &it : nullptr, beta, cls, depth, prev_delta, prev_ctx, prev.p, pdf_w,
+                                out);
         }
         if (!hit) break;
         const Shape& shape = *scene.shapes[it.shape];
