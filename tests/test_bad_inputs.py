@@ -516,7 +516,7 @@ XML = [
     ("ortho_fov", _sensor('<float name="fov" value="40"/>', kind="orthographic"), ["unknown parameter 'fov'"]),
     # -- integrators -----------------------------------------------------------
     ("integrator_unknown", _integrator("aov"), ["integrator type 'aov' is not supported"]),
-    ("integrator_planned", _integrator("pssmlt"), ["integrator type 'pssmlt' is not supported"]),
+    ("integrator_mitsuba_unsupported", _integrator("prbvolpath"), ["integrator type 'prbvolpath' is not supported"]),
     ("max_depth_zero", _integrator("path", '<integer name="max_depth" value="0"/>'),
      ["parameter 'max_depth'", "must be -1 (unbounded) or >= 1"]),
     ("max_depth_minus_two", _integrator("bdpt", '<integer name="max_depth" value="-2"/>'), ["parameter 'max_depth'"]),
