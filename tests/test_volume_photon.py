@@ -270,16 +270,23 @@ def test_fog_room_classes_match_volpath(fog_ref):
 def test_fog_room_global_map_seen_directly(fog_mitsuba):
     """final_gather off: the global map (its photons attenuated through the
     fog, those that scattered in it filed as volume light) read at the
-    camera's first surface, no gather rays through the fog. Measured against
-    Mitsuba (64 000 volume and 50 000 global photons, seeds 0-2): top half
-    +4.2 / +1.7 / +0.3 %, bottom -0.9 / -0.1 / -2.3 %; held to 6 % per half."""
+    camera's first surface, no gather rays through the fog. One render's
+    halves carry the camera pass's 1 / d^2 tail (FOG_TOL's note): against
+    Mitsuba (64 000 volume and 50 000 global photons, seeds 0-14, one render
+    each) the top half is -5.1 to +14.1 %, the bottom -2.3 to +1.6 %; a
+    single render under seed offset 5 was 7.5 % off. So the statistic is
+    the median over 5 seeds, per half: seeds 0-4 / 5-9 / 10-14 gave
+    +0.3 / +2.2 / -2.4 % (top) and -0.9 / -0.5 / -0.3 % (bottom); held to
+    5 %, and a reference 10 % too bright must fall outside it."""
     scene, ref = fog_mitsuba
-    res = rm.render(scene, integrator=_pm(volume_photons=64000, global_photons=50000, final_gather=False), spp=8,
-                    seed=0)
-    assert_clean(res, "fog_room, final_gather off")
-    rel = _halves(res.image) / _halves(ref) - 1
-    assert np.all(np.abs(rel) < 0.06), rel
-    assert res.effects["volume"].mean() > 0.5 * res.image.mean()
+    rs = [rm.render(scene, integrator=_pm(volume_photons=64000, global_photons=50000, final_gather=False), spp=8,
+                    seed=s) for s in range(5)]
+    assert_clean(rs[0], "fog_room, final_gather off")
+    med = np.median(_errors({0: rs}, ref, _halves)[0], axis=0)
+    assert np.all(np.abs(med) < 0.05), med
+    med_s = np.median(_errors({0: rs}, 1.1 * ref, _halves)[0], axis=0)
+    assert np.all(np.abs(med_s) > 0.05), f"a reference 10 % too bright went undetected: {med_s}"
+    assert all(r.effects["volume"].mean() > 0.5 * r.image.mean() for r in rs)
 
 
 # --- subsurface: translucent_slab ---------------------------------------------------------
@@ -405,15 +412,28 @@ def test_core_rejects_bad_volume_parameters():
 def test_mitsuba06_volume_names_and_step_size():
     """volumePhotons / volumeLookupRadius are aliases; an explicit step_size
     changes the quadrature but not its expectation (homogeneous media:
-    exact transmittance, jittered steps), so both agree within noise."""
+    exact transmittance, jittered steps), so both agree within noise. The
+    noise is the camera pass's 1 / d^2 tail near the spot light, so one
+    render pair can differ by far more than any bias (measured at 8 x 8,
+    1 spp: the pair's ratio 0.94 to 1.31 over seeds 0-7, 100-107, 200-207;
+    under seed offset 5 one pair was 38 % apart). The statistic is the
+    median over 8 seeds of the pair's ratio (same seed: same photon map):
+    0.995 / 0.994 / 1.017 for those seed sets, held to 5 %; a 10 % change of
+    the expectation must fall outside it."""
     scene = rm.load_file(ROOT / "fog_room" / "scene.xml", res=8)
     a = rm.render(scene, integrator=_pm(volumePhotons=2000, volumeLookupRadius=0.1), spp=1, seed=1)
     b = rm.render(scene, integrator=_pm(volume_photons=2000, volume_lookup_radius=0.1), spp=1, seed=1)
     assert a.image.tobytes() == b.image.tobytes()
-    c = rm.render(scene, integrator=_pm(volume_photons=2000, volume_lookup_radius=0.1, step_size=0.05), spp=1,
-                  seed=1)
-    assert c.image.tobytes() != b.image.tobytes()
-    assert abs(float(c.image.mean()) / float(b.image.mean()) - 1) < 0.1
+    ratios = []
+    for s in range(8):
+        b = rm.render(scene, integrator=_pm(volume_photons=2000, volume_lookup_radius=0.1), spp=1, seed=s)
+        c = rm.render(scene, integrator=_pm(volume_photons=2000, volume_lookup_radius=0.1, step_size=0.05), spp=1,
+                      seed=s)
+        assert c.image.tobytes() != b.image.tobytes()
+        ratios.append(float(c.image.mean()) / float(b.image.mean()))
+    med = float(np.median(ratios))
+    assert abs(med - 1) < 0.05, ratios
+    assert abs(1.1 * med - 1) > 0.05, f"a 10 % change went undetected: {ratios}"
 
 
 def test_same_bytes_whatever_threads_on_media():
