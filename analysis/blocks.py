@@ -75,12 +75,15 @@ def reference_variance_floor(ref_variance, ref_total_spp, spp):
     return np.asarray(ref_variance, np.float64) * float(ref_total_spp) / float(spp)
 
 
-def blocked_z_test(a, var_a, b, var_b=None, *, b_splatted=False, a_correlated=False, alpha=ALPHA, k=BLOCK,
-                   var_a_floor=None, exclude=(), block_mask=None, label=""):
+def blocked_z_test(a, var_a, b, var_b=None, *, b_splatted=False, a_correlated=False, a_common_mode=False,
+                   alpha=ALPHA, k=BLOCK, var_a_floor=None, exclude=(), block_mask=None, label=""):
     """z-tests k x k block means of `a` against `b`, each channel at
     alpha / 3; returns (passed, message). var_b None: b is exact (analytic).
     b_splatted / a_correlated: that side's pixels share samples (a filter
     wider than a pixel), so its block variance is the Cauchy-Schwarz bound.
+    a_common_mode: a's blocks may share one error across the whole image
+    (Metropolis' normalisation b), so the mean-z statistic takes its
+    Cauchy-Schwarz bound too (z_test's `common_mode`).
     `var_a_floor` (per pixel, like var_a): a lower bound on the variance of
     a's pixels (`reference_variance_floor`); a block's variance is the larger
     of a's own estimate and the floor's. `exclude`: pixel boxes (x0, y0, x1,
@@ -103,6 +106,7 @@ def blocked_z_test(a, var_a, b, var_b=None, *, b_splatted=False, a_correlated=Fa
     keep = np.ones(ba.shape[:2], bool) if block_mask is None else np.asarray(block_mask, bool).copy()
     if exclude:
         keep &= ~(block_mean(region_mask(np.shape(a), exclude)[..., None].astype(float), k)[..., 0] > 0)
-    results = [z_test(ba[..., c], va[..., c], bb[..., c], vb[..., c], alpha=alpha / 3, mask=keep) for c in range(3)]
+    results = [z_test(ba[..., c], va[..., c], bb[..., c], vb[..., c], alpha=alpha / 3, mask=keep,
+                      common_mode=a_common_mode) for c in range(3)]
     msg = "\n".join(f"{label}{'RGB'[c]} ({k}x{k} blocks): {r.summary()}" for c, r in enumerate(results))
     return all(r.passed for r in results), msg

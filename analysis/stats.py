@@ -50,7 +50,7 @@ class ZTestResult:
 
 
 def z_test(a, var_a, b, var_b=None, alpha: float = 0.01, pixel_level: float = 0.01, mask=None,
-           rounding: float = 1e-5, per_channel: bool = True) -> ZTestResult:
+           rounding: float = 1e-5, per_channel: bool = True, common_mode: bool = False) -> ZTestResult:
     """Tests H0: E[a] == E[b] pixel by pixel. For (H, W, 3) images the
     channels are tested separately, each at alpha / 3 (Bonferroni): one path
     sample feeds R, G and B, so the channels of a pixel are correlated and
@@ -62,7 +62,12 @@ def z_test(a, var_a, b, var_b=None, alpha: float = 0.01, pixel_level: float = 0.
     the images (float32 arithmetic along a path, ~10 ulp): differences within
     rounding * max(|a|, |b|) count as zero, so a zero-variance estimate that
     agrees to rounding is neither an infinite z nor, summed over many pixels,
-    a spurious bias."""
+    a spurious bias. `common_mode`: every pixel of `a` may carry one shared
+    error (Metropolis: each chain's normalisation b scales all its splats,
+    wherever they land), so the z's are not independent and the mean-z
+    statistic sum(z) / sqrt(n) is too wide; its Cauchy-Schwarz bound
+    Var(sum z) <= n^2 gives mean z = sum(z) / n instead (conservative). The
+    per-pixel tests (Sidak, rejected count) are unchanged."""
     a = np.asarray(a, np.float64)
     b = np.asarray(b, np.float64)
     var_a = np.asarray(var_a, np.float64)
@@ -70,7 +75,8 @@ def z_test(a, var_a, b, var_b=None, alpha: float = 0.01, pixel_level: float = 0.
     if per_channel and a.ndim == 3 and a.shape[-1] == 3 and a.shape == b.shape == var_a.shape == var_b.shape:
         m = None if mask is None else np.broadcast_to(np.asarray(mask, bool), a.shape)
         parts = [z_test(a[..., c], var_a[..., c], b[..., c], var_b[..., c], alpha / 3.0, pixel_level,
-                        None if m is None else m[..., c], rounding, per_channel=False) for c in range(3)]
+                        None if m is None else m[..., c], rounding, per_channel=False, common_mode=common_mode)
+                 for c in range(3)]
         worst = min(parts, key=lambda r: (r.passed, min(r.min_p / r.sidak_level, r.p_rejected, r.p_mean)))
         z = np.stack([r.z for r in parts], axis=-1)
         lines = [f"  {'RGB'[c]}: {r.summary()}" for c, r in enumerate(parts)]
@@ -109,7 +115,7 @@ def z_test(a, var_a, b, var_b=None, alpha: float = 0.01, pixel_level: float = 0.
     rejected = int(np.count_nonzero(p < pixel_level))
     p_rej = float(_st.binom.sf(rejected - 1, n, pixel_level))
     finite = np.isfinite(zs)
-    mean_z = float(zs[finite].sum() / np.sqrt(n)) if finite.all() else float("inf")
+    mean_z = float(zs[finite].sum() / (n if common_mode else np.sqrt(n))) if finite.all() else float("inf")
     p_mean = float(2.0 * _st.norm.sf(abs(mean_z)))
     passed = (min_p >= sidak) and (p_rej >= a3) and (p_mean >= a3)
     return ZTestResult(passed, alpha, n, min_p, sidak, rejected, n * pixel_level, p_rej, mean_z, p_mean, worst, z)

@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.stats as st
 
 import radiometer as rm
 from radiometer.reference_scenes import references, registry
@@ -100,14 +101,15 @@ ANALYTIC = {
 # missed on furnace, area lights and mirror caustic); 5 % here, and its
 # over-seed tests (tests/test_mlt.py) check bias to 3-5 % with power. mmlt's
 # mirror caustic classes (one render, no variance): direct was 0.942 x exact;
-# on the furnace (each sample one strategy) 5 % went undetected, so 10 %.
+# on the furnace (each sample one strategy) 5 % went undetected, so 10 %;
+# on the mirror caustic 5 % went undetected under seed offset 5 (z -1.43).
 _MLT_ANALYTIC = {n: {"power": 1.05} for n in ("furnace", "area_lights_disk", "area_lights_rect", "mirror_caustic")}
 # ptracer on the furnace: at 256 spp the 1 % power check went undetected
 # under seed offset 5 (its splats' noise on the furnace's uniform image).
 ANALYTIC_PER = {"ptracer": {"furnace": {"spp": 1024}},
                 "pssmlt": _MLT_ANALYTIC,
                 "mmlt": {**_MLT_ANALYTIC, "furnace": {"power": 1.10},
-                         "mirror_caustic": {"power": 1.05, "class_tol": 0.1}}}
+                         "mirror_caustic": {"power": 1.10, "class_tol": 0.1}}}
 # Per Mitsuba scene: spp, block size k and the power check's bias (a float:
 # the whole reference scaled by it; a (region, boxes, s) triple: the pixels
 # outside `boxes` scaled by s, the region the scene is about). "per": the
@@ -349,17 +351,23 @@ def _target(spec, ref, complete):
 
 def _z(spec, cfg, res, ref, est, image, variance):
     # Metropolis chains correlate neighbouring pixels (capability
-    # correlated_pixels): its block variance is the Cauchy-Schwarz bound.
+    # correlated_pixels): its block variance is the Cauchy-Schwarz bound,
+    # and so is its mean z, as a chain's normalisation b scales every pixel
+    # it visits: the whole image moves at once (measured: pssmlt on
+    # veach_mis, b over 12 seeds 0.90 to 4.98 x its median with 16384
+    # bootstrap samples; under seed offset 5 the image mean was 2.51 x the
+    # reference, mean z +6.1 with independent blocks, +0.38 bounded).
     chained = bool(EST[est]["capabilities"].get("correlated_pixels"))
     if spec.kind == "analytic":
-        return blocked_z_test(res.image, res.variance, image, None, a_correlated=chained, alpha=ALPHA, k=cfg["k"])
+        return blocked_z_test(res.image, res.variance, image, None, a_correlated=chained, a_common_mode=chained,
+                              alpha=ALPHA, k=cfg["k"])
     box = _box_filtered(spec)
     floor = reference_variance_floor(ref.variance, ref.spp, res.spp) if box else None
     # A light tracer's splats spread over the filter's footprint, so with a
     # filter wider than a pixel its own pixels are correlated too.
     light = EST[est]["capabilities"]["driver"] == "light"
     return blocked_z_test(res.image, res.variance, image, variance, b_splatted=not box,
-                          a_correlated=chained or (light and not box),
+                          a_correlated=chained or (light and not box), a_common_mode=chained,
                           alpha=ALPHA, k=cfg["k"], var_a_floor=floor, exclude=spec.exclusions.get(est, ()))
 
 
@@ -382,19 +390,81 @@ def test_mitsuba_reference_is_well_formed(name):
     assert float(ref.image.max()) > 0, f"{name}: the reference is black"
 
 
+def _mean_z(spec, res, image, variance):
+    """Per channel: z of the render's image mean against the reference's,
+    with the render's own variance of its image mean (Metropolis:
+    "mlt_image_mean_variance", batch means over independent chains) and
+    the reference's (its pixels independent, or their Cauchy-Schwarz bound
+    where Mitsuba splats)."""
+    m = res.image.reshape(-1, 3).astype(np.float64).mean(axis=0)
+    r = np.asarray(image, np.float64).reshape(-1, 3).mean(axis=0)
+    v = np.asarray(res.stats["mlt_image_mean_variance"], np.float64)
+    if variance is not None:
+        sd = np.sqrt(np.asarray(variance, np.float64)).reshape(-1, 3)
+        v = v + ((sd ** 2).sum(axis=0) / sd.shape[0] ** 2 if _box_filtered(spec) else sd.mean(axis=0) ** 2)
+    return (m - r) / np.sqrt(v)
+
+
+def _check_chained(spec, cfg, res, ref, est, image, variance, where):
+    """Metropolis (correlated_pixels): a chain's normalisation b_c scales
+    every pixel it visits, so one error is shared across the image. Blocks:
+    the Cauchy-Schwarz bound on each block and on the mean z (the local
+    test). The image's scale: its mean against the reference's with the
+    batch-means variance of the mean (_mean_z), each channel at ALPHA / 3;
+    power: the reference scaled by MLT_POWER (or the cell's own power on
+    the analytic scenes) is rejected by that test."""
+    passed, msg = _z(spec, cfg, res, ref, est, image, variance)
+    ratio = res.image.mean() / max(image.mean(), 1e-30)
+    assert passed, f"{where} ({res.spp} spp): mean / reference = {ratio:.5f}\n{msg}"
+    crit = st.norm.isf(ALPHA / 6)
+    z = _mean_z(spec, res, image, variance)
+    assert np.all(np.abs(z) <= crit), (f"{where}: image mean / reference {ratio:.4f}, z {np.round(z, 2)} "
+                                       f"(|z| <= {crit:.2f})")
+    p = MLT_POWER.get((est, spec.name), cfg["power"])
+    zs = _mean_z(spec, res, image * p, None if variance is None else variance * p * p)
+    assert np.any(np.abs(zs) > crit), (f"{where}: a scale error of {(p - 1) * 100:.0f} % went undetected, "
+                                       f"z {np.round(zs, 2)}")
+
+
+# The scale error each Metropolis cell on a Mitsuba scene must see (its
+# image mean's relative standard deviation at the matrix's budget, from the
+# batch means, measured 2026-12-03 at SEED: pssmlt cornell_box 4.6 %,
+# glass_sphere_caustic 4.7 %, veach_mis 7.1 %, mmlt ajar_door 3.1 %,
+# cornell_box 10-13 %, glass_sphere_caustic 3.6 %): about 6 of those, so
+# the test rejects it under fresh noise too. The spread is b's: each
+# chain's bootstrap estimate of the normalisation (res.stats mlt_b_variance
+# gave the same relative error), and on veach_mis and glass_sphere_caustic
+# it is heavy-tailed (docs/mlt.md).
+MLT_POWER = {("pssmlt", "cornell_box"): 1.3, ("pssmlt", "glass_sphere_caustic"): 1.3,
+             ("pssmlt", "veach_mis"): 1.5, ("pssmlt", "ajar_door"): 1.1,
+             ("mmlt", "cornell_box"): 1.8, ("mmlt", "glass_sphere_caustic"): 1.3,
+             ("mmlt", "veach_mis"): 1.5, ("mmlt", "ajar_door"): 1.2}
+
+
 # Cells that fail today and are being investigated, with what was measured
 # (an expected failure, not a pass: each still runs, and reports XPASS once
-# it passes). Metropolis on Mitsuba scenes at SEED (docs/mlt.md): image mean
-# over the reference pssmlt glass_sphere_caustic 0.974 (mean z -9.2); mmlt
-# cornell_box 0.961 (-9.5; seeds 1-4: 1.029, 0.970, 0.913, 0.976, the whole
-# image moving at once), glass_sphere_caustic 0.867 (-13.9), veach_mis 0.978
-# (-7.2). Not decided between a whole-image fluctuation the block test
-# reads as bias and a bias.
+# it passes). 2026-12-03: at SEED pssmlt on glass_sphere_caustic (0.974 of
+# the reference) and mmlt on the Cornell box (0.961) pass now: with the
+# image mean's own batch-means variance their z is -0.58 and -0.3 (they had
+# failed the mean z of independent blocks, which no Metropolis render
+# meets); but under seed offsets 4 and 5 their blocks failed (mmlt Cornell
+# 0.981 and 0.776 of the reference, pssmlt glass 0.926), so they stay
+# here. Also open: on veach_mis (both) and glass_sphere_caustic (mmlt) b's
+# bootstrap is heavy-tailed: pssmlt veach_mis over 12 seeds b 0.90 to 4.98
+# x its median (16384 samples; 0.86 to 1.36 with 131072), under seed offset
+# 5 the image mean 2.51 x the reference (its own z +0.66: the render says
+# how unsure it is, so the power check fails, not the test); mmlt's b
+# relative error grew with 4 x the bootstrap (glass 3.1 -> 8.7 %, veach_mis
+# 63 % at 262144), the mark of an infinite variance; mmlt glass at SEED
+# 0.867 of the reference with z -4.3 at the default bootstrap (1.037, z
+# +0.46 at 262144): a bias not ruled out.
+_B_TAIL = "b's bootstrap heavy-tailed here (docs/mlt.md; measurements above UNDER_INVESTIGATION)"
 UNDER_INVESTIGATION = {
-    ("pssmlt", "glass_sphere_caustic"): "pssmlt 0.974 of the reference (mean z -9.2), docs/mlt.md",
-    ("mmlt", "cornell_box"): "mmlt 0.961 of the reference (mean z -9.5; seeds 1-4 0.913-1.029), docs/mlt.md",
-    ("mmlt", "glass_sphere_caustic"): "mmlt 0.867 of the reference (mean z -13.9), docs/mlt.md",
-    ("mmlt", "veach_mis"): "mmlt 0.978 of the reference (mean z -7.2), docs/mlt.md",
+    ("pssmlt", "veach_mis"): "pssmlt: " + _B_TAIL,
+    ("mmlt", "veach_mis"): "mmlt: " + _B_TAIL,
+    ("mmlt", "glass_sphere_caustic"): "mmlt 0.867 of the reference, z -4.3 at SEED: " + _B_TAIL,
+    ("mmlt", "cornell_box"): "mmlt: blocks rejected under seed offsets 4 and 5 (0.981, 0.776 of the reference)",
+    ("pssmlt", "glass_sphere_caustic"): "pssmlt: blocks rejected under seed offset 5 (0.926 of the reference)",
 }
 
 
@@ -412,6 +482,9 @@ def test_estimator_matrix(est, name, request):
     bias = _bias(est, spec)
     if spec.kind == "analytic":
         _check_classes(spec, cfg if bias == "unbiased" else {}, res, ref, complete, where)
+    if bias == "unbiased" and EST[est]["capabilities"].get("correlated_pixels"):
+        _check_chained(spec, cfg, res, ref, est, image, variance, where)
+        return
     if bias == "unbiased":
         passed, msg = _z(spec, cfg, res, ref, est, image, variance)
         ratio = res.image.mean() / max(image.mean(), 1e-30)

@@ -317,6 +317,7 @@ public:
         st.push_back({"mlt_small_step_acceptance", {ratio(acc - lacc, prop - lprop)}});
         st.push_back({"mlt_acceptance_per_chain", per_chain});
         st.push_back({"mlt_max_rejections_per_chain", max_rej});
+        image_mean_variance(st);
         if (m_.multiplexed_) {
             // Acceptance by the proposal's depth 1 .. max_depth.
             std::vector<double> per_depth;
@@ -334,6 +335,43 @@ public:
     }
 
 private:
+    // "mlt_image_mean_variance" (R, G, B): the variance of the image mean by
+    // the batch means res.variance uses per pixel. A chain's normalisation
+    // b_c scales every pixel it visits, so the pixels' errors share one
+    // component across the image, which no sum of their variances gives;
+    // the batches are independent (own chains, own bootstraps), so their
+    // image means carry it. NaN with fewer than 2 batches.
+    void image_mean_variance(std::vector<std::pair<std::string, std::vector<double>>>& st) const {
+        std::vector<double> n_b(size_t(B_), 0.0);
+        for (uint64_t c = 0; c < C_; ++c) n_b[c % uint64_t(B_)] += double(chains_[c].proposed);
+        double n = 0;
+        int b_eff = 0;
+        for (double v : n_b) {
+            n += v;
+            b_eff += v > 0 ? 1 : 0;
+        }
+        const size_t px = size_t(W_) * size_t(H_);
+        std::vector<double> out(3, std::numeric_limits<double>::quiet_NaN());
+        if (b_eff >= 2 && px > 0) {
+            for (int c = 0; c < 3; ++c) {
+                std::vector<double> m(size_t(B_), 0.0);
+                double total = 0;
+                for (size_t p = 0; p < px; ++p)
+                    for (int b = 0; b < B_; ++b) m[size_t(b)] += batches_[(p * size_t(B_) + size_t(b)) * 3 + c];
+                for (double v : m) total += v;
+                total /= n * double(px);
+                double ss = 0;
+                for (int b = 0; b < B_; ++b)
+                    if (n_b[size_t(b)] > 0) {
+                        const double d = m[size_t(b)] / (n_b[size_t(b)] * double(px)) - total;
+                        ss += n_b[size_t(b)] * d * d;
+                    }
+                out[size_t(c)] = ss / (double(b_eff - 1) * n);
+            }
+        }
+        st.push_back({"mlt_image_mean_variance", out});
+    }
+
     struct Chain {
         Chain(float sigma, float large_p) : pss(sigma, large_p) {}
         PssSampler pss;
