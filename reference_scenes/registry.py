@@ -178,7 +178,8 @@ def scene_params(spec: SceneSpec, overrides: Optional[dict] = None) -> dict:
     if spec.kind in ("mitsuba", "ours"):
         for k, v in overrides.items():
             if k not in spec.fixed_params or spec.fixed_params[k] != v:
-                raise ValueError(f"parameter '{k}' = {v!r}: {spec.name}'s {spec.kind} reference was made with "
+                whose = "Mitsuba" if spec.kind == "mitsuba" else "our own"
+                raise ValueError(f"parameter '{k}' = {v!r}: {spec.name}'s {whose} reference was made with "
                                  f"{spec.fixed_params}; these cannot change without a new reference")
         return dict(spec.fixed_params)
     defaults = xml_defaults(spec)
