@@ -20,7 +20,7 @@ class Reference:
     variance: Optional[np.ndarray]  # None for exact
     effects: Optional[dict]  # effect class -> image, or None when no per-effect reference is available
     effects_variance: Optional[dict]  # per-effect variance (none recorded yet: renders keep only the total's)
-    kind: str  # "analytic", "mitsuba"
+    kind: str  # "analytic", "mitsuba", "ours"
     effects_kind: str  # "analytic", "ours:<estimator> <spp> spp (z-test vs Mitsuba passed)", or why there is none
     spp: int = 0  # total spp of a Mitsuba reference
 
@@ -68,7 +68,9 @@ def _cached(name: str, params_key: tuple, effect_ref: Optional[str]):
 
     path = spec.xml.parent / "reference.exr"
     if not path.exists():
-        raise FileNotFoundError(f"{path}: Mitsuba reference missing (radiometer refs {name})")
+        how = (f"python -m radiometer.reference_scenes.{spec.folder}.make_reference" if spec.kind == "ours"
+               else f"radiometer refs {name}")
+        raise FileNotFoundError(f"{path}: {spec.kind} reference missing ({how})")
     ref = read_exr(path)
     effects = None
     why = "no per-effect reference"
@@ -76,7 +78,7 @@ def _cached(name: str, params_key: tuple, effect_ref: Optional[str]):
         e = read_exr(effect_ref)
         effects = {k: np.asarray(v, np.float64) for k, v in (e.effects or {}).items()}
         why = e.metadata.get("effects_kind", "ours")
-    return Reference(np.asarray(ref.image, np.float64), np.asarray(ref.variance, np.float64), effects, None, "mitsuba",
+    return Reference(np.asarray(ref.image, np.float64), np.asarray(ref.variance, np.float64), effects, None, spec.kind,
                      why, int(ref.metadata.get("total_spp", 0)))
 
 

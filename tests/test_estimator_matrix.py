@@ -236,7 +236,15 @@ def _cells():
     out = []
     for est in sorted(EST):
         for name in sorted(registry.SCENES):
-            out.append(pytest.param(est, name, id=f"{est}-{name}"))
+            marks = ()
+            if registry.get(name).kind == "ours":
+                # caustic_in_mirror: its reference is ours (bdpt on the unfolded
+                # twin); the unbiased estimators' single renders there carry the
+                # caustic by rare paths (path, bdpt: L S S D S E only by hitting
+                # the light through the sphere), so its test is over seeds,
+                # tests/test_caustic_in_mirror.py.
+                marks = (pytest.mark.skip(reason=f"{name}: reference and its test in tests/test_caustic_in_mirror.py"),)
+            out.append(pytest.param(est, name, id=f"{est}-{name}", marks=marks))
     return out
 
 
