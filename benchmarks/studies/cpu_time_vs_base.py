@@ -162,7 +162,12 @@ def main(argv=None):
     ap.add_argument("--out", default=None)
     ap.add_argument("--instructions", action="store_true",
                     help="count instructions under valgrind instead of timing (load-independent)")
+    ap.add_argument("--settings", default=None,
+                    help='JSON object of estimator parameters merged into the defaults above, e.g. '
+                         '\'{"photonmapper": {"final_gather": false}}\'')
     a = ap.parse_args(argv)
+    for name, extra in json.loads(a.settings or "{}").items():
+        SETTINGS[name] = dict(SETTINGS.get(name, {}), **extra)
     measure = _measure_instructions if a.instructions else _measure
     rows = {name: measure(a, name) for name in a.integrators.split(",")}
     params = {"res": a.res, "spp": a.spp, "max_depth": a.max_depth, "repeats": a.repeats,
