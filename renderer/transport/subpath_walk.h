@@ -67,6 +67,9 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
         count = 1;
         if (path.size() < 2) path.resize(2);
     }
+    // The window's two slots (the buffer does not move during the walk: a
+    // pointer held once, not reloaded after every store into a vertex).
+    PathVertex* const slots = kWindow ? path.data() : nullptr;
     Color thr(1.f);         // throughput since the start (Russian roulette without media)
     float eta_scale = 1.f;  // undoes radiance scaling by eta^2 (Russian roulette)
     // Through media: the hero channel of spectral MIS (media_common.h),
@@ -80,7 +83,7 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
     auto add_vertex = [&]() {
         const size_t n = size_t(count) - 1;  // index of v
         if constexpr (kWindow) {
-            if (!visit(path[n & 1], &path[(n - 1) & 1], int(n))) return false;
+            if (!visit(slots[n & 1], &slots[(n - 1) & 1], int(n))) return false;
             return count < max_vertices;
         }
         PathVertex& v = path[n];
@@ -104,7 +107,7 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
     auto new_vertex = [&]() -> PathVertex& {
         ++count;
         if constexpr (kWindow) {
-            PathVertex& v = path[size_t(count - 1) & 1];
+            PathVertex& v = slots[size_t(count - 1) & 1];
             reset_walk_slot(v);
             return v;
         } else {
@@ -123,8 +126,10 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
                                      beta0 > 0.f ? max_component(th.beta) / beta0 * eta_scale : 0.f, rr_u, th.beta);
         float q = roulette_survival(RouletteRule::Capped, depth, rr_depth, max_component(thr) * eta_scale);
         if (!(rr_u < q)) return false;
-        th.beta /= q;
-        thr /= q;
+        if (q < 1.f) {  // before rr_depth q is 1: nothing to divide
+            th.beta /= q;
+            thr /= q;
+        }
         return true;
     };
     // depth: scattering vertices from the start to the new vertex (every
