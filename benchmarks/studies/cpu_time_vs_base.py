@@ -23,7 +23,13 @@ run per side and budget, no repeats needed: the count does not depend on
 the machine's load): each side renders at 1 spp and at 1 + spp, and the
 difference, the instructions of `spp` samples per pixel, is compared; the
 1 spp runs' totals (imports, scene load, photon maps) are reported beside
-it. Use a small --res (32): valgrind runs about 50 times slower.
+it. Use a small --res (32): valgrind runs about 50 times slower. The
+count is not exactly repeatable (threads that wait, Embree's among them,
+count what they spin): the same build measured 1.614e9 and 1.524e9
+instructions for sppm's 8 spp in two runs, and photonmapper without final
+gathering 3.61e8 and 3.74e8, so a ratio within a few percent of 1 needs
+repeats. `--settings` merges parameters into an estimator's (e.g. final
+gathering off).
 
 Studies recorded with it: `media_free_when_absent` (path only: media
 support must cost nothing in a scene without media) and
@@ -162,7 +168,12 @@ def main(argv=None):
     ap.add_argument("--out", default=None)
     ap.add_argument("--instructions", action="store_true",
                     help="count instructions under valgrind instead of timing (load-independent)")
+    ap.add_argument("--settings", default=None,
+                    help='JSON object of estimator parameters merged into the defaults above, e.g. '
+                         '\'{"photonmapper": {"final_gather": false}}\'')
     a = ap.parse_args(argv)
+    for name, extra in json.loads(a.settings or "{}").items():
+        SETTINGS[name] = dict(SETTINGS.get(name, {}), **extra)
     measure = _measure_instructions if a.instructions else _measure
     rows = {name: measure(a, name) for name in a.integrators.split(",")}
     params = {"res": a.res, "spp": a.spp, "max_depth": a.max_depth, "repeats": a.repeats,

@@ -109,12 +109,14 @@ public:
     PhotonStore(const PhotonTraceSpec& spec, std::vector<Photon>& out, ThreadStats& stats)
         : spec_(spec), out_(out), stats_(stats) {}
 
-    bool operator()(const std::vector<PathVertex>& path) {
-        const int n = int(path.size()) - 1;
+    // The walk's window mode (subpath_walk.h): vertex n and its predecessor.
+    static constexpr bool kLastTwo = true;
+
+    bool operator()(const PathVertex& v, const PathVertex* prev_vertex, int n) {
         if (n == 0) return true;  // y0: the emission sample leaves no photon
         // 1. The vertex before this one is complete now (its lobe is known): count it.
         if (n >= 2) {
-            const PathVertex& prev = path[n - 1];
+            const PathVertex& prev = *prev_vertex;
             if (prev.type == VType::Medium) {
                 ++k_;
                 all_specular_ = false;
@@ -126,7 +128,6 @@ public:
         }
         // A caustic path ends once it scattered through a non-specular lobe.
         if (spec_.caustic_only && !all_specular_) return false;
-        const PathVertex& v = path[n];
         const uint32_t depth = uint32_t(std::min(n, 255)) << kPhotonDepthShift;
         // 2. A volume photon at a multiple-scattering event (k > 0); a
         //    medium vertex ends a caustic path.

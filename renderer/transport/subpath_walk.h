@@ -19,6 +19,33 @@ int emitter_shape(const Scene& scene, const Emitter& e);
 // the walk (a block copy, cheaper than member-by-member initialisation).
 extern const PathVertex kFreshVertex;
 
+// A visitor that declares `static constexpr bool kLastTwo = true` walks in
+// the window mode: `path` holds two slots, the new vertex and the one
+// before it (vertex i in slot i & 1), and the visitor is called as
+// visit(v, prev, i) with prev null for the start vertex i = 0. For a
+// visitor that reads only a vertex and its predecessor (photon storage):
+// no vertex record is copied per vertex, a reused slot gets only the
+// fields the walk does not write at a surface vertex reset, and there are
+// no densities (they read the vertex two back). The walk's arithmetic and
+// random numbers are the same in both modes.
+template <class V, class = void>
+struct WalksLastTwo : std::false_type {};
+template <class V>
+struct WalksLastTwo<V, std::void_t<decltype(V::kLastTwo)>> : std::bool_constant<V::kLastTwo> {};
+
+// A reused slot made a fresh surface vertex: every field that
+// Scene::intersect (the whole Interaction on a hit) and step 5 of the walk
+// do not write, to its default.
+inline void reset_walk_slot(PathVertex& v) {
+    v.type = VType::Surface;
+    v.pdf_fwd = 0.f;
+    v.pdf_rev = 0.f;
+    v.delta = false;
+    v.infinite = false;
+    v.phase = nullptr;
+    v.enclosed = false;
+}
+
 // Each new vertex gets pdf_fwd and its predecessor's predecessor pdf_rev
 // (Veach 1997, sec. 10.2.1), both through pdf_to from the vertex positions,
 // exactly as the connections compute them: the weights are a partition of
@@ -31,7 +58,18 @@ template <class Visit>
 void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode, int max_vertices,
                       int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, Visit& visit,
                       const MediumTracker* media, bool densities) {
+    constexpr bool kWindow = WalksLastTwo<Visit>::value;
+    if constexpr (kWindow) densities = false;  // the window keeps no vertex two back
     BsdfContext ctx{mode};
+    // Vertices made so far, the start included (path.size() outside the window mode).
+    int count = int(path.size());
+    if constexpr (kWindow) {
+        count = 1;
+        if (path.size() < 2) path.resize(2);
+    }
+    // The window's two slots (the buffer does not move during the walk: a
+    // pointer held once, not reloaded after every store into a vertex).
+    PathVertex* const slots = kWindow ? path.data() : nullptr;
     Color thr(1.f);         // throughput since the start (Russian roulette without media)
     float eta_scale = 1.f;  // undoes radiance scaling by eta^2 (Russian roulette)
     // Through media: the hero channel of spectral MIS (media_common.h),
@@ -43,7 +81,11 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
     // then the visitor; false when the walk ends there (the visitor's
     // choice, or max_vertices reached).
     auto add_vertex = [&]() {
-        const size_t n = path.size() - 1;  // index of v
+        const size_t n = size_t(count) - 1;  // index of v
+        if constexpr (kWindow) {
+            if (!visit(slots[n & 1], &slots[(n - 1) & 1], int(n))) return false;
+            return count < max_vertices;
+        }
         PathVertex& v = path[n];
         const PathVertex& prev = path[n - 1];
         if (densities && n == 1) {
@@ -55,8 +97,26 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
             v.pdf_fwd = pdf_to(scene, prev, &path[n - 2], v);
             path[n - 2].pdf_rev = pdf_to(scene, prev, &v, path[n - 2]);
         }
-        if (!visit(path)) return false;
-        return int(path.size()) < max_vertices;
+        if constexpr (!kWindow) {
+            if (!visit(path)) return false;
+        }
+        return count < max_vertices;
+    };
+    // A new vertex at the end of the walk (kFreshVertex, or a reset slot in
+    // the window mode), and the one just made dropped.
+    auto new_vertex = [&]() -> PathVertex& {
+        ++count;
+        if constexpr (kWindow) {
+            PathVertex& v = slots[size_t(count - 1) & 1];
+            reset_walk_slot(v);
+            return v;
+        } else {
+            return path.emplace_back(kFreshVertex);
+        }
+    };
+    auto drop_vertex = [&]() {
+        --count;
+        if constexpr (!kWindow) path.pop_back();
     };
     // Russian roulette after the depth-th scattering vertex (common.h):
     // Mitsuba's rule on the throughput since the start, volpath's in media.
@@ -66,18 +126,20 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
                                      beta0 > 0.f ? max_component(th.beta) / beta0 * eta_scale : 0.f, rr_u, th.beta);
         float q = roulette_survival(RouletteRule::Capped, depth, rr_depth, max_component(thr) * eta_scale);
         if (!(rr_u < q)) return false;
-        th.beta /= q;
-        thr /= q;
+        if (q < 1.f) {  // before rr_depth q is 1: nothing to divide
+            th.beta /= q;
+            thr /= q;
+        }
         return true;
     };
     // depth: scattering vertices from the start to the new vertex (every
     // surface vertex without media; null boundaries excluded with them).
     for (int depth = 1, guard = 0; guard < (1 << 20); ++guard) {
-        if (int(path.size()) >= max_vertices) break;
+        if (count >= max_vertices) break;
         // 1. The next surface along the ray, intersected straight into the
         //    vertex it may become (no Interaction copied per bounce); the
         //    slot is reset or dropped when it becomes another vertex or none.
-        PathVertex& v = path.emplace_back(kFreshVertex);
+        PathVertex& v = new_vertex();
         Interaction& it = v.it;
         ++stats.rays;
         bool hit = scene.intersect(ray, it);
@@ -90,7 +152,7 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
             float t = 0.f;
             FlightEvent event = free_flight(med, ray, hit ? it.t : ray.tmax, sampler, th, t);
             if (event == kAbsorbed) {
-                path.pop_back();
+                drop_vertex();
                 break;
             }
             if (event == kScattered) {
@@ -129,7 +191,7 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
                 v.medium = mt.medium;
                 add_vertex();
             } else {
-                path.pop_back();
+                drop_vertex();
             }
             break;
         }
@@ -140,7 +202,7 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
         if (media && bsdf->flags() == kNull) {
             mt.cross(it, ray.d, true);
             ray = it.spawn(ray.d);
-            path.pop_back();
+            drop_vertex();
             continue;
         }
 
@@ -178,7 +240,8 @@ template <class Visit>
 bool light_subpath_with(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
                         std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats, Visit& visit,
                         bool densities) {
-    light.clear();
+    constexpr bool kWindow = WalksLastTwo<Visit>::value;
+    if constexpr (!kWindow) light.clear();
     // 1. An emitter picked (pick_start_emitter: by the render's light
     //    sampler, without a point) and a ray of light leaving it, its weight
     //    the flux Le |cos| / (pdf_a pdf_w) / pick (Jensen 2001, sec. 5.1);
@@ -198,7 +261,11 @@ bool light_subpath_with(const Scene& scene, Sampler& sampler, int max_vertices, 
     // 2. y0 and its density. At infinity that is the density of its
     //    direction under light sampling (pbrt-v4's GenerateLightSubpath);
     //    y1's comes from the origin disk through emitter_pdf_to.
-    PathVertex& y0 = light.emplace_back();
+    if constexpr (kWindow) {
+        if (light.size() < 2) light.resize(2);
+        light[0] = kFreshVertex;
+    }
+    PathVertex& y0 = kWindow ? light[0] : light.emplace_back();
     y0.type = VType::Light;
     y0.emitter = e;
     y0.it.p = es.p;
@@ -224,7 +291,11 @@ bool light_subpath_with(const Scene& scene, Sampler& sampler, int max_vertices, 
         y0.enclosed = mt.enclosed;
         if (y0.infinite) beta *= transmittance_from_infinity(scene, mt.medium);
     }
-    if (!visit(light)) return true;
+    if constexpr (kWindow) {
+        if (!visit(y0, static_cast<const PathVertex*>(nullptr), 0)) return true;
+    } else {
+        if (!visit(light)) return true;
+    }
     if (is_black(beta)) return true;  // y0 alone: light from infinity that no unbounded medium lets through
     // 4. The adjoint walk.
     random_walk_with(scene, sampler, ray, beta, TransportMode::Importance, max_vertices, rr_depth, light, stats, visit,
