@@ -184,8 +184,10 @@ def _run_job(job, rec, root: Path, run_id: str):
         rec["verdict"] = _verdict.verdict(rec, rec["verdict"]["target"])
         budget["terms"] = rec["verdict"]["terms"]
     layers = {k: res.arrays[k] for k in ("radius_bias",) if k in (res.arrays or {})}
-    rm.write_exr(out, res, scene=job["scene"], run_id=run_id, job_key=job["key"], error_budget=budget,
-                 layers=layers or None)
+    from radiometer.exr import write_exr
+
+    write_exr(out, res, scene=job["scene"], run_id=run_id, job_key=job["key"], error_budget=budget,
+              layers=layers or None)
     rec["exr"] = str(rel)
 
 
@@ -274,12 +276,11 @@ def fill_matrix_terms(store, run_id: str) -> int:
 
 def _rewrite_budget(path: Path, budget: dict):
     """Rewrites an EXR's error_budget metadata (its pixels unchanged)."""
-    import radiometer as rm
+    from radiometer.exr import read_exr, write_exr
 
-    e = rm.read_exr(path)
+    e = read_exr(path)
     meta = dict(e.metadata, error_budget=budget)
-    layers = {k: v for k, v in (getattr(e, "layers", None) or {}).items()}
-    rm.write_exr(path, image=e.image, variance=e.variance, effects=e.effects, layers=layers or None, **meta)
+    write_exr(path, image=e.image, variance=e.variance, effects=e.effects, layers=dict(e.layers) or None, **meta)
 
 
 def _crash_record(job: dict, commit, machine, err: str) -> dict:
