@@ -156,8 +156,8 @@ def test_model_term_from_the_matrix_is_the_known_model_error():
     furnace of albedo 0.55 (the 'alternative': its reference), path at
     unbounded depth (Russian roulette makes it noisy: 4 spp, 16 seeds).
     matrix_terms' model error must be 0.5 / 0.5 - 0.5 / 0.45 = -0.111
-    within its standard error (z test at ALPHA), and 3 % of it more is
-    rejected. A
+    within its standard error (z test at ALPHA), and 15 % of it more is
+    rejected (15 %: the standard error is about 2.3 % of it). A
     vpl render (no same-render estimate) gets its discretisation term from
     its seeds the same way; path's stays 0 (unbiased)."""
     recs, ref = _records(0.5, 0.55, {"type": "path", "max_depth": -1}, "furnace_model", SEEDS,
@@ -170,7 +170,7 @@ def test_model_term_from_the_matrix_is_the_known_model_error():
     assert mdl["seeds"] == 16 and "furnace_055" in mdl["from"] and mdl["alternative_scene"] == "furnace_055"
     z = (np.array(mdl["error_mean"]) - true) / np.array(mdl["error_se"])
     assert np.all(np.abs(z) < st.norm.ppf(1 - ALPHA / 2)), z
-    zw = (np.array(mdl["error_mean"]) - 1.03 * true) / np.array(mdl["error_se"])
+    zw = (np.array(mdl["error_mean"]) - 1.15 * true) / np.array(mdl["error_se"])
     assert np.all(np.abs(zw) > st.norm.ppf(1 - ALPHA / 2)), zw
     assert recs[0]["error_budget"]["discretisation"]["bias_mean"] == [0.0] * 3  # path: unbiased, untouched
     d = vrecs[0]["error_budget"]["discretisation"]

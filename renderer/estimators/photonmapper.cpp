@@ -779,19 +779,19 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     std::mutex tally_mutex;
     double bias_sum[3] = {0, 0, 0}, bias_sq[3] = {0, 0, 0};
     uint64_t bias_n = 0;
-    CameraView pass(*this, [&](const Scene& sc, Sampler& sampler, const Ray& ray, EffectRadiance& o,
-                               ThreadStats& stats) {
-        tl_bias() = Color(0.f);
-        radiance(sc, maps, sampler, ray, o, stats);
-        if (!tally) return;
-        const Color b = tl_bias();
-        std::lock_guard<std::mutex> lock(tally_mutex);
-        for (int ch = 0; ch < 3; ++ch) {
-            bias_sum[ch] += double(b[ch]);
-            bias_sq[ch] += double(b[ch]) * double(b[ch]);
-        }
-        ++bias_n;
-    });
+    CameraView pass(*this,
+                    [&](const Scene& sc, Sampler& sampler, const Ray& ray, EffectRadiance& o, ThreadStats& stats) {
+                        tl_bias() = Color(0.f);
+                        radiance(sc, maps, sampler, ray, o, stats);
+                        if (!tally) return;
+                        const Color b = tl_bias();
+                        std::lock_guard<std::mutex> lock(tally_mutex);
+                        for (int ch = 0; ch < 3; ++ch) {
+                            bias_sum[ch] += double(b[ch]);
+                            bias_sq[ch] += double(b[ch]) * double(b[ch]);
+                        }
+                        ++bias_n;
+                    });
     RenderOutput out = render_camera_paths(loop, pass);
     if (tally && bias_n > 0) {
         out.estimator_stats.push_back({"radius_bias_sum", {bias_sum[0], bias_sum[1], bias_sum[2]}});
