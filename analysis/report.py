@@ -283,10 +283,10 @@ def evidence_html(scene, wins) -> str:
 
 def verdict_table_html(rows) -> str:
     """Per configuration: its verdict against the target and its error terms."""
-    from .verdict import TERMS, verdict_word
+    from .verdict import BIAS_PARTS, TERMS, verdict_word
 
     head = ["scene", "estimator", "budget", "seeds", "relMSE", "own error", "target", "verdict", "dominant",
-            "noise", "bias (remainder)", "reference noise"]
+            "noise", "bias (remainder)", "reference noise", "of the bias: truncation", "discretisation", "model"]
     out = ["<table class='verdicts'><thead><tr>" + "".join(f"<th>{h}</th>" for h in head) + "</tr></thead><tbody>"]
     for r in rows:
         v = r.get("verdict")
@@ -295,7 +295,7 @@ def verdict_table_html(rows) -> str:
         cls = {True: "usable", False: "unusable", None: "cannot"}[v["usable"]]
         cells = [esc(r["scene"]), esc(r["estimator"]), esc(r["budget"]), v["n"], T.fmt(r["total"]),
                  T.fmt(v["own_error"]), T.fmt(v["target"]), f"<span class='{cls}'>{verdict_word(v['usable'])}</span>",
-                 esc(v["dominant"])] + [T.fmt(v["terms"].get(k)) for k in TERMS]
+                 esc(v["dominant"])] + [T.fmt(v["terms"].get(k)) for k in TERMS + BIAS_PARTS]
         out.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     out.append("</tbody></table>")
     return "\n".join(out)
@@ -580,7 +580,7 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, 
         parts.append(f"<h2 id='{esc(scene)}'>{esc(scene)}</h2>")
         parts.append(evidence_html(scene, wins))
         parts.append("<div class='figs'>")
-        spec = S.SCENES.get(scene)
+        spec = S.ALL_SCENES.get(scene)
         params = srecs[0]["scene_params"]
         # Convergence plot.
         png = f"{scene}-convergence.png"

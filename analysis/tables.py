@@ -110,7 +110,8 @@ def fmt(v, digits=3) -> str:
 
 TEXT_WIDTH = 100  # the terminal table stays one screen wide
 EFFECT_SHORT = {"subsurface": "subsurf"}
-TERM_SHORT = {"noise": "noise", "bias": "bias", "reference": "ref", "none": "-"}
+TERM_SHORT = {"noise": "noise", "bias": "bias", "reference": "ref", "truncation": "trunc", "discretisation": "disc",
+              "model": "model", "none": "-"}
 USABLE_SHORT = {True: "yes", False: "NO", None: "?"}
 
 
@@ -145,7 +146,9 @@ def effect_table_text(rows, metric: str = "relmse", winners=None, width: int = T
         out += textwrap.wrap(f"{metric} per effect, mean over seeds; usable: every seed's own error (relMSE less "
                              f"the reference's noise) <= target {target:g} (? = the reference's noise alone "
                              f"exceeds it); dominant term: noise (the render's variance), bias (remainder), ref "
-                             f"(the reference's noise); * = the effect's winner by efficiency", width)
+                             f"(the reference's noise), or the part of the bias that explains most of it: trunc "
+                             f"(max_depth), disc (photon radius, cache, clamping), model (dipole vs random walk); "
+                             f"* = the effect's winner by efficiency", width)
     by_scene = {}
     for r in rows:
         by_scene.setdefault(r["scene"], []).append(r)

@@ -40,10 +40,19 @@ from typing import Optional
 import numpy as np
 
 TERMS = ("noise", "bias", "reference")
+# Named parts of the bias remainder, from the render's budget (image mean,
+# in relMSE units as the squared relative bias of the image mean).
+BIAS_PARTS = ("truncation", "discretisation", "model")
 TERM_HOW = {
     "noise": "the render's own per-pixel variance: mean(var / (ref^2 + 0.01))",
     "bias": "remainder: relMSE - noise - reference, clamped at 0 (squared bias plus what the noise estimate misses)",
     "reference": "the reference's own noise (relMSE floor; 0 for an analytic reference)",
+    "truncation": "part of the bias: the light max_depth cuts off (the render's own probe), (missing mean / "
+                  "reference mean)^2",
+    "discretisation": "part of the bias: the method's own bias (photon radius from the same render, else the "
+                      "matrix's seeds), (bias of the image mean / reference mean)^2",
+    "model": "part of the bias: the model against its known alternative (dipole vs random walk, from the matrix), "
+             "(error of the image mean / reference mean)^2",
 }
 # Efficiency of a render with zero error (an exact furnace): the error is
 # floored here so ratios stay finite.
@@ -72,7 +81,34 @@ def error_terms(rec: dict) -> dict | None:
     ref = float(m.get("relmse_floor") or 0.0)
     noise = m.get("relmse_noise")
     rest = total - ref - (noise or 0.0)
-    return {"noise": None if noise is None else float(noise), "bias": max(0.0, float(rest)), "reference": ref}
+    out = {"noise": None if noise is None else float(noise), "bias": max(0.0, float(rest)), "reference": ref}
+    b = rec.get("error_budget") or {}
+    rm_ = m.get("reference_mean")
+    t = b.get("truncation") if isinstance(b.get("truncation"), dict) else {}
+    d = b.get("discretisation") if isinstance(b.get("discretisation"), dict) else {}
+    mo = b.get("model") if isinstance(b.get("model"), dict) else {}
+    out["truncation"] = _squared_relative(t.get("missing_mean"), rm_)
+    out["discretisation"] = _squared_relative(d.get("bias_mean"), rm_)
+    out["model"] = _squared_relative(mo.get("error_mean"), rm_)
+    return out
+
+
+def dominant_term(terms: dict) -> str:
+    """The largest of noise, bias and reference; when it is the bias, the
+    largest of its named parts (truncation, discretisation, model) where that
+    part is at least what they leave unexplained (bias - parts), else "bias"."""
+    known = {k: terms[k] for k in TERMS if terms.get(k) is not None}
+    if not any(v > 0 for v in known.values()):
+        return "none"
+    top = max(known, key=lambda k: known[k])
+    if top != "bias":
+        return top
+    parts = {k: terms[k] for k in BIAS_PARTS if terms.get(k) is not None and terms[k] > 0}
+    if not parts:
+        return "bias"
+    best = max(parts, key=lambda k: parts[k])
+    unexplained = max(0.0, known["bias"] - sum(parts.values()))
+    return best if parts[best] >= unexplained else "bias"
 
 
 def verdict(rec: dict, target: float) -> dict | None:
@@ -87,9 +123,8 @@ def verdict(rec: dict, target: float) -> dict | None:
         usable = None
     else:
         usable = own <= target
-    known = {k: v for k, v in terms.items() if v is not None}
-    dominant = max(known, key=lambda k: known[k]) if any(v > 0 for v in known.values()) else "none"
-    return {"usable": usable, "own_error": own, "dominant": dominant, "terms": terms, "target": float(target)}
+    return {"usable": usable, "own_error": own, "dominant": dominant_term(terms), "terms": terms,
+            "target": float(target)}
 
 
 def verdict_word(usable) -> str:
@@ -109,11 +144,11 @@ def config_verdict(recs: list, target: float) -> dict | None:
     else:
         usable = all(v["usable"] for v in vs)
     means = {}
-    for k in TERMS:
-        x = [v["terms"][k] for v in vs if v["terms"][k] is not None]
+    for k in TERMS + BIAS_PARTS:
+        x = [v["terms"].get(k) for v in vs if v["terms"].get(k) is not None]
         if x:
             means[k] = float(np.mean(x))
-    dominant = max(means, key=lambda k: means[k]) if any(x > 0 for x in means.values()) else "none"
+    dominant = dominant_term(means)
     return {"usable": usable, "dominant": dominant, "terms": means, "target": float(target),
             "own_error": float(np.mean([v["own_error"] for v in vs])), "n": len(vs)}
 
@@ -236,7 +271,11 @@ def render_error_budget(res) -> dict:
     return {"noise": {"image_mean_se": se(res.variance), "effects_mean_se": effects},
             "rounding": rounding_term(res),
             "truncation": truncation_term(res),
+            "discretisation": discretisation_term(res),
+            "model": model_term(res),
             "how": {"truncation": TRUNCATION_HOW,
+                    "discretisation": DISCRETISATION_HOW,
+                    "model": MODEL_HOW,
                     "noise": "standard error of the image mean per channel, sqrt(sum of per-pixel variances) / "
                              "pixels; per effect from the film's per-effect variances (render(effect_variance=True))",
                     "rounding": ROUNDING_HOW}}
@@ -298,3 +337,170 @@ def truncation_term(res) -> Optional[dict]:
     se = [float(x) for x in np.sqrt(var)] if probes > 0 else None
     return {"missing_mean": [float(x) for x in mean], "missing_se": se, "relative": [float(x) for x in rel],
             "probes": probes, "exact": False}
+
+
+# -- discretisation and estimator bias -----------------------------------------
+
+RADIUS_ASSUMPTION = ("bias ~ c r^2 (Richardson extrapolation between the gather radius r and r / sqrt(2)): holds "
+                     "where the radiance is smooth within r; at an edge or a corner the bias is of order r and "
+                     "this estimate misses part of it")
+DISCRETISATION_HOW = ("the bias of the image mean that the method's own approximation makes (photon radius, cache "
+                      "density, clamping, patch size), per channel with its standard error. 'same render': sppm and "
+                      "photonmapper estimate their photon radius's bias from the density estimate at r and r / "
+                      "sqrt(2) of the same photons (" + RADIUS_ASSUMPTION + "; photonmapper adds the k-nearest rim "
+                      "photon's share, its n / (n - 1) overestimate). 'the matrix': the other biased estimators' "
+                      "seeds against the reference (the bench fills it: the whole bias of the image mean, "
+                      "discretisation and any other); 0 for unbiased estimators")
+# The biased estimators without a same-render estimate: what their bias comes from.
+NO_SAME_RENDER = {
+    "irrcache": "cache density (record spacing and interpolation)",
+    "radcache": "cache density (record spacing and interpolation)",
+    "vpl": "clamping and the VPL count",
+    "rowcolumn": "clamping and the row-column sampling",
+    "radiosity": "patch size (piecewise-constant radiosity)",
+    "prt": "the spherical-harmonic band limit",
+    "ppm": "the merge radius",
+    "bpm": "the merge radius",
+    "vcm": "the merge radius",
+}
+
+
+def _mean_se(total, sq, n):
+    """Mean and standard error of the mean of n values from their sum and sum of squares, per channel."""
+    total, sq = np.asarray(total, np.float64), np.asarray(sq, np.float64)
+    mean = total / n
+    if n < 2:
+        return mean, None
+    var = np.maximum(sq / n - mean ** 2, 0.0) * n / (n - 1)
+    return mean, np.sqrt(var / n)
+
+
+def discretisation_term(res) -> Optional[dict]:
+    """The discretisation term of res.error_budget (see DISCRETISATION_HOW):
+    {bias_mean, bias_se, relative (to the image mean), from, batches,
+    assumption} from the render's own radius-bias tally (sppm, photonmapper),
+    0 for an unbiased estimator, or bias_mean None with the reason and
+    from None for a biased estimator the bench fills from the matrix."""
+    from .. import estimators
+
+    spec = dict(getattr(res, "integrator", None) or {})
+    est = spec.get("type")
+    info = estimators().get(est, {})
+    bias = (info.get("capabilities") or {}).get("bias")
+    st = getattr(res, "stats", None) or {}
+    if bias == "unbiased":
+        return {"bias_mean": [0.0] * 3, "bias_se": [0.0] * 3, "relative": [0.0] * 3, "from": "unbiased estimator",
+                "exact": True}
+    img_mean = np.asarray(res.image, np.float64).reshape(-1, 3).mean(axis=0)
+    for batch in ("passes", "samples"):
+        key = f"radius_bias_{batch}"
+        if key in st:
+            n = int(st[key] if np.isscalar(st[key]) else st[key][0])
+            mean, se = _mean_se(st["radius_bias_sum"], st["radius_bias_sq_sum"], n)
+            rel = np.divide(mean, img_mean, out=np.zeros(3), where=img_mean > 0)
+            note = ("passes: independent (own camera samples and photons)" if batch == "passes" else
+                    "camera samples: they share one photon map, whose own randomness this standard error misses")
+            return {"bias_mean": [float(x) for x in mean], "bias_se": None if se is None else [float(x) for x in se],
+                    "relative": [float(x) for x in rel], "from": "same render", "kind": "photon radius",
+                    "batches": n, "batch": note, "assumption": RADIUS_ASSUMPTION, "exact": False}
+    if est in ("sppm", "photonmapper"):
+        why = ("no photon map was needed (no photon-mapped light in this scene)" if not st.get("photon_maps")
+               else "scenes with media are not tallied")
+        if not st.get("photon_maps"):
+            return {"bias_mean": [0.0] * 3, "bias_se": [0.0] * 3, "relative": [0.0] * 3, "from": why, "exact": True}
+        return {"bias_mean": None, "bias_se": None, "from": None,
+                "reason": f"{est}: {why}; the bench fills it from the matrix's seeds against the reference"}
+    what = NO_SAME_RENDER.get(est, "its approximation")
+    return {"bias_mean": None, "bias_se": None, "from": None,
+            "reason": f"{est}: no same-render estimate of the bias from {what}; the bench fills it from the "
+                      f"matrix's seeds against the reference"}
+
+
+MODEL_HOW = ("the error of the scene's physical model where it has one known alternative (the dipole BSSRDF against "
+             "the random-walk subsurface): from the matrix, the model's renders (seeds) against the alternative's "
+             "reference, image mean per channel with its standard error (the seeds' spread and the reference's "
+             "variance); None where the scene has no known alternative")
+
+
+def model_term(res) -> Optional[dict]:
+    """The model term a render knows about itself: None (no known
+    alternative), or a placeholder naming the alternative, which the bench
+    fills from the matrix (matrix_terms)."""
+    feats = (getattr(res, "stats", None) or {}).get("features") or {}
+    if dict(feats).get("has_dipole"):
+        return {"error_mean": None, "error_se": None, "from": None, "model": "dipole BSSRDF",
+                "alternative": "random-walk subsurface",
+                "reason": "the dipole is an approximation of the random walk; its model error comes from the matrix "
+                          "(the dipole scene's seeds against the random walk's reference)"}
+    return None
+
+
+def _image_mean_se(rec_seeds: list, ref_mean, ref_se):
+    """(mean, se) per channel of (image mean - reference mean) over seeds:
+    se from the seeds' spread (None with one seed) and the reference's own."""
+    x = np.array([r["metrics"]["image_mean"] for r in rec_seeds], np.float64) - np.asarray(ref_mean, np.float64)
+    mean = x.mean(axis=0)
+    rs = np.asarray(ref_se if ref_se is not None else [0.0] * 3, np.float64)
+    if len(x) < 2:
+        return mean, None
+    return mean, np.sqrt(x.var(axis=0, ddof=1) / len(x) + rs ** 2)
+
+
+def matrix_terms(recs: list) -> list:
+    """Fills, in place, the terms of the records' error budgets that come
+    from the matrix: `discretisation` where the render has no same-render
+    estimate (its seeds, records of one configuration, against the
+    reference) and `model` of a scene with a known alternative (model_of).
+    Returns the records it changed. Seeds: the ok records of one
+    config_key with image and reference means (metrics image_mean,
+    reference_mean, reference_mean_se)."""
+    groups = {}
+    for r in recs:
+        m = r.get("metrics") or {}
+        if r.get("status") != "ok" or m.get("image_mean") is None or m.get("reference_mean") is None:
+            continue
+        groups.setdefault(r.get("config_key") or r["key"], []).append(r)
+    changed = []
+    for grp in groups.values():
+        ref_mean = grp[0]["metrics"]["reference_mean"]
+        ref_se = grp[0]["metrics"].get("reference_mean_se")
+        mean, se = _image_mean_se(grp, ref_mean, ref_se)
+        ref_m = np.asarray(ref_mean, np.float64)
+        rel = np.divide(mean, ref_m, out=np.zeros(3), where=ref_m > 0)
+        label = f"the matrix: {len(grp)} seed(s) against the reference"
+        for r in grp:
+            b = r.get("error_budget")
+            if not isinstance(b, dict):
+                continue
+            touched = False
+            d = b.get("discretisation")
+            if isinstance(d, dict) and (d.get("bias_mean") is None or str(d.get("from")).startswith("the matrix")):
+                b["discretisation"] = dict(d, bias_mean=[float(x) for x in mean],
+                                           bias_se=None if se is None else [float(x) for x in se],
+                                           relative=[float(x) for x in rel], **{"from": label}, seeds=len(grp),
+                                           note="the whole bias of the image mean (discretisation and any other "
+                                                "bias of the estimator), not the discretisation alone")
+                touched = True
+            if r.get("model_of"):
+                mdl = dict(b.get("model") or {})
+                mdl.update(error_mean=[float(x) for x in mean], error_se=None if se is None else [float(x) for x in se],
+                           relative=[float(x) for x in rel], seeds=len(grp), alternative_scene=r["model_of"],
+                           **{"from": f"the matrix: {len(grp)} seed(s) of {r['scene']} against {r['model_of']}'s "
+                                      f"reference (the alternative model)"})
+                b["model"] = mdl
+                touched = True
+            if touched:
+                changed.append(r)
+    return changed
+
+
+def _squared_relative(values, ref_mean) -> Optional[float]:
+    """mean over channels of (value / reference mean)^2: a term of the image
+    mean in relMSE units (the squared relative bias of the image mean)."""
+    if values is None or ref_mean is None:
+        return None
+    v, m = np.asarray(values, np.float64), np.asarray(ref_mean, np.float64)
+    ok = m > 0
+    if not np.any(ok):
+        return None
+    return float(np.mean((v[ok] / m[ok]) ** 2))

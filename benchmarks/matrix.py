@@ -249,14 +249,14 @@ def parse(d: dict, path: str = "<dict>", text: str = "") -> Matrix:
     jobs = []
     for sname, s in sc.items():
         where = f"scenes.{sname}"
-        if sname not in _scenes.SCENES:
-            raise err(where, f"unknown scene (known: {', '.join(sorted(_scenes.SCENES))})")
+        if sname not in _scenes.ALL_SCENES:
+            raise err(where, f"unknown scene (known: {', '.join(sorted(_scenes.ALL_SCENES))})")
         if not isinstance(s, dict):
             raise err(where, "expected a table")
         for k in s:
             if k not in ("params", "estimators"):
                 raise err(f"{where}.{k}", "unknown key (known: params, estimators)")
-        spec = _scenes.SCENES[sname]
+        spec = _scenes.ALL_SCENES[sname]
         try:
             params = _scenes.scene_params(spec, s.get("params") or {})
         except ValueError as ex:

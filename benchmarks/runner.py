@@ -127,6 +127,16 @@ def _run_job(job, rec, root: Path, run_id: str):
     if ref.variance is not None:
         m["relmse_floor"] = M.relmse_floor(ref.image, ref.variance)
     m["relmse_noise"] = _verdict.noise_relmse(res.variance, ref.image)
+    # Image means per channel (the error budget's terms of the image mean,
+    # and the matrix's seeds against the reference: verdict.matrix_terms).
+    m["image_mean"] = [float(x) for x in np.asarray(res.image, np.float64).reshape(-1, 3).mean(axis=0)]
+    ref_px = np.asarray(ref.image, np.float64).reshape(-1, 3)
+    m["reference_mean"] = [float(x) for x in ref_px.mean(axis=0)]
+    m["reference_mean_se"] = (None if ref.variance is None else
+                              [float(x) for x in np.sqrt(np.asarray(ref.variance, np.float64).reshape(-1, 3)
+                                                         .sum(axis=0)) / ref_px.shape[0]])
+    if spec.model_of:
+        rec["model_of"] = spec.model_of
     # Convergence: relMSE at each checkpoint against the same reference.
     curve = M.error_curve(res.checkpoints, ref.image, "relmse") if res.checkpoints else []
     rec["curve"] = curve
@@ -169,7 +179,15 @@ def _run_job(job, rec, root: Path, run_id: str):
                   terms=rec["verdict"]["terms"] if rec["verdict"] else None, terms_how=_verdict.TERM_HOW,
                   effect_noise_relmse={e: d.get("noise") for e, d in em.items()})
     rec["error_budget"] = budget
-    rm.write_exr(out, res, scene=job["scene"], run_id=run_id, job_key=job["key"], error_budget=budget)
+    # The rest of the verdict's terms come from the render's own budget (truncation, discretisation).
+    if rec["verdict"]:
+        rec["verdict"] = _verdict.verdict(rec, rec["verdict"]["target"])
+        budget["terms"] = rec["verdict"]["terms"]
+    layers = {k: res.arrays[k] for k in ("radius_bias",) if k in (res.arrays or {})}
+    from radiometer.exr import write_exr
+
+    write_exr(out, res, scene=job["scene"], run_id=run_id, job_key=job["key"], error_budget=budget,
+              layers=layers or None)
     rec["exr"] = str(rel)
 
 
@@ -233,6 +251,36 @@ class _DaskPool:
     def shutdown(self):
         if self.client.status not in ("closing", "closed"):
             self.client.close()
+
+
+def fill_matrix_terms(store, run_id: str) -> int:
+    """The error budget's terms that come from the matrix (verdict.matrix_terms:
+    the discretisation term of estimators without a same-render estimate,
+    from their seeds against the reference; the model term of a model
+    variant's jobs), filled into the run's records in the store, with their
+    verdicts recomputed; the job's EXR metadata gets the same budget. Run
+    after the jobs (again on --resume: it recomputes over all seeds).
+    Returns the number of records changed."""
+    recs = store.jobs(run_id)
+    changed = _verdict.matrix_terms(recs)
+    root = store.path.parent
+    for r in changed:
+        if r.get("verdict"):
+            r["verdict"] = _verdict.verdict(r, r["verdict"]["target"])
+            r["error_budget"]["terms"] = r["verdict"]["terms"]
+        store.update_job(r)
+        if r.get("exr") and (root / r["exr"]).exists():
+            _rewrite_budget(root / r["exr"], r["error_budget"])
+    return len(changed)
+
+
+def _rewrite_budget(path: Path, budget: dict):
+    """Rewrites an EXR's error_budget metadata (its pixels unchanged)."""
+    from radiometer.exr import read_exr, write_exr
+
+    e = read_exr(path)
+    meta = dict(e.metadata, error_budget=budget)
+    write_exr(path, image=e.image, variance=e.variance, effects=e.effects, layers=dict(e.layers) or None, **meta)
 
 
 def _crash_record(job: dict, commit, machine, err: str) -> dict:
@@ -368,6 +416,7 @@ def _run(mat, root: Path, pool, workers, cores, resume, progress, log) -> str:
     finally:
         bar.close()
         pool.shutdown()
+    fill_matrix_terms(store, run_id)
     store.finish_run(run_id, now())
     log(f"run {run_id}: {counts['ok']} ok, {counts['unsupported']} unsupported, {counts['failed']} failed "
         f"-> {store.path}")

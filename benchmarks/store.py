@@ -181,6 +181,15 @@ class Store:
                  json.dumps(rec.get("machine")), rec.get("finished"), json.dumps(rec, default=_json_default)))
         return uid
 
+    def update_job(self, rec: dict):
+        """Replaces a stored job's record (by its uid), atomically: the
+        matrix's terms of the error budget, filled after the run's jobs."""
+        with self.conn:
+            cur = self.conn.execute("UPDATE jobs SET record = ? WHERE uid = ?",
+                                    (json.dumps(rec, default=_json_default), rec["uid"]))
+        if cur.rowcount != 1:
+            raise KeyError(f"{self.path}: no job with uid {rec.get('uid')!r}")
+
     def job_keys(self, run_id: str) -> set:
         return {r["job_key"] for r in self.conn.execute("SELECT job_key FROM jobs WHERE run_id = ?", (run_id,))}
 

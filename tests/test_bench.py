@@ -48,9 +48,10 @@ def test_shipped_matrices_parse():
     default = MX.load("default")
     scenes = {j.scene for j in default.jobs}
     # Every canonical scene of the registry takes part in the main job.
-    from radiometer.reference_scenes.registry import SCENES
+    from radiometer.reference_scenes.registry import MODEL_VARIANTS, SCENES
 
-    assert scenes == set(SCENES)
+    # ... and the model variants (the dipole scenes: their records carry the model error).
+    assert scenes == set(SCENES) | set(MODEL_VARIANTS)
     assert {j.estimator for j in default.jobs} >= {"path", "direct", "ptracer", "bdpt"}
     # Each estimator that takes max_depth gets the scene's.
     j = next(j for j in default.jobs if j.scene == "ajar_door" and j.estimator == "bdpt")

@@ -167,7 +167,7 @@ def test_bench_records_terms_and_verdicts(report_run):
     root, run_id, recs, _ = report_run
     for r in recs:
         v = r["verdict"]
-        assert v["target"] == 0.05 and v["dominant"] in V.TERMS + ("none",)
+        assert v["target"] == 0.05 and v["dominant"] in V.TERMS + V.BIAS_PARTS + ("none",)
         assert r["metrics"]["relmse_noise"] >= 0
     fur = [r for r in recs if r["scene"] == "furnace"]
     # Light tracing cannot see the emitter: far off the target, its error is bias (the missing emission).

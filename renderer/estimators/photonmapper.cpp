@@ -42,6 +42,21 @@
 // simulated.
 // res.stats["photon_maps"] lists the maps built.
 //
+// Radius bias (res.error_budget's discretisation term), estimated in the
+// same render: each surface radiance estimate also returns an estimate of
+// its own bias, weighted into the camera sample like the estimate itself.
+// With r the disc's radius and the n photons found, the estimate is
+// L_in + L_rim, L_rim the n-th photon's share when the n nearest filled the
+// disc (it sits on the rim: the n / (n - 1) overestimate below), else 0.
+// The disc average of a radiance smooth at x is biased by c r^2 + O(r^4),
+// so with L_h the inner photons within r / sqrt(2) over pi r^2 / 2,
+// 2 (L_in - L_h) estimates the blur c r^2 (Richardson extrapolation in r^2),
+// and the bias estimate is 2 (L_in - L_h) + L_rim. Tallied per camera
+// sample into estimator stats radius_bias_sum / radius_bias_sq_sum (per
+// channel) and radius_bias_samples; scenes with media are not tallied.
+// The camera samples share one photon map, so the spread over them misses
+// the map's own randomness (the bench's seeds see it). Wrong where the
+// radiance is not smooth within r (an edge, a corner: of order r).
 // Bias: the estimate blurs the photon density over the disc of radius r (and
 // counts photons of nearby surfaces: corners read brighter), and n / (pi r_n^2)
 // itself overestimates a Poisson density by n / (n - 1) (the n-th photon
@@ -50,6 +65,7 @@
 // in benchmarks/studies/photon_bias.py; sppm is the consistent form.
 #include <chrono>
 #include <limits>
+#include <mutex>
 #include <stdexcept>
 #include <thread>
 
@@ -214,11 +230,13 @@ public:
                                     //    map read at x itself.
                                     int cls_i = via_specular ? kSpecular : kIndirect;
                                     if (maps.has_global && mask[cls_i]) {
+                                        Color b(0.f);
                                         Color li = final_gather_
-                                                       ? gather(scene, maps, sampler, it, bsdf, wi, c, nb, stats)
+                                                       ? gather(scene, maps, sampler, it, bsdf, wi, c, nb, stats, &b)
                                                        : estimate(maps.global, maps.r2_global, it, bsdf, wi,
-                                                                  photon_budget(max_depth_, c), nb);
+                                                                  photon_budget(max_depth_, c), nb, nullptr, &b);
                                         out.add(cls_i, beta * li);
+                                        tl_bias() += beta * b;
                                     }
                                 }
                                 // 5. Specular reflection by Monte Carlo ray tracing: follow a delta
@@ -247,9 +265,12 @@ private:
             out.add(cls_d, beta * ld / float(direct_samples_));
         }
         int cls_c = via_specular ? kSpecular : kCaustic;
-        if (maps.has_caustic && mask[cls_c])
-            out.add(cls_c,
-                    beta * estimate(maps.caustic, maps.r2_caustic, it, bsdf, wi, photon_budget(max_depth_, c), nb));
+        if (maps.has_caustic && mask[cls_c]) {
+            Color b(0.f);
+            out.add(cls_c, beta * estimate(maps.caustic, maps.r2_caustic, it, bsdf, wi, photon_budget(max_depth_, c),
+                                           nb, nullptr, &b));
+            tl_bias() += beta * b;
+        }
     }
 
     // Jensen 2001, eq. 7.6, over the lookup_size nearest photons within r2_max.
@@ -257,15 +278,18 @@ private:
     // medium go to by_medium[0] (volume class) or [1] (subsurface) instead
     // of the returned sum.
     Color estimate(const PhotonMap& map, float r2_max, const Interaction& it, const Bsdf& bsdf, const Vec3& wi,
-                   int max_photon_depth, std::vector<Neighbour>& nb, Color* by_medium = nullptr) const {
+                   int max_photon_depth, std::vector<Neighbour>& nb, Color* by_medium = nullptr,
+                   Color* bias = nullptr) const {
         if (max_photon_depth < 1) return Color(0.f);
         map.knn(it.p, lookup_size_, r2_max, nb, max_photon_depth);
         if (nb.empty()) return Color(0.f);
-        float r2 = int(nb.size()) == lookup_size_ ? nb.back().d2 : r2_max;
+        const bool full = int(nb.size()) == lookup_size_;
+        float r2 = full ? nb.back().d2 : r2_max;
         if (!(r2 > 0.f)) r2 = r2_max;  // n photons on one point: fall back to the maximum disc
         BsdfContext ctx;
-        Color sum(0.f);
-        for (const Neighbour& n : nb) {
+        Color sum(0.f), half(0.f), rim(0.f);
+        for (size_t k = 0; k < nb.size(); ++k) {
+            const Neighbour& n = nb[k];
             const Photon& ph = map.photons()[n.idx];
             Vec3 wp = it.to_local(ph.wi);
             float c = std::fabs(wp.z);
@@ -276,9 +300,15 @@ private:
                 by_medium[0] += v * (1.f / (kPi * r2));
             else if (by_medium && (ph.flags & kPhotonSubsurfacePath))
                 by_medium[1] += v * (1.f / (kPi * r2));
-            else
+            else {
                 sum += v;
+                if (full && k + 1 == nb.size())
+                    rim += v;
+                else if (2.f * n.d2 <= r2)
+                    half += v;
+            }
         }
+        if (bias) *bias = (2.f * (sum - rim) - 4.f * half + rim) * (1.f / (kPi * r2));
         return sum * (1.f / (kPi * r2));
     }
 
@@ -288,9 +318,9 @@ private:
     // the environment found this way are skipped: that light is direct
     // (step 2) or caustic (step 3) at x.
     Color gather(const Scene& scene, const Maps& maps, Sampler& sampler, const Interaction& x, const Bsdf& bsdf,
-                 const Vec3& wi, int c, std::vector<Neighbour>& nb, ThreadStats& stats) const {
+                 const Vec3& wi, int c, std::vector<Neighbour>& nb, ThreadStats& stats, Color* bias = nullptr) const {
         BsdfContext ctx;
-        Color sum(0.f);
+        Color sum(0.f), bsum(0.f);
         for (int i = 0; i < gather_rays_; ++i) {
             BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
             if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || bs.is_delta) continue;
@@ -304,7 +334,11 @@ private:
                 if (budget < 1) break;
                 const Bsdf& b2 = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
                 Vec3 wi2 = it.to_local(it.wi);
-                if (b2.has_smooth()) sum += w * estimate(maps.global, maps.r2_global, it, b2, wi2, budget, nb);
+                if (b2.has_smooth()) {
+                    Color b(0.f);
+                    sum += w * estimate(maps.global, maps.r2_global, it, b2, wi2, budget, nb, nullptr, &b);
+                    bsum += w * b;
+                }
                 if (!(b2.flags() & kDelta)) break;
                 BsdfSample bs2 = b2.sample(ctx, wi2, sampler.next_1d(), sampler.next_2d());
                 if (!(bs2.pdf_w > 0.f) || is_black(bs2.weight) || !bs2.is_delta) break;
@@ -312,6 +346,7 @@ private:
                 r = it.spawn(it.to_world(bs2.wo));
             }
         }
+        if (bias) *bias = bsum / float(gather_rays_);
         return sum / float(gather_rays_);
     }
 
@@ -329,6 +364,12 @@ private:
     Color gather_media(const Scene& scene, const Maps& maps, Sampler& sampler, const Interaction& x, const Bsdf& bsdf,
                        const Vec3& wi, int c, const MediumTracker& mt, const PathClass& pc, const Color& beta,
                        EffectRadiance& out, std::vector<Neighbour>& nb, ThreadStats& stats) const;
+
+    // The current camera sample's radius-bias estimate (top of file).
+    static Color& tl_bias() {
+        thread_local Color b(0.f);
+        return b;
+    }
 
     int max_depth_, rr_depth_;
     bool hide_;
@@ -732,9 +773,31 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     ThreadStats pstats;
     if (!photon_pass(loop, maps, info, pstats)) return loop.cancelled_output();
     // 2. Pass 2, the camera passes, through the camera driver.
-    CameraView pass(*this, [&](const Scene& sc, Sampler& sampler, const Ray& ray, EffectRadiance& o,
-                               ThreadStats& stats) { radiance(sc, maps, sampler, ray, o, stats); });
+    //    Each camera sample's radius-bias estimate is tallied (top of file;
+    //    surfaces only), under a lock: one sample's gather rays cost far more.
+    const bool tally = !scene.features.has_media && (maps.has_caustic || maps.has_global);
+    std::mutex tally_mutex;
+    double bias_sum[3] = {0, 0, 0}, bias_sq[3] = {0, 0, 0};
+    uint64_t bias_n = 0;
+    CameraView pass(*this,
+                    [&](const Scene& sc, Sampler& sampler, const Ray& ray, EffectRadiance& o, ThreadStats& stats) {
+                        tl_bias() = Color(0.f);
+                        radiance(sc, maps, sampler, ray, o, stats);
+                        if (!tally) return;
+                        const Color b = tl_bias();
+                        std::lock_guard<std::mutex> lock(tally_mutex);
+                        for (int ch = 0; ch < 3; ++ch) {
+                            bias_sum[ch] += double(b[ch]);
+                            bias_sq[ch] += double(b[ch]) * double(b[ch]);
+                        }
+                        ++bias_n;
+                    });
     RenderOutput out = render_camera_paths(loop, pass);
+    if (tally && bias_n > 0) {
+        out.estimator_stats.push_back({"radius_bias_sum", {bias_sum[0], bias_sum[1], bias_sum[2]}});
+        out.estimator_stats.push_back({"radius_bias_sq_sum", {bias_sq[0], bias_sq[1], bias_sq[2]}});
+        out.estimator_stats.push_back({"radius_bias_samples", {double(bias_n)}});
+    }
     // 3. The photon passes' counters and maps.
     out.stats.merge(pstats);
     out.photon_maps = info;

@@ -24,6 +24,21 @@
 // count, i.e. the passes treated as independent estimates as Knaus & Zwicker
 // 2011 ("Progressive Photon Mapping: A Probabilistic Approach") do; it does
 // not see the bias.
+// Radius bias (res.error_budget's discretisation term): each pass also
+// counts the photons within r / sqrt(2) of x; with Phi_h their sum, the
+// pass's estimate at the half-area disc is Phi_h / (pi r^2 / 2). A disc
+// average of a radiance smooth at x is biased by c r^2 + O(r^4) (the
+// Laplacian term of the disc mean's Taylor series), so the difference
+// Phi / (pi r^2) - Phi_h / (pi r^2 / 2) has expectation c r^2 / 2 and twice
+// it estimates the pass's bias at r (Richardson extrapolation in r^2). The
+// progressive estimate is close to the mean of the passes' own estimates
+// (Knaus & Zwicker 2011), so the mean over passes of these estimates is its
+// bias estimate, per pixel (res.arrays["radius_bias"]) and for the image
+// mean with its standard error over the passes (independent: each has its
+// own camera samples and photons): estimator stats radius_bias_sum /
+// radius_bias_sq_sum (per channel, sums over passes of the pass's image
+// mean) and radius_bias_passes. It is wrong where the radiance is not
+// smooth within r (an edge: bias of order r, not r^2).
 // Effect classes: emission and direct as in `path`; photons whose light path
 // was specular-only before x are `caustic`, the others `indirect`; all of x's
 // light is `specular` when the camera reached x through a specular vertex.
@@ -101,6 +116,9 @@ struct PixelStats {
     double tau[3][3] = {};               // [class][channel]
     double ray[kNumEffects][3] = {};     // sums of the ray-traced parts over passes
     double sum[3] = {}, sum_sq[3] = {};  // per-pass total estimates
+    // The radius-bias estimate (top of file): per pass, twice the photon-
+    // mapped estimate at r minus the one at r / sqrt(2), summed over passes.
+    double bias[3] = {};
 };
 
 }  // namespace
@@ -195,7 +213,18 @@ public:
             if (photons_needed_ && !photon_pass(loop, s, map)) return s;
             // 3. Gather and update every pixel's statistics (never cancelled:
             //    a pass is either wholly in the estimate or not at all).
+            row_bias_.assign(3 * size_t(scene_.sensor->height), 0.0);
             loop.parallel_commit(size_t(scene_.sensor->height), [&](size_t y, int) { gather_row(map, int(y)); });
+            // The pass's radius-bias estimate of the image mean (rows summed
+            // in order: the same whatever the thread count).
+            for (int ch = 0; ch < 3; ++ch) {
+                double t = 0;
+                for (size_t y = 0; y < size_t(scene_.sensor->height); ++y) t += row_bias_[3 * y + ch];
+                t /= double(px_.size());
+                bias_sum_[ch] += t;
+                bias_sq_[ch] += t * t;
+            }
+            ++bias_passes_;
         }
         return s1;
     }
@@ -234,6 +263,18 @@ public:
 
     void finish(RenderOutput& out) const override {
         out.stats.merge(pstats_);
+        if (photons_needed_ && bias_passes_ > 0) {
+            OutputArray a;
+            a.name = "radius_bias";
+            a.shape = {scene_.sensor->height, scene_.sensor->width, 3};
+            a.data.resize(3 * px_.size());
+            for (size_t p = 0; p < px_.size(); ++p)
+                for (int ch = 0; ch < 3; ++ch) a.data[3 * p + ch] = float(px_[p].bias[ch] / double(bias_passes_));
+            out.arrays.push_back(std::move(a));
+            out.estimator_stats.push_back({"radius_bias_sum", {bias_sum_[0], bias_sum_[1], bias_sum_[2]}});
+            out.estimator_stats.push_back({"radius_bias_sq_sum", {bias_sq_[0], bias_sq_[1], bias_sq_[2]}});
+            out.estimator_stats.push_back({"radius_bias_passes", {double(bias_passes_)}});
+        }
         if (photons_needed_) out.photon_maps.push_back(pms_);
     }
 
@@ -305,6 +346,7 @@ private:
             const VisiblePoint& vp = vps_[p];
             PixelStats& ps = px_[p];
             Color phi[3] = {Color(0.f), Color(0.f), Color(0.f)};
+            Color phi_half(0.f);  // photons within r / sqrt(2), every class
             double m = 0;
             if (vp.bsdf && !map.empty()) {
                 int budget = sppm_.max_depth_ < 0 ? 255 : sppm_.max_depth_ - vp.c;
@@ -319,7 +361,20 @@ private:
                     if (is_black(fr)) continue;  // photons x cannot reflect (back side) do not count
                     int j = vp.via_specular ? 2 : ((ph.flags & kPhotonIndirect) ? 1 : 0);
                     m += 1;
-                    if (mask[kTauClasses[j]]) phi[j] += vp.beta * fr * ph.power;
+                    if (mask[kTauClasses[j]]) {
+                        Color v = vp.beta * fr * ph.power;
+                        phi[j] += v;
+                        if (2.f * n.d2 <= float(ps.r2)) phi_half += v;
+                    }
+                }
+            }
+            {
+                const Color all = phi[0] + phi[1] + phi[2];
+                const double inv = 1.0 / (kPi * ps.r2);
+                for (int ch = 0; ch < 3; ++ch) {
+                    double b = 2.0 * (double(all[ch]) * inv - 2.0 * double(phi_half[ch]) * inv);
+                    ps.bias[ch] += b;
+                    row_bias_[3 * size_t(y) + ch] += b;
                 }
             }
             Color value = vp.er.total() + (phi[0] + phi[1] + phi[2]) * float(1.0 / (kPi * ps.r2));
@@ -348,6 +403,9 @@ private:
     PhotonMapStats pms_;
     ThreadStats pstats_;                 // photon tracing's counters
     uint64_t max_photons_ = UINT64_MAX;  // a pass's photons beyond this do not fit in memory
+    std::vector<double> row_bias_;       // a pass's radius-bias estimates summed per row
+    double bias_sum_[3] = {0, 0, 0}, bias_sq_[3] = {0, 0, 0};
+    int bias_passes_ = 0;
 };
 
 RenderOutput Sppm::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
