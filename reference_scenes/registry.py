@@ -162,8 +162,8 @@ def _variant(name, of, xml):
                      base.spp, base.mitsuba_integrator, 0, base.effect_ref_estimator, {}, model_of=of)
 
 
-# Scenes with one known alternative model (issue 20: the model error of the
-# error budget): the same geometry and optical properties with another
+# Scenes with one known alternative model (the model term of the error
+# budget): the same geometry and optical properties with another
 # physical model, measured against the original scene's reference. Kept out
 # of SCENES (whose every scene is compared with its reference as an
 # estimator test: a model variant differs from it by design); the bench

@@ -1,4 +1,4 @@
-"""The error budget's discretisation and model terms (issue 20): each is
+"""The error budget's discretisation and model terms: each is
 checked where its true value is known.
 
 * discretisation, same render: sppm's and photonmapper's photon-radius bias

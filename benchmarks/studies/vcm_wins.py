@@ -1,4 +1,4 @@
-"""Issue 15 point 4, where merging wins: error against time of path, bdpt,
+"""Where merging wins: error against time of path, bdpt,
 sppm, bpm and vcm on caustic_in_mirror, glass_sphere_caustic and the
 Cornell box. A benchmark, not a timed test.
 
