@@ -205,6 +205,16 @@ MITSUBA = {
 MEAN_BOUND_FACTOR = 2.0
 MEAN_BOUND = {"biased": MEAN_BOUND_FACTOR * 0.00263, "consistent": MEAN_BOUND_FACTOR * 0.00346}
 MEAN_POWER = 1.02
+# Cells whose spread over seeds was measured wider than that (2026-12-03,
+# seeds 1000..1007 of render_cell, relative error of the image mean in %):
+# bpm and ppm on the mirror caustic carry their radius bias, -0.54 on
+# average (-0.34 .. -0.81; -0.735 and -0.773 under seed offsets 4 and 1);
+# vpl and rowcolumn on the rectangle light are noise around 0 (-0.51 ..
+# +0.46, sd 0.40; +0.625 under offset 1). Bound: twice the largest seen;
+# power: a bias that lands about 2.5 bounds' widths away, 3 % for the
+# noisy ones. (bound, power) per (estimator, scene).
+MEAN_PER = {("bpm", "mirror_caustic"): (0.0161, 1.02), ("ppm", "mirror_caustic"): (0.0161, 1.02),
+            ("vpl", "area_lights_rect"): (0.0125, 1.03), ("rowcolumn", "area_lights_rect"): (0.0125, 1.03)}
 
 # Biased estimators whose bias is confined to the indirect class, every
 # other class being path's own (irrcache, radcache: indirect light from their
@@ -513,9 +523,9 @@ def test_estimator_matrix(est, name, request):
         passed, msg = _z(spec, cfg, res, ref, est, image_s, var_s)
         assert not passed, f"{where}: a bias of {what} went undetected\n{msg}"
         return
-    bound = MEAN_BOUND[bias]
+    bound, power = MEAN_PER.get((est, name), (MEAN_BOUND[bias], MEAN_POWER))
     err = res.image.mean() / image.mean() - 1
     assert abs(err) <= bound, (f"{est} ({bias}) on {name}: image mean off by {err * 100:+.3f} % "
                                f"(bound {bound * 100:.3f} %)")
-    err_s = res.image.mean() / (image.mean() * MEAN_POWER) - 1
-    assert abs(err_s) > bound, f"{where}: a {(MEAN_POWER - 1) * 100:.0f} % bias went undetected"
+    err_s = res.image.mean() / (image.mean() * power) - 1
+    assert abs(err_s) > bound, f"{where}: a {(power - 1) * 100:.0f} % bias went undetected"
