@@ -155,7 +155,7 @@ ESTIMATORS = {
     "bdpt": ({"type": "bdpt", "max_depth": 4}, 128),
     "vcm": ({"type": "vcm", "max_depth": 4}, 64),
     "bpm": ({"type": "bpm", "max_depth": 4}, 256),
-    "ppm": ({"type": "ppm", "max_depth": 4}, 64),
+    "ppm": ({"type": "ppm", "max_depth": 4}, 256),  # 64 spp missed the 50 % power check under offset 1
     "photonmapper": ({"type": "photonmapper", "global_photons": 4000, "caustic_photons": 1000,
                       "gather_rays": 2}, 4),
     "sppm": ({"type": "sppm", "photon_count": 4000, "max_depth": 4}, 16),
