@@ -156,7 +156,7 @@ _SCENES = [
     # the copy generate.write_weighted makes, each emitter's sampling_weight
     # its power (Mitsuba picks emitter i with probability w_i / sum w; the
     # expectation is unchanged). ptracer: nothing left out (all diffuse).
-    _mitsuba("many_lights", {"res": 64, "max_depth": 4}, 32, 512, 1024, exclusions={"ptracer": []},
+    _mitsuba("many_lights", {"res": 64, "max_depth": 4}, 32, 2048, 1024, exclusions={"ptracer": []},
              mitsuba_writer="generate:write_weighted"),
 ]
 # Ours, not Mitsuba's: the caustic is seen only in the mirror (L S S D S E),

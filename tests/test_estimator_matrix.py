@@ -196,7 +196,9 @@ MITSUBA = {
     # while power (1.0004, mean z -0.4) and tree (1.0013, +0.2) passed.
     # Per-sample relative variance (pixel variance / image mean^2, SEED):
     # path uniform 32, power 12, tree 5.
-    "many_lights": {"spp": 256, "k": 4, "power": 1.02, "integrator": {"light_sampler": "tree"}},
+    # pssmlt at 64 spp (256 took 53 s on the loaded machine).
+    "many_lights": {"spp": 256, "k": 4, "power": 1.02, "integrator": {"light_sampler": "tree"},
+                    "per": {"pssmlt": {"spp": 64}}},
     # One pixel (an irradiance meter): a plain z-test, 2^18 samples (at that
     # budget bdpt's standard error is 0.5 % of T_d and 0.7 % of R, measured
     # in tests/test_irradiancemeter.py, hence 2 % and 3 %).
@@ -457,7 +459,13 @@ def _check_chained(spec, cfg, res, ref, est, image, variance, where):
 MLT_POWER = {("pssmlt", "cornell_box"): 1.3, ("pssmlt", "glass_sphere_caustic"): 1.3,
              ("pssmlt", "veach_mis"): 1.5, ("pssmlt", "ajar_door"): 1.1,
              ("mmlt", "cornell_box"): 1.8, ("mmlt", "glass_sphere_caustic"): 1.3,
-             ("mmlt", "veach_mis"): 1.5, ("mmlt", "ajar_door"): 1.2}
+             ("mmlt", "veach_mis"): 1.5, ("mmlt", "ajar_door"): 1.2,
+             # many_lights (light tree), image mean / reference at seed
+             # offsets 0, 1, 2: pssmlt 64 spp 0.991 / 0.984 / 1.014 (relative
+             # sd of the mean from the batch means 1.4-1.7 %; at 256 spp the
+             # same 0.991: b's error, not the chains'), mmlt 256 spp
+             # 1.040 / 0.993 / 1.007 (1.8-2.8 %).
+             ("pssmlt", "many_lights"): 1.10, ("mmlt", "many_lights"): 1.15}
 
 
 # Cells that fail today and are being investigated, with what was measured
