@@ -1,5 +1,5 @@
 """Writes reference_scenes/many_lights/scene.xml: a two-room hall lit by
-10 000 emitters whose powers span six decades (card.md says what the scene
+10 000 emitters whose powers span five decades (card.md says what the scene
 isolates). Deterministic (numpy's default_rng(SEED)); the committed XML is
 this script's output, and tests/test_many_lights.py checks that it still is.
 
