@@ -56,6 +56,7 @@ biased and consistent estimators at BIASED_SPP and CONSISTENT_SPP.
 The whole file: about 200 s on 2 shared cores (69 cells run; the slowest
 bdpt on ajar_door, 21 s, and on the Cornell box, 18 s), the renders that
 the per-estimator Mitsuba comparisons made before, in one place.
+many_lights (2026-12-03) adds 5 cells and 14 skips, 60-95 s (bdpt 19-37 s).
 """
 from __future__ import annotations
 
@@ -110,7 +111,9 @@ ANALYTIC_PER = {"ptracer": {"furnace": {"spp": 1024}},
                 "pssmlt": _MLT_ANALYTIC,
                 "mmlt": {**_MLT_ANALYTIC, "furnace": {"power": 1.10},
                          "mirror_caustic": {"power": 1.10, "class_tol": 0.1}}}
-# Per Mitsuba scene: spp, block size k and the power check's bias (a float:
+# Per Mitsuba scene: spp, block size k, optionally "integrator" (estimator
+# parameters every cell of the scene adds: many_lights' light tree) and the
+# power check's bias (a float:
 # the whole reference scaled by it; a (region, boxes, s) triple: the pixels
 # outside `boxes` scaled by s, the region the scene is about). "per": the
 # budgets measured for particular estimators where the scene's own does not
