@@ -33,8 +33,11 @@ SEED = 987654321
 
 def ref_path(root, scene: str, params: dict, spp: int) -> Path:
     spec = _scenes.get(scene)
-    key = json.dumps({"scene": scene, "params": params, "estimator": spec.effect_ref_estimator,
-                      "max_depth": _scenes.max_depth(spec, params), "spp": spp, "seed": SEED}, sort_keys=True)
+    d = {"scene": scene, "params": params, "estimator": spec.effect_ref_estimator,
+         "max_depth": _scenes.max_depth(spec, params), "spp": spp, "seed": SEED}
+    if spec.effect_ref_params:  # only where given, so that the other scenes' cached files keep their names
+        d["estimator_params"] = spec.effect_ref_params
+    key = json.dumps(d, sort_keys=True)
     return Path(root) / "refs" / f"{scene}-{hashlib.sha1(key.encode()).hexdigest()[:12]}.exr"
 
 
@@ -58,7 +61,8 @@ def _splatted(scene) -> bool:
 
 def make(scene: str, params: dict, spp: int, out: Path, threads: int = 0, progress=None) -> dict:
     """Renders the per-effect reference of `scene` with `spp` samples per
-    pixel of `path` (or the scene's effect_ref_estimator), z-tests its total against Mitsuba's reference and
+    pixel of `path` (or the scene's effect_ref_estimator, with its
+    effect_ref_params), z-tests its total against Mitsuba's reference and
     writes it to `out` (EXR, metadata `accepted` and `ztest`). Returns the
     metadata."""
     import radiometer as rm
@@ -71,7 +75,8 @@ def make(scene: str, params: dict, spp: int, out: Path, threads: int = 0, progre
         raise ValueError(f"{scene}: per-effect reference spp: expected an integer >= 2 (its z-test needs the "
                          f"per-pixel variance of at least two samples), got {spp!r}")
     s = rm.load_file(spec.xml, **params)
-    integ = {"type": spec.effect_ref_estimator, "max_depth": _scenes.max_depth(spec, params)}
+    integ = {"type": spec.effect_ref_estimator, **spec.effect_ref_params,
+             "max_depth": _scenes.max_depth(spec, params)}
     t0 = time.monotonic()
     res = rm.render(s, integrator=integ, spp=spp, seed=SEED, threads=threads, progress=progress)
     ref = rm.read_exr(spec.xml.parent / "reference.exr")
@@ -80,7 +85,9 @@ def make(scene: str, params: dict, spp: int, out: Path, threads: int = 0, progre
     passed, msg = blocked_z_test(res.image, res.variance, ref.image, ref.variance, b_splatted=splatted,
                                  var_a_floor=floor)
     meta = {"accepted": int(passed), "ztest": msg, "reference_total_spp": int(ref.metadata["total_spp"]),
-            "effects_kind": (f"ours: {spec.effect_ref_estimator}, {res.spp} spp, z-test against Mitsuba "
+            "effects_kind": (f"ours: {spec.effect_ref_estimator}"
+                             + "".join(f" {k}={v}" for k, v in sorted(spec.effect_ref_params.items()))
+                             + f", {res.spp} spp, z-test against Mitsuba "
                              f"{'passed' if passed else 'FAILED'}"),
             "make_seconds": time.monotonic() - t0}
     out.parent.mkdir(parents=True, exist_ok=True)

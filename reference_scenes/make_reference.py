@@ -18,9 +18,11 @@ from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import importlib
 import json
 import platform
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -43,12 +45,14 @@ def _set_variant(mi, variant: str):
 
 
 def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 1024, variant: str = "llvm_ad_rgb",
-                           progress: bool = True, integrator: dict | None = None, **scene_params):
+                           progress: bool = True, integrator: dict | None = None, scene_note: str = "",
+                           **scene_params):
     """Renders `scene_xml` with Mitsuba 3 `runs` times (seed = 0 .. runs-1,
     `spp` samples per pixel each) and writes to `out_exr` the mean image and
     the variance of that mean (sample variance across runs / runs).
     `scene_params` override the XML's <default> parameters; `integrator`, a
-    Mitsuba plugin dict, replaces the XML's integrator. Returns the
+    Mitsuba plugin dict, replaces the XML's integrator; `scene_note`, when
+    given, says in the metadata what Mitsuba rendered. Returns the
     ExrImage-like tuple (mean, var_mean, metadata)."""
     if runs < 2:
         raise ValueError(f"make_mitsuba_reference: need runs >= 2 to estimate a variance, got {runs}")
@@ -93,6 +97,7 @@ def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 102
         "total_spp": int(spp) * int(runs),
         "seeds": f"0..{runs - 1}",
         "scene": scene_xml.name,
+        "scene_note": scene_note or "the scene's XML",
         "scene_params": json.dumps(scene_params, sort_keys=True),
         "integrator": json.dumps(integrator, sort_keys=True) if integrator else "the scene's",
         "seconds": float(seconds),
@@ -103,6 +108,16 @@ def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 102
 
     write_exr(out_exr, None, image=mean.astype(np.float32), variance=var_mean.astype(np.float32), **meta)
     return mean, var_mean, meta
+
+
+def mitsuba_xml(spec, tmp: Path):
+    """(the XML Mitsuba renders for `spec`, a note on it): the scene's own,
+    or what its registry `mitsuba_writer` writes into the folder `tmp`."""
+    if not spec.mitsuba_writer:
+        return spec.xml, ""
+    mod, fn = spec.mitsuba_writer.split(":")
+    writer = getattr(importlib.import_module(f"radiometer.reference_scenes.{spec.folder}.{mod}"), fn)
+    return Path(writer(tmp / spec.xml.name)), f"{spec.folder}/{mod}.py {fn}: {writer.__doc__.split(chr(10))[0]}"
 
 
 def main(argv=None):
@@ -121,8 +136,11 @@ def main(argv=None):
     out = Path(args.out) if args.out else spec.reference_exr
     print(f"{args.scene}: {runs} runs x {spp} spp, params {spec.fixed_params}, variant {args.variant} -> {out}",
           file=sys.stderr)
-    _, var_mean, meta = make_mitsuba_reference(spec.xml, out, runs=runs, spp=spp, variant=args.variant,
-                                               integrator=spec.mitsuba_integrator, **spec.fixed_params)
+    with tempfile.TemporaryDirectory() as tmp:
+        xml, note = mitsuba_xml(spec, Path(tmp))
+        _, var_mean, meta = make_mitsuba_reference(xml, out, runs=runs, spp=spp, variant=args.variant,
+                                                   integrator=spec.mitsuba_integrator, scene_note=note,
+                                                   **spec.fixed_params)
     print(f"wrote {out} ({out.stat().st_size / 1024:.0f} KB) in {meta['seconds']:.0f} s with {meta['variant']}; "
           f"mean variance of the mean {var_mean.mean():.3g}", file=sys.stderr)
 
