@@ -59,11 +59,12 @@ FullPath full_path(const BdptMisProbe& bd, const Scene& scene, int s, int t) {
         double p = i == 1 ? camera_pdf_a(scene, x[0], x[1]) : pdf_to(scene, x[i - 1], &x[i - 2], x[i]);
         pc[i] = p != 0.0 ? p : 1.0;
     }
+    double p_nee = 0.0;  // next event estimation's density of x_k, before the remap
     for (int i = k; i >= 1; --i) {
         double p;
         if (i == k) {  // next event estimation's density (strategy s' = 1); p_le below for s' >= 2
-            p = em->is_delta() ? emitter_pick_prob(scene, vertex_light_context(x[k - 1]), *em)
-                               : light_origin_pdf(scene, x[k], x[k - 1]);
+            p = p_nee = em->is_delta() ? emitter_pick_prob(scene, vertex_light_context(x[k - 1]), *em)
+                                       : light_origin_pdf(scene, x[k], x[k - 1]);
         } else {
             if (x[i + 1].delta) continue;
             p = i == k - 1 ? emitter_pdf_to(scene, x[k], x[i]) : pdf_to(scene, x[i + 1], &x[i + 2], x[i]);
@@ -73,9 +74,10 @@ FullPath full_path(const BdptMisProbe& bd, const Scene& scene, int s, int t) {
     // The light subpath's own density of x_k (sample_emission by area),
     // for strategies with s' >= 2 light vertices.
     // (Where next event estimation cannot reach x_k, both keep the
-    // remapped density, as nee_over_emission's ratio of 1 does.)
+    // remapped density, as nee_over_emission's ratio of 1 does: a spot's
+    // back, which its light-tree selection gives probability 0.)
     fp.p_le = pl[k];
-    if (em->is_delta() && !x[k].infinite && pl[k] > 0.0) {
+    if (em->is_delta() && !x[k].infinite && p_nee > 0.0) {
         double a = double(start_pick_prob(scene, *em));
         if (a > 0.0) fp.p_le = a;
     }

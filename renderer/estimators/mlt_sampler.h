@@ -32,16 +32,26 @@ public:
 
     // A fresh point: every coordinate unread, fresh values from stream
     // (a, b) (a bootstrap sample, or its replay as a chain's start).
-    void restart(uint64_t a, uint64_t b) {
+    // With `dim` >= 0, that coordinate reads `value` instead of its fresh
+    // draw (the draw is still made, so the others keep theirs): the same
+    // point with one coordinate moved (mmlt's bootstrap over strategies).
+    void restart(uint64_t a, uint64_t b, int dim = -1, float value = 0.f) {
         x_.clear();
         iteration_ = 0;
         last_large_ = 0;
         large_ = true;
         rng_.seed(a, b);
+        fixed_dim_ = dim;
+        fixed_value_ = value;
     }
     // From here on, fresh values and mutations come from stream (a, b)
     // (the chain's own, after its start was replayed from the bootstrap's).
-    void reseed(uint64_t a, uint64_t b) { rng_.seed(a, b); }
+    void reseed(uint64_t a, uint64_t b) {
+        rng_.seed(a, b);
+        fixed_dim_ = -1;
+    }
+    // Coordinate `dim`'s current value (0 if it was never read).
+    float value(uint32_t dim) const { return dim < x_.size() ? x_[dim].value : 0.f; }
 
     // Begins the next proposal: a large step with the large-step
     // probability, else a small one (the choice is the chain's stream's).
@@ -79,6 +89,7 @@ public:
         if (large_ || c.last_modified < last_large_ || c.last_modified < 0) {
             // Unread since the last accepted large step: still uniform.
             c.value = uniform();
+            if (int64_t(dim) == fixed_dim_ && iteration_ == 0) c.value = fixed_value_;
         } else {
             const int64_t n = iteration_ - c.last_modified;
             c.value += normal() * sigma_ * std::sqrt(float(n));
@@ -102,7 +113,8 @@ private:
 
     float sigma_, large_p_;
     std::vector<Coord> x_;
-    int64_t iteration_ = 0, last_large_ = 0;
+    int64_t iteration_ = 0, last_large_ = 0, fixed_dim_ = -1;
+    float fixed_value_ = 0.f;
     bool large_ = true;
     Pcg32 rng_;
 };

@@ -61,7 +61,9 @@
 // uniformly; the sample is that strategy alone on subpaths of s and t
 // vertices (bdpt_internal.h), its MIS-weighted contribution times
 // max_depth (d + 1), so its expectation is bdpt's image truncated at
-// max_depth. Small steps keep the strategy mostly fixed, large steps
+// max_depth. Its bootstrap evaluates each point with every strategy of
+// its depth (bootstrap(), below): b's variance without the strategy
+// choice's. Small steps keep the strategy mostly fixed, large steps
 // change it; "mlt_acceptance_per_depth" in res.stats. pbrt-v4's
 // MLTIntegrator runs separate chains per depth instead.
 //
@@ -86,6 +88,7 @@ namespace rm {
 namespace {
 
 constexpr int kMaxBatches = 32;
+constexpr uint32_t kStrategyDim = 3;                     // mmlt's coordinates: pixel (0, 1), depth (2), strategy (3)
 constexpr uint64_t kChunkMutations = uint64_t(1) << 19;  // mutations of all chains between commits (bounds memory)
 
 // The chains' parameters, shared by pssmlt and mmlt (`bootstrap`: the default sample count).
@@ -446,18 +449,52 @@ private:
 
     // Chain c's bootstrap: its share of independent points, b_c, and its
     // start drawn from them in proportion to f (replayed from its stream).
+    // mmlt: each point is evaluated with every strategy of its depth (the
+    // strategy coordinate moved into each strategy's interval at the same
+    // relative place), b_c the mean over points of their strategies' mean f
+    // and the start drawn among all (point, strategy) pairs in proportion
+    // to f / (d + 1). For u uniform, the moved point is uniform given its
+    // strategy, so E[(1/n) sum_i (1/(d_i+1)) sum_s f(u_i^s) h(u_i^s)] =
+    // E[f h] = b E_pi[h]: the chains stay unbiased, while b loses the
+    // variance of the strategy choice (a strategy alone times d + 1).
     void bootstrap(PassLoop& loop, size_t c, ThreadStats& stats) {
         Chain& ch = chains_[c];
         const uint64_t stream = mix64(loop.seed() ^ mix64(uint64_t(c) + 0x6d6c74626f6f7473ULL));
-        std::vector<double> cdf(size_t(n_boot_) + 1, 0.0);
+        std::vector<double> cdf(1, 0.0);
+        std::vector<std::pair<uint64_t, float>> point;  // per cdf entry: bootstrap point, strategy coordinate
+        cdf.reserve(size_t(n_boot_) + 1);
+        point.reserve(size_t(n_boot_));
         std::vector<Splat> tmp;
         for (uint64_t i = 0; i < n_boot_; ++i) {
             if (loop.cancelled()) return;
             ch.pss.restart(stream, i);
-            const double f = evaluate(ch.pss, tmp, stats);
-            ch.f_sum += f;
-            ch.f_sq += f * f;
-            cdf[size_t(i) + 1] = cdf[size_t(i)] + f;
+            int d = 0;
+            const double f0 = evaluate(ch.pss, tmp, stats, &d);
+            double f_mean = f0;
+            if (!m_.multiplexed_) {
+                cdf.push_back(cdf.back() + f0);
+                point.push_back({i, -1.f});
+            } else {
+                const int n = d + 1;
+                const float v = ch.pss.value(kStrategyDim);
+                const int s0 = std::min(int(v * float(n)), d);
+                const float xi = std::min(std::max(v * float(n) - float(s0), 0.f), 1.f);
+                double sum = 0;
+                for (int st = 0; st < n; ++st) {
+                    const float vs = st == s0 ? v : strategy_coordinate(st, n, xi);
+                    double f = f0;
+                    if (st != s0) {
+                        ch.pss.restart(stream, i, int(kStrategyDim), vs);
+                        f = evaluate(ch.pss, tmp, stats);
+                    }
+                    sum += f;
+                    cdf.push_back(cdf.back() + f / double(n));
+                    point.push_back({i, vs});
+                }
+                f_mean = sum / double(n);
+            }
+            ch.f_sum += f_mean;
+            ch.f_sq += f_mean * f_mean;
         }
         ch.n_f = n_boot_;
         ch.b = ch.f_sum / double(n_boot_);
@@ -469,12 +506,27 @@ private:
         }
         Pcg32 pick(own, uint64_t(c) ^ 0x5bd1e995ULL);
         const double target = double(pick.next_float()) * cdf.back();
-        size_t i = size_t(std::upper_bound(cdf.begin() + 1, cdf.end(), target) - cdf.begin()) - 1;
-        while (i + 1 < cdf.size() && !(cdf[i + 1] > cdf[i])) ++i;  // never a point with f = 0
-        i = std::min(i, size_t(n_boot_) - 1);
-        ch.pss.restart(stream, i);
+        size_t j = size_t(std::upper_bound(cdf.begin() + 1, cdf.end(), target) - cdf.begin()) - 1;
+        while (j + 1 < cdf.size() && !(cdf[j + 1] > cdf[j])) ++j;  // never a point with f = 0
+        j = std::min(j, point.size() - 1);
+        if (point[j].second < 0.f)
+            ch.pss.restart(stream, point[j].first);
+        else
+            ch.pss.restart(stream, point[j].first, int(kStrategyDim), point[j].second);
         ch.f_cur = evaluate(ch.pss, ch.cur, stats);
         ch.pss.reseed(own, uint64_t(c));
+    }
+
+    // mmlt's strategy coordinate: s of n strategies at relative place xi
+    // in [0, 1) of its interval, kept inside it against rounding.
+    static float strategy_coordinate(int s, int n, float xi) {
+        float v = (float(s) + xi) / float(n);
+        for (int k = 0; k < 8; ++k) {
+            const int got = std::min(int(v * float(n)), n - 1);
+            if (got == s) break;
+            v = std::nextafter(v, got > s ? 0.f : 1.f);
+        }
+        return v;
     }
 
     void mutate(Chain& ch, ThreadStats& stats) {
