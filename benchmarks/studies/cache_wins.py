@@ -18,7 +18,9 @@ the HTML report), then:
   mean of its seeds' B (an MSE: seeds average arithmetically). The curve has
   "stopped falling" at n* = V / B, where its noise has fallen to its bias;
   each seed records n*, the spp it reached, and the ratio of its last two
-  checkpoints (1/2 for pure noise, 1 at the floor) as a check of the fit.
+  checkpoints (1/2 for pure noise, 1 at the floor) as a check of the fit;
+  from those ratios the floor is called "flat", "bending" or "falling"
+  (resolved(): only a flat one is seen rather than extrapolated).
 * the times. Path tracing's time to reach the floor B (and 2 B) on each
   seed's curve (analysis.metrics.time_to_error: log-log interpolation
   between checkpoints); where a curve ends above it, extrapolated from its
@@ -29,7 +31,8 @@ the HTML report), then:
 Writes benchmarks/results/cache_wins.json (studies/record.py's layout) with
 the curves, fits and times, benchmarks/results/cache_wins.png (per scene the
 seeds' curves, each floor as a dashed line and path's crossing of it), and
-copies the report's convergence plots to benchmarks/results/cache_wins_<scene>.png.
+copies the report's convergence plots to benchmarks/results/cache_wins_<scene>.png
+and its 3D views of irrcache's records to cache_wins_<scene>_irrcache_records.png.
 """
 from __future__ import annotations
 
@@ -81,6 +84,19 @@ def time_to(curve, target):
     return float(t_last * e_last / target), True
 
 
+def resolved(seeds):
+    """How well the checkpoints show the floor, from the last doubling of
+    spp of every seed (e(2n) / e(n) = (1 + x / 2) / (1 + x), x = V / (n B):
+    1/2 for pure noise, 1 at the floor): "flat" when every ratio is at least
+    0.9 (the noise at most a quarter of the bias), "bending" when every one
+    is at least 0.55, else "falling" (the noise still dominates: B is an
+    extrapolation of the fit)."""
+    r = [s["last_doubling_ratio"] for s in seeds]
+    if any(x is None for x in r):
+        return "falling"
+    return "flat" if min(r) >= 0.9 else "bending" if min(r) >= 0.55 else "falling"
+
+
 def summarise(recs):
     out = {}
     for scene in sorted({r["scene"] for r in recs}):
@@ -105,7 +121,7 @@ def summarise(recs):
             if not seeds:
                 continue
             floor = float(np.mean([s["floor"] for s in seeds]))
-            row = {"floor": floor, "seeds": seeds}
+            row = {"floor": floor, "seeds": seeds, "resolved": resolved(seeds)}
             own = [s["time_to_twice_floor"] for s in seeds if s["time_to_twice_floor"] is not None]
             row["time_to_twice_floor"] = float(np.median(own)) if own else None
             for key, target in (("path_time_to_floor", floor), ("path_time_to_twice_floor", 2 * floor)):
@@ -149,7 +165,7 @@ def plot(summary, recs, png: Path):
                     ax.plot([t], [f["floor"]], "D", color=c, mec="k", ms=6, mfc="none" if ext else c)
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_xlabel("seconds (one thread)")
+        ax.set_xlabel("wall seconds (one thread per job)")
         ax.set_ylabel("relMSE against the reference")
         ax.set_title(f"{scene}: dashed = fitted bias floor B,\n diamond = path reaches B (open: extrapolated)",
                      fontsize=9)
@@ -182,6 +198,9 @@ def main(argv=None):
         png = root / "reports" / rid / f"{scene}-convergence.png"
         if png.exists():
             shutil.copy(png, record.RESULTS / f"cache_wins_{scene}.png")
+        png = root / "reports" / rid / f"{scene}-irrcache-records.png"  # the report's 3D view of the records
+        if png.exists():
+            shutil.copy(png, record.RESULTS / f"cache_wins_{scene}_irrcache_records.png")
         print(f"{scene}: reference's own relMSE floor {s['reference_relmse_floor']}")
         for p in s["path_final"]:
             print(f"  path seed {p['seed']}: {p['relmse']:.3g} at {p['seconds']:.1f} s, {p['spp']} spp")
@@ -191,7 +210,7 @@ def main(argv=None):
 
             ext = " (extrapolated)" if any(q["extrapolated"] for q in f["path_time_to_floor_seeds"]) else ""
             per_seed = ", ".join("%.3g" % q["floor"] for q in f["seeds"])
-            print(f"  {est:12s} floor {f['floor']:.3g} (seeds {per_seed});"
+            print(f"  {est:12s} floor {f['floor']:.3g} ({f['resolved']}; seeds {per_seed});"
                   f" itself at 2 B: {secs(f['time_to_twice_floor'])}; path at 2 B: "
                   f"{secs(f['path_time_to_twice_floor'])}, at B: {secs(f['path_time_to_floor'])}{ext}")
             for q in f["seeds"]:
