@@ -144,3 +144,40 @@ def test_report_shows_the_records_of_irrcache_jobs_only(cache_run, tmp_path):
     page = index.read_text()
     assert "cornell_box-irrcache-records.png" not in page
     assert "no view of irrcache" in page
+
+
+# -- the study of what caching buys (benchmarks/studies/cache_wins.py) -------------------------
+
+
+def test_cache_wins_matrix_parses():
+    from radiometer.benchmarks import matrix as MX
+    from radiometer.benchmarks.studies import cache_wins
+
+    m = MX.load(str(cache_wins.MATRIX))
+    assert {j.scene for j in m.jobs} == {"cornell_box", "ajar_door"}
+    assert {j.estimator for j in m.jobs} == {"path", "photonmapper", "irrcache", "radcache"}
+    assert len(m.jobs) == 2 * 4 * 2
+
+
+@pytest.mark.parametrize("floor", [0.0, 1e-4, 3e-3])
+def test_floor_fit_recovers_a_known_bias_and_noise(floor):
+    """e(n) = B + V / n with a few per cent of multiplicative noise: the fit
+    returns B and V, and the time path needs to reach B comes from its own
+    curve (or its slope -1 past the last checkpoint)."""
+    from radiometer.benchmarks.studies.cache_wins import fit_floor, resolved, time_to
+
+    rng = np.random.default_rng(7)
+    v = 0.2
+    n = 2.0 ** np.arange(0, 13)
+    curve = [(int(k), 0.01 * k, (floor + v / k) * float(np.exp(rng.normal(0, 0.03)))) for k in n]
+    bb, vv = fit_floor(curve)
+    assert abs(vv - v) < 0.1 * v
+    assert abs(bb - floor) < 0.15 * floor + 5e-6
+    ratio = curve[-1][2] / curve[-2][2]
+    word = resolved([{"last_doubling_ratio": ratio}])
+    assert word == ("falling" if floor == 0 else "flat" if floor == 3e-3 else "bending"), (word, ratio)
+    path = [(int(k), 0.01 * k, v / k) for k in n]  # unbiased: 0.2 / spp, 0.01 s per spp
+    t, extrapolated = time_to(path, 1e-3)
+    assert not extrapolated and abs(t - 2.0) < 1e-9
+    t, extrapolated = time_to(path, 1e-5)
+    assert extrapolated and abs(t - 200.0) < 1e-6
