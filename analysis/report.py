@@ -23,8 +23,9 @@ viewer's data, no scripts from elsewhere:
     estimator whose jobs kept a cache's records (irrcache, radcache), a 3D
     view of its lowest seed's records on the scene, from the camera and
     from over its shoulder, each a point with a circle of its radius,
-    coloured by its irradiance. Where a view cannot be made, the report
-    says why in its place.
+    coloured by its irradiance, and a map of its bias (the seeds' mean
+    against the reference, per pixel and in 4 x 4 blocks). Where a view
+    cannot be made, the report says why in its place.
 A small inline script checks on load that every image decoded and writes
 the count into the page (body[data-images-ok]), for people and for the
 headless-browser test.
@@ -661,6 +662,61 @@ def records_figures(scene, recs, desc, root: Path, out: Path) -> list:
     return parts
 
 
+BIAS_BLOCK = 4
+
+
+def bias_maps(images, ref, block: int = BIAS_BLOCK, eps: float = 1e-2):
+    """The bias of a biased estimator, seen over seeds: per pixel the
+    luminance of (mean over `images` - `ref`) / (ref + eps) (eps as relMSE's,
+    metrics.RELMSE_EPS), and the same of the block x block means of both
+    images (most of the noise of the seed mean averages out there, the
+    interpolation's blotches do not). Returns (pixel map, block map)."""
+    w = np.array([0.2126, 0.7152, 0.0722])
+    lum_mean = np.mean([np.asarray(im, np.float64) for im in images], axis=0) @ w
+    lum_ref = np.asarray(ref, np.float64) @ w
+    pix = (lum_mean - lum_ref) / (lum_ref + eps)
+    h, wd = (lum_ref.shape[0] // block) * block, (lum_ref.shape[1] // block) * block
+
+    def blocks(a):
+        return a[:h, :wd].reshape(h // block, block, wd // block, block).mean(axis=(1, 3))
+
+    return pix, (blocks(lum_mean) - blocks(lum_ref)) / (blocks(lum_ref) + eps)
+
+
+def cache_bias_figures(scene, recs, ref_image, root: Path, out: Path) -> list:
+    """The page's parts for the bias of each estimator whose jobs kept cache
+    records: its seeds' mean against the reference (bias_maps), signed, on
+    one symmetric scale; or why there is none (fewer than two seeds)."""
+    ests = sorted({r["estimator"] for r in recs if r["status"] == "ok" and r.get("arrays")})
+    parts = []
+    for est in ests:
+        ims = [im.image for im in (_load_exr(root, r) for r in recs if r["estimator"] == est and r["status"] == "ok")
+               if im is not None and im.image.shape == ref_image.shape]
+        if len(ims) < 2:
+            parts.append(f"<p class='note'>no bias map of {esc(est)}: {len(ims)} seed with its image here "
+                         f"(the mean over seeds needs two)</p>")
+            continue
+        pix, blk = bias_maps(ims, ref_image)
+        plt = _plt()
+        fig, axes = plt.subplots(1, 2, figsize=(7.2, 3.3), dpi=90)
+        v = max(float(np.percentile(np.abs(pix), 99)), 1e-6)
+        for ax, m, name in ((axes[0], pix, "per pixel"), (axes[1], blk, f"{BIAS_BLOCK} x {BIAS_BLOCK} blocks")):
+            h = ax.imshow(m, cmap="RdBu_r", vmin=-v, vmax=v, interpolation="nearest")
+            ax.set_title(f"{name}: RMS {float(np.sqrt(np.mean(m ** 2))):.3g}, mean {float(m.mean()):+.3g}",
+                         fontsize=8)
+            ax.set_xticks([])
+            ax.set_yticks([])
+        fig.colorbar(h, ax=axes.tolist(), shrink=0.8, label="(mean - ref) / (ref + 0.01), luminance")
+        fig.suptitle(f"{scene}: {est}, mean of {len(ims)} seeds against the reference", fontsize=9)
+        png = f"{scene}-{est}-bias.png"
+        fig.savefig(out / png)
+        plt.close(fig)
+        parts.append(f"<figure><img src='{png}' alt='{esc(scene)} {esc(est)} bias map'><figcaption>{esc(est)}: "
+                     f"signed relative error of the mean of {len(ims)} seeds (red: too bright); the block means "
+                     f"keep the interpolation's blotches and lose most of the noise</figcaption></figure>")
+    return parts
+
+
 # -- the page -------------------------------------------------------------------
 
 
@@ -821,6 +877,8 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, 
                 views_note = why
             parts.append(f"<p class='note'>no 3D view: {esc(why)}</p>")
         parts += records_figures(scene, brecs, None if loaded is None else loaded.desc, root, out)
+        if ref is not None:
+            parts += cache_bias_figures(scene, brecs, ref.image, root, out)
         parts.append("</div>")
         # Errors of failed jobs.
         bad = [r for r in srecs if r["status"] != "ok"]

@@ -32,7 +32,8 @@ Writes benchmarks/results/cache_wins.json (studies/record.py's layout) with
 the curves, fits and times, benchmarks/results/cache_wins.png (per scene the
 seeds' curves, each floor as a dashed line and path's crossing of it), and
 copies the report's convergence plots to benchmarks/results/cache_wins_<scene>.png
-and its 3D views of irrcache's records to cache_wins_<scene>_irrcache_records.png.
+and its 3D views of irrcache's records and its bias maps to
+cache_wins_<scene>_irrcache_records.png and cache_wins_<scene>_irrcache_bias.png.
 """
 from __future__ import annotations
 
@@ -198,9 +199,10 @@ def main(argv=None):
         png = root / "reports" / rid / f"{scene}-convergence.png"
         if png.exists():
             shutil.copy(png, record.RESULTS / f"cache_wins_{scene}.png")
-        png = root / "reports" / rid / f"{scene}-irrcache-records.png"  # the report's 3D view of the records
-        if png.exists():
-            shutil.copy(png, record.RESULTS / f"cache_wins_{scene}_irrcache_records.png")
+        for what in ("records", "bias"):  # the report's 3D view of irrcache's records and its bias map
+            png = root / "reports" / rid / f"{scene}-irrcache-{what}.png"
+            if png.exists():
+                shutil.copy(png, record.RESULTS / f"cache_wins_{scene}_irrcache_{what}.png")
         print(f"{scene}: reference's own relMSE floor {s['reference_relmse_floor']}")
         for p in s["path_final"]:
             print(f"  path seed {p['seed']}: {p['relmse']:.3g} at {p['seconds']:.1f} s, {p['spp']} spp")
