@@ -135,6 +135,13 @@ def test_report_shows_the_records_of_irrcache_jobs_only(cache_run, tmp_path):
     # The bias map of the two seeds' mean, for the cache estimator only.
     assert "cornell_box-irrcache-bias.png" in imgs and not any("path-bias" in i for i in imgs)
     assert float(_png(index.parent / "cornell_box-irrcache-bias.png").std()) > 0.05
+    # Every image of the page decodes in a browser (the page's own load check).
+    from test_bench import chromium_check
+
+    console, dom = chromium_check(index)
+    assert not console, console
+    m = re.search(r'data-images-ok="(\d+)" data-images-total="(\d+)"', dom)
+    assert m and int(m.group(1)) == int(m.group(2)) == len(imgs), dom[:2000]
     # Without the records file the report says so in the figure's place.
     irr = next(r for r in recs if r["estimator"] == "irrcache" and r["seed"] == 0)
     npy = root / irr["arrays"]["irrcache_records"]["npy"]
