@@ -19,7 +19,12 @@ viewer's data, no scripts from elsewhere:
     region where the estimators err most; the per-pixel relative squared
     error as a heat map on one log scale per scene); a pyvista off-screen
     3D view of the scene (VTK through EGL: VTK_DEFAULT_OPENGL_WINDOW =
-    vtkEGLRenderWindow), with the camera and its view frustum. Where a view
+    vtkEGLRenderWindow), with the camera and its view frustum; for each
+    estimator whose jobs kept a cache's records (irrcache, radcache), a 3D
+    view of its lowest seed's records on the scene, from the camera and
+    from over its shoulder, each a point with a circle of its radius,
+    coloured by its irradiance, and a map of its bias (the seeds' mean
+    against the reference, per pixel and in 4 x 4 blocks). Where a view
     cannot be made, the report says why in its place.
 A small inline script checks on load that every image decoded and writes
 the count into the page (body[data-images-ok]), for people and for the
@@ -410,6 +415,37 @@ def scene_photons(scene, max_points: int = 20000, seed: int = 1):
     return label, p
 
 
+def _add_scene_meshes(p, desc, pv, opacity=1.0, culling="back") -> int:
+    """Adds the scene's shapes to the plotter `p`, coloured by their BSDF
+    (emitters yellow, glass translucent blue, metal grey), each opacity
+    times `opacity`. Returns how many shapes it drew."""
+    n = 0
+    for s in desc.shapes:
+        col, op = _bsdf_colour(s.bsdf)
+        if s.emitter is not None:
+            col, op = (1.0, 0.85, 0.1), 1.0
+        if s.type == "mesh" and s.positions is not None and s.indices is not None and len(s.indices):
+            faces = np.hstack([np.full((len(s.indices), 1), 3), np.asarray(s.indices, np.int64)]).ravel()
+            mesh = pv.PolyData(np.asarray(s.positions, np.float64), faces)
+        elif s.type == "sphere":
+            inside = np.linalg.norm(np.asarray(desc.sensor.to_world, np.float64)[:3, 3] -
+                                    np.asarray(s.center, np.float64)) < float(s.radius)
+            if inside:  # the camera is inside (a furnace): see through it
+                op = min(op, 0.35)
+            mesh = pv.Sphere(radius=float(s.radius), center=tuple(float(c) for c in s.center),
+                             theta_resolution=32, phi_resolution=32)
+        elif s.type == "disk":
+            mesh = pv.Disc(center=(0, 0, 0), inner=0, outer=1, normal=(0, 0, 1), c_res=32)
+            mesh = mesh.transform(np.asarray(s.to_world, np.float64), inplace=False)
+        else:
+            continue
+        # Back faces culled: walls seen from outside vanish, so a closed room
+        # shows its inside (a cut-away) and the camera in it.
+        p.add_mesh(mesh, color=col, opacity=op * opacity, smooth_shading=s.type == "sphere", culling=culling)
+        n += 1
+    return n
+
+
 def scene_view(desc, out: Path, size=(420, 320), photons=None):
     """Renders the scene's geometry off screen with pyvista: shapes coloured
     by their BSDF (emitters yellow, glass translucent blue, metal grey), the
@@ -425,30 +461,7 @@ def scene_view(desc, out: Path, size=(420, 320), photons=None):
         pv.OFF_SCREEN = True
         p = pv.Plotter(off_screen=True, window_size=list(size))
         p.set_background("white")
-        n = 0
-        for s in desc.shapes:
-            col, op = _bsdf_colour(s.bsdf)
-            if s.emitter is not None:
-                col, op = (1.0, 0.85, 0.1), 1.0
-            if s.type == "mesh" and s.positions is not None and s.indices is not None and len(s.indices):
-                faces = np.hstack([np.full((len(s.indices), 1), 3), np.asarray(s.indices, np.int64)]).ravel()
-                mesh = pv.PolyData(np.asarray(s.positions, np.float64), faces)
-            elif s.type == "sphere":
-                inside = np.linalg.norm(np.asarray(desc.sensor.to_world, np.float64)[:3, 3] -
-                                        np.asarray(s.center, np.float64)) < float(s.radius)
-                if inside:  # the camera is inside (a furnace): see through it
-                    op = min(op, 0.35)
-                mesh = pv.Sphere(radius=float(s.radius), center=tuple(float(c) for c in s.center),
-                                 theta_resolution=32, phi_resolution=32)
-            elif s.type == "disk":
-                mesh = pv.Disc(center=(0, 0, 0), inner=0, outer=1, normal=(0, 0, 1), c_res=32)
-                mesh = mesh.transform(np.asarray(s.to_world, np.float64), inplace=False)
-            else:
-                continue
-            # Back faces culled: walls seen from outside vanish, so a closed room
-            # shows its inside (a cut-away) and the camera in it.
-            p.add_mesh(mesh, color=col, opacity=op, smooth_shading=s.type == "sphere", culling="back")
-            n += 1
+        n = _add_scene_meshes(p, desc, pv)
         if n == 0:
             p.close()
             return "the scene has no surfaces to draw"
@@ -483,6 +496,225 @@ def scene_view(desc, out: Path, size=(420, 320), photons=None):
         return None
     except Exception as e:
         return f"pyvista off-screen rendering failed ({type(e).__name__}: {e})"
+
+
+def _record_frames(normals):
+    """Two unit tangents (t, b) per unit normal (Duff et al. 2017's
+    branchless orthonormal basis)."""
+    n = np.asarray(normals, np.float64)
+    sign = np.where(n[:, 2] >= 0, 1.0, -1.0)
+    a = -1.0 / (sign + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    t = np.stack([1 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
+    bt = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
+    return t, bt
+
+
+def record_values(records, columns):
+    """What a record view colours by: (values, label). The luminance of the
+    record's irradiance (Rec. 709 weights) where the records carry one
+    (irrcache: E_r, E_g, E_b), else the radius (radcache)."""
+    a = np.asarray(records, np.float64)
+    cols = list(columns or [])
+    if all(c in cols for c in ("E_r", "E_g", "E_b")):
+        e = a[:, [cols.index("E_r"), cols.index("E_g"), cols.index("E_b")]]
+        return e @ np.array([0.2126, 0.7152, 0.0722]), "irradiance (luminance)"
+    return a[:, cols.index("radius") if "radius" in cols else 6], "record radius"
+
+
+def record_discs(records, columns, pv, segments: int = 24, lift: float = 4e-3, outline: bool = False):
+    """The cache records as a pyvista PolyData: per record a disc (or, with
+    `outline`, a circle) of the record's radius in its tangent plane, wound
+    counter-clockwise about its normal (back faces can be culled), with the
+    record's value (record_values) on each cell. Each disc is lifted along
+    its normal by up to `lift` x the largest radius, the smaller the disc
+    the higher, so that small records (corners, edges) lie on top of the
+    large ones they overlap and nothing fights the surface for depth."""
+    a = np.asarray(records, np.float64)
+    cols = list(columns or [])
+
+    def col(name, k):
+        return cols.index(name) if name in cols else k
+
+    pos = a[:, [col("x", 0), col("y", 1), col("z", 2)]]
+    nrm = a[:, [col("nx", 3), col("ny", 4), col("nz", 5)]]
+    nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
+    rad = a[:, col("radius", 6)]
+    val, _ = record_values(a, cols)
+    t, b = _record_frames(nrm)
+    phi = 2 * math.pi * np.arange(segments) / segments
+    ring = (np.cos(phi)[None, :, None] * t[:, None, :] + np.sin(phi)[None, :, None] * b[:, None, :])
+    rmax = float(rad.max()) if len(rad) else 1.0
+    rank = np.argsort(np.argsort(-rad, kind="stable"), kind="stable") / max(1, len(rad) - 1)
+    h = lift * rmax * (0.25 + 0.75 * rank)
+    pts = pos[:, None, :] + rad[:, None, None] * ring + (h[:, None] * nrm)[:, None, :]
+    idx = np.arange(len(a) * segments).reshape(len(a), segments)
+    if outline:
+        cells = np.hstack([np.full((len(a), 1), segments + 1), idx, idx[:, :1]]).ravel()
+        mesh = pv.PolyData(pts.reshape(-1, 3), lines=cells)
+    else:
+        cells = np.hstack([np.full((len(a), 1), segments), idx]).ravel()
+        mesh = pv.PolyData(pts.reshape(-1, 3), faces=cells)
+    mesh.cell_data["value"] = val
+    return mesh
+
+
+def records_view(desc, records, columns, out: Path, size=(900, 400), title=None):
+    """A 3D view of a cache's records on the scene (pyvista, off screen):
+    on the left seen from the scene's camera, on the right from over its
+    shoulder as in scene_view; each record a translucent disc of its radius
+    with its outline, and its centre as a point, all coloured by the
+    record's irradiance (log scale; record_values). Returns None, or the
+    reason there is no view."""
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    try:
+        import pyvista as pv
+    except Exception as e:  # pragma: no cover - a missing install
+        return f"pyvista is not available ({type(e).__name__}: {e})"
+    a = np.asarray(records, np.float64)
+    if a.ndim != 2 or len(a) == 0:
+        return "the cache holds no records"
+    try:
+        val, label = record_values(a, columns)
+        pos_v = val[val > 0]
+        lo = float(np.percentile(pos_v, 1)) if pos_v.size else 1e-6
+        hi = float(pos_v.max()) if pos_v.size else 1.0
+        lo = min(lo, hi / 10)
+        clim = [math.log10(lo), math.log10(hi)]
+        cols = list(columns or [])
+        m = np.asarray(desc.sensor.to_world, np.float64)
+        o, fwd, up, left = m[:3, 3], m[:3, 2], m[:3, 1], m[:3, 0]
+        pv.OFF_SCREEN = True
+        p = pv.Plotter(off_screen=True, window_size=list(size), shape=(1, 2), border=False)
+        for k in range(2):
+            p.subplot(0, k)
+            p.set_background("white")
+            _add_scene_meshes(p, desc, pv, opacity=0.3)
+            box = np.array(p.bounds, np.float64).reshape(3, 2)  # the scene's, and every record's centre in it
+            box = np.stack([np.minimum(box[:, 0], a[:, :3].min(axis=0)),
+                            np.maximum(box[:, 1], a[:, :3].max(axis=0))], axis=1)
+            pad = 0.01 * float(np.linalg.norm(box[:, 1] - box[:, 0]))  # the discs' lift
+            box = (box + np.array([-pad, pad])).ravel()
+            rims = record_discs(a, cols, pv, outline=True)
+            rims.cell_data["log10 " + label] = np.log10(np.maximum(rims.cell_data["value"], lo))
+            rims = rims.clip_box(box, invert=False)  # what spills past the scene's walls
+            if rims.n_cells:
+                p.add_mesh(rims, scalars="log10 " + label, cmap="viridis", clim=clim, opacity=0.45, line_width=1,
+                           show_scalar_bar=False)
+            centres = pv.PolyData(a[:, :3].copy())
+            centres.point_data["log10 " + label] = np.log10(np.maximum(val, lo))
+            p.add_mesh(centres, scalars="log10 " + label, cmap="viridis", clim=clim, point_size=5,
+                       render_points_as_spheres=True, show_scalar_bar=False)
+            bounds = box.reshape(3, 2)
+            centre = bounds.mean(axis=1)
+            radius = 0.5 * float(np.linalg.norm(bounds[:, 1] - bounds[:, 0]))
+            if k == 0 and desc.sensor.type == "perspective":
+                p.camera_position = [tuple(o), tuple(o + fwd), tuple(up)]
+                w, h = max(1, desc.sensor.width), max(1, desc.sensor.height)
+                fy = 2 * math.degrees(math.atan(math.tan(math.radians(desc.sensor.fov_x) / 2) * h / w))
+                p.camera.view_angle = fy * 1.05
+            else:
+                view = -fwd + 0.7 * up + 0.6 * left
+                view /= np.linalg.norm(view)
+                p.camera_position = [tuple(centre + 3.2 * radius * view), tuple(centre), tuple(up)]
+                p.add_scalar_bar(title="log10 E" if label.startswith("irradiance") else "log10 R", n_labels=4,
+                                 color="black", vertical=True,
+                                 position_x=0.88, position_y=0.1, width=0.06, height=0.7, title_font_size=9,
+                                 label_font_size=9)
+            p.reset_camera_clipping_range()
+            p.add_text(("from the camera" if k == 0 else "from over its shoulder") +
+                       (f": {title}" if title and k == 0 else ""), font_size=7, color="black")
+        p.screenshot(str(out))
+        p.close()
+        return None
+    except Exception as e:
+        return f"pyvista off-screen rendering failed ({type(e).__name__}: {e})"
+
+
+def records_figures(scene, recs, desc, root: Path, out: Path) -> list:
+    """The page's parts for the cache records of `recs` (jobs whose record
+    names arrays kept beside the EXR: benchmarks/runner.RECORD_ARRAYS): per
+    estimator, the records view (records_view) of its lowest seed, or why
+    there is none."""
+    first = {}
+    for r in sorted(recs, key=lambda r: r["seed"]):
+        if r["status"] == "ok" and r.get("arrays"):
+            first.setdefault(r["estimator"], r)
+    parts = []
+    for est, r in sorted(first.items()):
+        for _name, a in sorted(r["arrays"].items()):
+            npy = Path(a.get("npy") or "")
+            png = f"{scene}-{est}-records.png"
+            if desc is None:
+                why = "the scene does not load here"
+            elif npy.is_absolute() or ".." in npy.parts or not (root / npy).is_file():
+                why = f"{npy} is not under the results folder"
+            else:
+                why = records_view(desc, np.load(root / npy), a.get("columns"), out / png,
+                                   title=f"{est}, {a.get('rows')} records")
+            if why is None:
+                values = "irradiance" if "E_r" in (a.get("columns") or []) else "radius"
+                parts.append(f"<figure><img src='{png}' alt='{esc(scene)} {esc(est)} cache records'><figcaption>"
+                             f"{esc(est)} (seed {r['seed']}): {a.get('rows')} cache records, each a point with a "
+                             f"circle of its radius, coloured by its {values} (log scale)</figcaption></figure>")
+            else:
+                parts.append(f"<p class='note'>no view of {esc(est)}'s cache records: {esc(why)}</p>")
+    return parts
+
+
+BIAS_BLOCK = 4
+
+
+def bias_maps(images, ref, block: int = BIAS_BLOCK, eps: float = 1e-2):
+    """The bias of a biased estimator, seen over seeds: per pixel the
+    luminance of (mean over `images` - `ref`) / (ref + eps) (eps as relMSE's,
+    metrics.RELMSE_EPS), and the same of the block x block means of both
+    images (most of the noise of the seed mean averages out there, the
+    interpolation's blotches do not). Returns (pixel map, block map)."""
+    w = np.array([0.2126, 0.7152, 0.0722])
+    lum_mean = np.mean([np.asarray(im, np.float64) for im in images], axis=0) @ w
+    lum_ref = np.asarray(ref, np.float64) @ w
+    pix = (lum_mean - lum_ref) / (lum_ref + eps)
+    h, wd = (lum_ref.shape[0] // block) * block, (lum_ref.shape[1] // block) * block
+
+    def blocks(a):
+        return a[:h, :wd].reshape(h // block, block, wd // block, block).mean(axis=(1, 3))
+
+    return pix, (blocks(lum_mean) - blocks(lum_ref)) / (blocks(lum_ref) + eps)
+
+
+def cache_bias_figures(scene, recs, ref_image, root: Path, out: Path) -> list:
+    """The page's parts for the bias of each estimator whose jobs kept cache
+    records: its seeds' mean against the reference (bias_maps), signed, on
+    one symmetric scale; or why there is none (fewer than two seeds)."""
+    ests = sorted({r["estimator"] for r in recs if r["status"] == "ok" and r.get("arrays")})
+    parts = []
+    for est in ests:
+        ims = [im.image for im in (_load_exr(root, r) for r in recs if r["estimator"] == est and r["status"] == "ok")
+               if im is not None and im.image.shape == ref_image.shape]
+        if len(ims) < 2:
+            parts.append(f"<p class='note'>no bias map of {esc(est)}: {len(ims)} seed with its image here "
+                         f"(the mean over seeds needs two)</p>")
+            continue
+        pix, blk = bias_maps(ims, ref_image)
+        plt = _plt()
+        fig, axes = plt.subplots(1, 2, figsize=(7.2, 3.3), dpi=90)
+        v = max(float(np.percentile(np.abs(pix), 99)), 1e-6)
+        for ax, m, name in ((axes[0], pix, "per pixel"), (axes[1], blk, f"{BIAS_BLOCK} x {BIAS_BLOCK} blocks")):
+            h = ax.imshow(m, cmap="RdBu_r", vmin=-v, vmax=v, interpolation="nearest")
+            ax.set_title(f"{name}: RMS {float(np.sqrt(np.mean(m ** 2))):.3g}, mean {float(m.mean()):+.3g}",
+                         fontsize=8)
+            ax.set_xticks([])
+            ax.set_yticks([])
+        fig.colorbar(h, ax=axes.tolist(), shrink=0.8, label="(mean - ref) / (ref + 0.01), luminance")
+        fig.suptitle(f"{scene}: {est}, mean of {len(ims)} seeds against the reference", fontsize=9)
+        png = f"{scene}-{est}-bias.png"
+        fig.savefig(out / png)
+        plt.close(fig)
+        parts.append(f"<figure><img src='{png}' alt='{esc(scene)} {esc(est)} bias map'><figcaption>{esc(est)}: "
+                     f"signed relative error of the mean of {len(ims)} seeds (red: too bright); the block means "
+                     f"keep the interpolation's blotches and lose most of the noise</figcaption></figure>")
+    return parts
 
 
 # -- the page -------------------------------------------------------------------
@@ -626,6 +858,7 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, 
         # 3D view.
         png = f"{scene}-view.png"
         why = None
+        loaded = None
         try:
             import radiometer as rm
 
@@ -643,6 +876,9 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, 
             if "pyvista" in why:
                 views_note = why
             parts.append(f"<p class='note'>no 3D view: {esc(why)}</p>")
+        parts += records_figures(scene, brecs, None if loaded is None else loaded.desc, root, out)
+        if ref is not None:
+            parts += cache_bias_figures(scene, brecs, ref.image, root, out)
         parts.append("</div>")
         # Errors of failed jobs.
         bad = [r for r in srecs if r["status"] != "ok"]

@@ -36,6 +36,8 @@ from .store import Store
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_ROOT = Path("out") / "results"
 STORE_NAME = "bench.sqlite"
+# Arrays of res.arrays kept beside a job's EXR as .npy (the report draws them).
+RECORD_ARRAYS = ("irrcache_records", "radcache_records")
 
 
 def now() -> str:
@@ -189,6 +191,17 @@ def _run_job(job, rec, root: Path, run_id: str):
     write_exr(out, res, scene=job["scene"], run_id=run_id, job_key=job["key"], error_budget=budget,
               layers=layers or None)
     rec["exr"] = str(rel)
+    # A cache's records (irrcache, radcache: one row per record), beside the
+    # EXR, for the report's view of them.
+    saved = {}
+    for k in RECORD_ARRAYS:
+        a = (res.arrays or {}).get(k)
+        if a is not None and np.ndim(a) == 2 and len(a):
+            npy = rel.with_name(f"{rel.stem}.{k}.npy")
+            np.save(root / npy, np.asarray(a, np.float64))
+            saved[k] = {"npy": str(npy), "rows": int(len(a)), "columns": list(res.stats.get(f"{k}_columns") or [])}
+    if saved:
+        rec["arrays"] = saved
 
 
 # -- executors ----------------------------------------------------------------
