@@ -47,7 +47,9 @@ reported.
 Studies recorded with it: `media_free_when_absent` (path only: media
 support must cost nothing in a scene without media) and
 `plumbing_cpu_time` (every estimator across the registry / pass-loop /
-light-walk refactor).
+light-walk refactor); `sppmperf2_sppm`, `sppmperf2_photonmapper_nofg`
+and `sppmperf2_photonmapper_fg` (--render-only against 19af56f, the
+commit before that refactor).
 """
 from __future__ import annotations
 
