@@ -36,7 +36,8 @@ valgrind's callgrind with collection switched on inside rm::render and
 the render's worker threads (the Python interpreter, the scene load and
 the poll callback left out), so the count no longer depends on threads
 that wait or on how long the machine took; the same build measured to
-within 0.002 % over repeats (sppm on the Cornell box, 8 spp). The render
+within 0.004 % over 3 repeats (sppm on the Cornell box, 8 spp; 0.02 %
+photonmapper). The render
 then runs at 1 and at 1 + spp in fresh processes (each after an untimed
 1 spp render), and the difference is the samples' count. Both packages
 need their symbols (an unstripped build, e.g. CMake's RelWithDebInfo,
