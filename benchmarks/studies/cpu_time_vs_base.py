@@ -31,10 +31,26 @@ gathering 3.61e8 and 3.74e8, so a ratio within a few percent of 1 needs
 repeats. `--settings` merges parameters into an estimator's (e.g. final
 gathering off).
 
+`--render-only` (with --instructions) counts only the render itself:
+valgrind's callgrind with collection switched on inside rm::render and
+the render's worker threads (the Python interpreter, the scene load and
+the poll callback left out), so the count no longer depends on threads
+that wait or on how long the machine took; the same build measured to
+within 0.004 % over 3 repeats (sppm on the Cornell box, 8 spp; 0.02 %
+photonmapper). The render
+then runs at 1 and at 1 + spp in fresh processes (each after an untimed
+1 spp render), and the difference is the samples' count. Both packages
+need their symbols (an unstripped build, e.g. CMake's RelWithDebInfo,
+whose -O3 is the same code as the release build): pass this tree's as
+--this. `--repeats` runs per side; the minimum and the spread are
+reported.
+
 Studies recorded with it: `media_free_when_absent` (path only: media
 support must cost nothing in a scene without media) and
 `plumbing_cpu_time` (every estimator across the registry / pass-loop /
-light-walk refactor).
+light-walk refactor); `sppmperf2_sppm`, `sppmperf2_photonmapper_nofg`
+and `sppmperf2_photonmapper_fg` (--render-only against 19af56f, the
+commit before that refactor).
 """
 from __future__ import annotations
 
@@ -107,6 +123,55 @@ def _instructions(base, res, spp, max_depth, integrator):
     return int(m.group(1).replace(",", "")), out.stdout.split()[2]
 
 
+# The render's own instructions: collection on inside rm::render (the
+# calling thread) and the worker threads, off inside the poll callback.
+CALLGRIND_RENDER = ["--collect-atstart=no", "--toggle-collect=rm::render(*",
+                    "--toggle-collect=std::thread::_State_impl*_M_run*",
+                    "--toggle-collect=std::_Function_handler<bool (unsigned long, unsigned long)*_M_invoke*"]
+
+
+def _render_instructions(pkg, res, spp, max_depth, integrator):
+    """Instructions of the render alone (callgrind, CALLGRIND_RENDER)."""
+    import re
+    import tempfile
+
+    spec = dict(SETTINGS.get(integrator, {}), type=integrator)
+    if integrator not in DEPTHLESS:
+        spec["max_depth"] = max_depth
+    with tempfile.TemporaryDirectory() as tmp:
+        out = subprocess.run(["valgrind", "--tool=callgrind", *CALLGRIND_RENDER,
+                              f"--callgrind-out-file={tmp}/cg.out", sys.executable, "-c", CHILD, pkg, str(SCENE),
+                              str(res), str(spp), str(max_depth), "1", json.dumps(spec)],
+                             capture_output=True, text=True, check=True, env=dict(os.environ, PYTHONHASHSEED="0"))
+    m = re.search(r"Collected\s*:\s*(\d+)", out.stderr)
+    if not m:
+        raise RuntimeError(f"no instruction count in valgrind's output: {out.stderr[-500:]}")
+    return int(m.group(1)), out.stdout.split()[2]
+
+
+def _measure_render_instructions(a, integrator):
+    from concurrent.futures import ThreadPoolExecutor
+
+    sides = (("this", a.this), ("base", a.base))
+    jobs = [(side, pkg, n, i) for i in range(a.repeats) for side, pkg in sides for n in (1, 1 + a.spp)]
+    with ThreadPoolExecutor(max(1, a.jobs)) as ex:
+        counts = list(ex.map(lambda j: (j, _render_instructions(j[1], a.res, j[2], a.max_depth, integrator)), jobs))
+    row = {}
+    for side, _ in sides:
+        lo = [c for (s, _, n, _), (c, _) in counts if s == side and n == 1]
+        hi = [c for (s, _, n, _), (c, _) in counts if s == side and n != 1]
+        hashes = sorted({h for (s, _, n, _), (_, h) in counts if s == side and n != 1})
+        samples = [h - lo_ for lo_, h in zip(lo, hi)]
+        row[side] = {"render_1spp": lo, "render": hi, "samples": samples, "min": min(samples),
+                     "spread": (max(samples) - min(samples)) / min(samples), "hash": hashes}
+        print(f"{integrator:12s} {side:4s} render instructions of {a.spp} spp: min {min(samples):,}, "
+              f"spread {row[side]['spread']:.2e} over {len(samples)}", flush=True)
+    ratio = row["this"]["min"] / row["base"]["min"]
+    print(f"{integrator}: render instructions per sample this / base {ratio:.4f}", flush=True)
+    return {"render_instructions": row, "ratio_samples_this_over_base": ratio,
+            "same_image_bytes": row["this"]["hash"] == row["base"]["hash"]}
+
+
 def _measure_instructions(a, integrator):
     row = {}
     for side, base in (("this", "-"), ("base", a.base)):
@@ -148,6 +213,9 @@ def _measure(a, integrator):
 
 TIMING_SECONDS = ("wall seconds (time.perf_counter) and process CPU seconds (time.process_time, all threads) of "
                   "one render per fresh process, after an untimed 1 spp render; sides interleaved")
+TIMING_RENDER = ("instructions of the render alone (valgrind callgrind, collection on inside rm::render and its "
+                 "worker threads, off in the poll callback) at 1 and 1 + spp spp, fresh processes; the difference "
+                 "is the samples' cost; min over repeats")
 TIMING_INSTRUCTIONS = ("instructions (valgrind cachegrind) of the child process at 1 and 1 + spp spp; the "
                        "difference is the samples' cost")
 
@@ -168,6 +236,11 @@ def main(argv=None):
     ap.add_argument("--out", default=None)
     ap.add_argument("--instructions", action="store_true",
                     help="count instructions under valgrind instead of timing (load-independent)")
+    ap.add_argument("--render-only", action="store_true",
+                    help="with --instructions: count the render alone (callgrind; packages with symbols)")
+    ap.add_argument("--this", default="-",
+                    help="this tree's package folder (default: the installed one); --render-only needs symbols")
+    ap.add_argument("--jobs", type=int, default=2, help="--render-only: valgrind runs at once")
     ap.add_argument("--settings", default=None,
                     help='JSON object of estimator parameters merged into the defaults above, e.g. '
                          '\'{"photonmapper": {"final_gather": false}}\'')
@@ -175,14 +248,16 @@ def main(argv=None):
     for name, extra in json.loads(a.settings or "{}").items():
         SETTINGS[name] = dict(SETTINGS.get(name, {}), **extra)
     measure = _measure_instructions if a.instructions else _measure
+    if a.instructions and a.render_only:
+        measure = _measure_render_instructions
     rows = {name: measure(a, name) for name in a.integrators.split(",")}
     params = {"res": a.res, "spp": a.spp, "max_depth": a.max_depth, "repeats": a.repeats,
-              "instructions": a.instructions,
+              "instructions": a.instructions, "render_only": a.render_only, "this": a.this,
               "integrators": list(rows), "threads": a.threads, "base": a.base, "base_commit": a.base_commit,
               "settings": {k: SETTINGS.get(k, {}) for k in rows}}
     rec = {
         "scene": "reference_scenes/cornell_box/scene.xml",
-        "timing": TIMING_INSTRUCTIONS if a.instructions else TIMING_SECONDS,
+        "timing": (TIMING_RENDER if a.render_only else TIMING_INSTRUCTIONS) if a.instructions else TIMING_SECONDS,
         "estimators": rows,
     }
     print("wrote", record.write(a.study, params, rec, out=a.out))

@@ -61,10 +61,15 @@ public:
 // independent PCG stream of (seed, pixel, sample); given a SampleSource
 // (not owned; it outlives the sampler) the values come from it instead.
 // The independent stream pays one predictable branch per draw for that.
+// The PCG stream of (seed, pixel, sample) that Sampler draws from without a SampleSource.
+inline Pcg32 independent_stream(uint64_t seed, uint64_t pixel, uint64_t sample_index) {
+    return Pcg32(mix64(seed ^ mix64(sample_index + 0x632be59bd9b4e019ULL)), mix64(pixel + (seed << 1)));
+}
+
 class Sampler {
 public:
     Sampler(uint64_t seed, uint64_t pixel, uint64_t sample_index)
-        : rng_(mix64(seed ^ mix64(sample_index + 0x632be59bd9b4e019ULL)), mix64(pixel + (seed << 1))) {}
+        : rng_(independent_stream(seed, pixel, sample_index)) {}
     explicit Sampler(SampleSource* source) : source_(source), stride_(source ? source->bounce_stride() : 0) {}
     float next_1d() {
         if (source_) return source_->get_1d(dim_++);
@@ -102,6 +107,24 @@ private:
     SampleSource* source_ = nullptr;
     uint32_t stride_ = 0;
     uint32_t dim_ = 0;
+};
+
+// Sampler's independent stream alone (the same numbers as Sampler(seed,
+// pixel, sample)), for loops that never take a SampleSource: no branch per
+// draw, and a local one stays in registers (photon tracing).
+class IndependentSampler {
+public:
+    IndependentSampler(uint64_t seed, uint64_t pixel, uint64_t sample_index)
+        : rng_(independent_stream(seed, pixel, sample_index)) {}
+    float next_1d() { return rng_.next_float(); }
+    Vec2 next_2d() {
+        float a = rng_.next_float();
+        float b = rng_.next_float();
+        return {a, b};
+    }
+
+private:
+    Pcg32 rng_;
 };
 
 }  // namespace rm

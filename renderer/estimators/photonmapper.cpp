@@ -207,57 +207,60 @@ public:
     // steps; false when cancelled.
     bool photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMapStats>& info, ThreadStats& pstats) const;
 
-    // Pass 2: the radiance along one camera ray, split four ways (top of file).
+    // Pass 2: the radiance along one camera ray, split four ways (top of
+    // file); `bias` gets its radius-bias estimate (surfaces only).
     void radiance(const Scene& scene, const Maps& maps, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
-                  ThreadStats& stats) const {
+                  ThreadStats& stats, Color& bias) const {
         if (scene.features.has_media) return radiance_media(scene, maps, sampler, camera_ray, out, stats);
-        thread_local std::vector<Neighbour> nb;
+        // The thread's lookup buffer, found once per camera ray through a
+        // call (a thread_local named here is looked up again at every use).
+        std::vector<Neighbour>& nb = tl_neighbours();
         // 1. Each vertex of the chain, with the emission it shows (reached
         //    from the camera directly or through specular vertices only).
-        walk_specular_chain(scene, sampler, camera_ray, SpecularChain{max_depth_, rr_depth_, hide_}, mask, out, stats,
-                            [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta,
-                                const PathClass& pc, int depth) {
-                                const int c = depth + 1;  // segments from the camera to x
-                                const bool via_specular = pc.scatter_vertices > 0;
-                                if (bsdf.has_smooth()) {
-                                    // 2. Direct light by ray tracing: light samples only (nothing
-                                    //    else finds emitters from x, so no MIS weight: bsdf_frac 0).
-                                    // 3. Caustics from the caustic map.
-                                    direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb, [&] {
-                                        return estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f);
-                                    });
-                                    // 4. Indirect light from the global map: final gathering, or the
-                                    //    map read at x itself.
-                                    int cls_i = via_specular ? kSpecular : kIndirect;
-                                    if (maps.has_global && mask[cls_i]) {
-                                        Color b(0.f);
-                                        Color li = final_gather_
-                                                       ? gather(scene, maps, sampler, it, bsdf, wi, c, nb, stats, &b)
-                                                       : estimate(maps.global, maps.r2_global, it, bsdf, wi,
-                                                                  photon_budget(max_depth_, c), nb, nullptr, &b);
-                                        out.add(cls_i, beta * li);
-                                        tl_bias() += beta * b;
-                                    }
-                                }
-                                // 5. Specular reflection by Monte Carlo ray tracing: follow a delta
-                                //    lobe (the chain samples it); a sampled smooth lobe ends the path
-                                //    (its light came from steps 2-4, and the lobe-selection weight
-                                //    keeps this unbiased).
-                                if (!(bsdf.flags() & kDelta)) return false;
-                                return mask[kSpecular] || (bsdf.flags() == kNull && !via_specular);
-                            });
+        walk_specular_chain(
+            scene, sampler, camera_ray, SpecularChain{max_depth_, rr_depth_, hide_}, mask, out, stats,
+            [&](const Interaction& it, const Bsdf& bsdf, const Vec3& wi, const Color& beta, const PathClass& pc,
+                int depth) {
+                const int c = depth + 1;  // segments from the camera to x
+                const bool via_specular = pc.scatter_vertices > 0;
+                if (bsdf.has_smooth()) {
+                    // 2. Direct light by ray tracing: light samples only (nothing
+                    //    else finds emitters from x, so no MIS weight: bsdf_frac 0).
+                    // 3. Caustics from the caustic map.
+                    direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb, bias,
+                                        [&] { return estimate_direct(scene, it, bsdf, wi, sampler, stats, 1.f, 0.f); });
+                    // 4. Indirect light from the global map: final gathering, or the
+                    //    map read at x itself.
+                    int cls_i = via_specular ? kSpecular : kIndirect;
+                    if (maps.has_global && mask[cls_i]) {
+                        Color b(0.f);
+                        Color li = final_gather_ ? gather(scene, maps, sampler, it, bsdf, wi, c, nb, stats, &b)
+                                                 : estimate(maps.global, maps.r2_global, it, bsdf, wi,
+                                                            photon_budget(max_depth_, c), nb, nullptr, &b);
+                        out.add(cls_i, beta * li);
+                        bias += beta * b;
+                    }
+                }
+                // 5. Specular reflection by Monte Carlo ray tracing: follow a delta
+                //    lobe (the chain samples it); a sampled smooth lobe ends the path
+                //    (its light came from steps 2-4, and the lobe-selection weight
+                //    keeps this unbiased).
+                if (!(bsdf.flags() & kDelta)) return false;
+                return mask[kSpecular] || (bsdf.flags() == kNull && !via_specular);
+            });
     }
 
 private:
     // At a camera vertex x with a smooth lobe, in both camera loops
     // (radiance, radiance_media): direct light as the mean of
     // direct_samples_ light samples, each from `direct_one()` (the surface
-    // or the through-media estimator), and caustics from the caustic map;
-    // c: segments from the camera to x.
+    // or the through-media estimator), and caustics from the caustic map
+    // (its radius-bias estimate added to `bias`); c: segments from the
+    // camera to x.
     template <typename DirectF>
     void direct_and_caustics(const Scene& scene, const Maps& maps, const Interaction& it, const Bsdf& bsdf,
                              const Vec3& wi, int c, bool via_specular, const Color& beta, EffectRadiance& out,
-                             std::vector<Neighbour>& nb, DirectF direct_one) const {
+                             std::vector<Neighbour>& nb, Color& bias, DirectF direct_one) const {
         int cls_d = via_specular ? kSpecular : kDirect;
         if (mask[cls_d] && direct_samples_ > 0 && !scene.emitters.empty()) {
             Color ld(0.f);
@@ -269,7 +272,7 @@ private:
             Color b(0.f);
             out.add(cls_c, beta * estimate(maps.caustic, maps.r2_caustic, it, bsdf, wi, photon_budget(max_depth_, c),
                                            nb, nullptr, &b));
-            tl_bias() += beta * b;
+            bias += beta * b;
         }
     }
 
@@ -288,9 +291,13 @@ private:
         if (!(r2 > 0.f)) r2 = r2_max;  // n photons on one point: fall back to the maximum disc
         BsdfContext ctx;
         Color sum(0.f), half(0.f), rim(0.f);
-        for (size_t k = 0; k < nb.size(); ++k) {
-            const Neighbour& n = nb[k];
-            const Photon& ph = map.photons()[n.idx];
+        const Neighbour* const found = nb.data();
+        const size_t m = nb.size();
+        const size_t last = full ? m - 1 : m;  // the rim photon of a full lookup (none otherwise)
+        const Photon* const photons = map.photons().data();
+        for (size_t k = 0; k < m; ++k) {
+            const Neighbour& n = found[k];
+            const Photon& ph = photons[n.idx];
             Vec3 wp = it.to_local(ph.wi);
             float c = std::fabs(wp.z);
             if (!(c > 1e-7f)) continue;
@@ -302,7 +309,7 @@ private:
                 by_medium[1] += v * (1.f / (kPi * r2));
             else {
                 sum += v;
-                if (full && k + 1 == nb.size())
+                if (k == last)
                     rim += v;
                 else if (2.f * n.d2 <= r2)
                     half += v;
@@ -365,10 +372,10 @@ private:
                        const Vec3& wi, int c, const MediumTracker& mt, const PathClass& pc, const Color& beta,
                        EffectRadiance& out, std::vector<Neighbour>& nb, ThreadStats& stats) const;
 
-    // The current camera sample's radius-bias estimate (top of file).
-    static Color& tl_bias() {
-        thread_local Color b(0.f);
-        return b;
+    // The thread's photon lookup buffer.
+    [[gnu::noinline]] static std::vector<Neighbour>& tl_neighbours() {
+        thread_local std::vector<Neighbour> nb;
+        return nb;
     }
 
     int max_depth_, rr_depth_;
@@ -725,7 +732,8 @@ void PhotonMapper::radiance_media(const Scene& scene, const Maps& maps, Sampler&
             // 3. Direct light, through media.
             // 4. Caustics from the caustic map (its photons came through
             //    media unscattered: L S+ D).
-            direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb, [&] {
+            Color untallied(0.f);  // scenes with media: no radius-bias estimate
+            direct_and_caustics(scene, maps, it, bsdf, wi, c, via_specular, beta, out, nb, untallied, [&] {
                 return direct_through_media(
                     scene, it, mt.medium, sampler, stats,
                     [&](const Vec3& wo) { return bsdf.eval(ctx, wi, it.to_local(wo)); }, nullptr);
@@ -777,15 +785,16 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
     //    surfaces only), under a lock: one sample's gather rays cost far more.
     const bool tally = !scene.features.has_media && (maps.has_caustic || maps.has_global);
     std::mutex tally_mutex;
+    const bool shared_tally = loop.threads() > 1;  // one render thread needs no lock
     double bias_sum[3] = {0, 0, 0}, bias_sq[3] = {0, 0, 0};
     uint64_t bias_n = 0;
     CameraView pass(*this,
                     [&](const Scene& sc, Sampler& sampler, const Ray& ray, EffectRadiance& o, ThreadStats& stats) {
-                        tl_bias() = Color(0.f);
-                        radiance(sc, maps, sampler, ray, o, stats);
+                        Color b(0.f);
+                        radiance(sc, maps, sampler, ray, o, stats, b);
                         if (!tally) return;
-                        const Color b = tl_bias();
-                        std::lock_guard<std::mutex> lock(tally_mutex);
+                        std::unique_lock<std::mutex> lock(tally_mutex, std::defer_lock);
+                        if (shared_tally) lock.lock();
                         for (int ch = 0; ch < 3; ++ch) {
                             bias_sum[ch] += double(b[ch]);
                             bias_sq[ch] += double(b[ch]) * double(b[ch]);

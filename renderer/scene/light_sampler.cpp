@@ -312,10 +312,9 @@ float LightSampler::prob_infinite() const {
     return float(infinite_.size()) / float(infinite_.size() + (nodes_.empty() ? 0 : 1));
 }
 
-int LightSampler::sample(const Vec3& p, const Vec3& n, float u, float& pmf) const {
+int LightSampler::sample_tree(const Vec3& p, const Vec3& n, float u, float& pmf) const {
     pmf = 0.f;
     if (n_ == 0) return -1;
-    if (kind_ != LightSamplerKind::Tree) return sample_start(u, pmf);
     const float p_inf = prob_infinite();
     if (u < p_inf) {
         size_t k = infinite_.size();
@@ -381,7 +380,7 @@ float LightSampler::pmf(const Vec3& p, const Vec3& n, int light) const {
     return float(pm);
 }
 
-int LightSampler::sample_start(float u, float& pmf) const {
+int LightSampler::sample_start_weighted(float u, float& pmf) const {
     pmf = 0.f;
     if (n_ == 0) return -1;
     if (kind_ == LightSamplerKind::Uniform || cdf_.empty()) {

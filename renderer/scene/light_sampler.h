@@ -20,6 +20,7 @@
 // light paths start without a point, so they select by power under both
 // `power` and `tree` (uniformly under `uniform`).
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -75,11 +76,17 @@ public:
     // Selection seen from p (normal n, zero in a medium): the light that u
     // in [0, 1) picks, -1 when none (no emitters, or none lights p), and its
     // probability `pmf`.
-    int sample(const Vec3& p, const Vec3& n, float u, float& pmf) const;
+    int sample(const Vec3& p, const Vec3& n, float u, float& pmf) const {
+        return kind_ == LightSamplerKind::Tree ? sample_tree(p, n, u, pmf) : sample_start(u, pmf);
+    }
     // The probability that sample(p, n, .) picks `light`.
     float pmf(const Vec3& p, const Vec3& n, int light) const;
-    // Selection without a point (a light path's start).
-    int sample_start(float u, float& pmf) const;
+    // Selection without a point (a light path's start); the uniform case inline.
+    int sample_start(float u, float& pmf) const {
+        if (kind_ != LightSamplerKind::Uniform || n_ == 0) return sample_start_weighted(u, pmf);
+        pmf = 1.f / float(n_);
+        return int(std::min(size_t(u * float(n_)), n_ - 1));
+    }
     float pmf_start(int light) const;
 
     // The tree's figures (0 for the other samplers): nodes, depth, bytes.
@@ -93,6 +100,8 @@ private:
         uint32_t child = 0;  // interior: the second child (the first is this + 1); leaf: the light
         bool leaf = false;
     };
+    int sample_tree(const Vec3& p, const Vec3& n, float u, float& pmf) const;
+    int sample_start_weighted(float u, float& pmf) const;
     int build(std::vector<uint32_t>& idx, size_t lo, size_t hi, int parent, int depth);
     float prob_infinite() const;
 

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <mutex>
 #include <stdexcept>
 #include <string>
@@ -176,6 +177,7 @@ int Scene::add_dipole(int shape, const DipoleDesc& desc) {
 // ray outside that range has lost all float32 precision anyway, so it is an
 // error that names the limit, raised as an exception (never an abort).
 constexpr float kEmbreeRayLimit = 1.844e18f;
+constexpr int32_t kRayLimitBits = __builtin_bit_cast(int32_t, kEmbreeRayLimit);
 
 void Scene::commit() {
     if (!sensor) throw std::invalid_argument("scene has no sensor");
@@ -250,17 +252,20 @@ LightSamplerUse::~LightSamplerUse() {
 
 static bool ray_in_range(const Ray& ray) {
 #ifdef __SSE2__
-    // The same test on two 4-wide registers (o.x o.y o.z d.x | d.y d.z tmin
-    // tmax), a few instructions per intersection query instead of eight
-    // compare-and-branch pairs; an ordered <= is false for NaN.
+    // The same test on two 4-wide integer registers (o.x o.y o.z d.x | d.y
+    // d.z tmin tmax): for |x| as bits, x <= limit is bits <= the limit's
+    // bits, and a NaN's bits exceed infinity's. About ten instructions.
     static_assert(sizeof(Ray) == 8 * sizeof(float), "Ray: o, d, tmin, tmax");
-    float f[8];
-    std::memcpy(f, &ray, sizeof f);
-    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
-    const __m128 a = _mm_and_ps(_mm_loadu_ps(f), abs_mask), b = _mm_and_ps(_mm_loadu_ps(f + 4), abs_mask);
-    const __m128 lim_a = _mm_set1_ps(kEmbreeRayLimit);
-    const __m128 lim_b = _mm_setr_ps(kEmbreeRayLimit, kEmbreeRayLimit, kInf, kInf);
-    return _mm_movemask_ps(_mm_and_ps(_mm_cmple_ps(a, lim_a), _mm_cmple_ps(b, lim_b))) == 0xf;
+    static_assert(std::numeric_limits<float>::is_iec559, "IEEE floats");
+    alignas(16) static const int32_t kAbs[4] = {0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff};
+    alignas(16) static const int32_t kLimA[4] = {kRayLimitBits, kRayLimitBits, kRayLimitBits, kRayLimitBits};
+    alignas(16) static const int32_t kLimB[4] = {kRayLimitBits, kRayLimitBits, 0x7f800000, 0x7f800000};
+    const __m128i abs = _mm_load_si128(reinterpret_cast<const __m128i*>(kAbs));
+    const __m128i a = _mm_and_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(&ray)), abs);
+    const __m128i b = _mm_and_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(&ray) + 1), abs);
+    const __m128i bad = _mm_or_si128(_mm_cmpgt_epi32(a, _mm_load_si128(reinterpret_cast<const __m128i*>(kLimA))),
+                                     _mm_cmpgt_epi32(b, _mm_load_si128(reinterpret_cast<const __m128i*>(kLimB))));
+    return _mm_movemask_epi8(bad) == 0;
 #else
     auto ok = [](const Vec3& v) {
         return std::fabs(v.x) <= kEmbreeRayLimit && std::fabs(v.y) <= kEmbreeRayLimit &&
@@ -270,8 +275,8 @@ static bool ray_in_range(const Ray& ray) {
 #endif
 }
 
-static void check_ray(const Ray& ray) {
-    if (ray_in_range(ray)) return;
+// The refusal, out of the intersection's line (its message buffer too).
+[[gnu::noinline, gnu::cold]] static void ray_out_of_range(const Ray& ray) {
     char buf[320];
     std::snprintf(buf, sizeof buf,
                   "a ray left what float32 ray tracing can represent (origin (%g, %g, %g), direction (%g, %g, %g); "
@@ -279,6 +284,10 @@ static void check_ray(const Ray& ray) {
                   "is beyond the renderer's range",
                   ray.o.x, ray.o.y, ray.o.z, ray.d.x, ray.d.y, ray.d.z);
     throw std::domain_error(buf);
+}
+
+static void check_ray(const Ray& ray) {
+    if (!ray_in_range(ray)) ray_out_of_range(ray);
 }
 
 bool Scene::intersect(const Ray& ray, Interaction& it) const {

@@ -2,22 +2,6 @@
 
 namespace rm {
 
-bool sample_light(const Scene& scene, const LightContext& ctx, Sampler& sampler, DirectSample& ds) {
-    float u_pick = sampler.next_1d();
-    Vec2 u = sampler.next_2d();
-    float u_extra = sampler.next_1d();
-    return sample_light(scene, ctx, u_pick, u, u_extra, ds);
-}
-
-bool sample_light(const Scene& scene, const LightContext& ctx, float u_pick, Vec2 u, float u_extra, DirectSample& ds) {
-    float pick = 0.f;
-    const Emitter* e = pick_emitter(scene, ctx, u_pick, pick);
-    if (!e) return false;
-    ds = e->sample_direct(ctx.p, u, u_extra);
-    ds.pick = pick;
-    return ds.pdf_w > 0.f && !is_black(ds.radiance);
-}
-
 Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsdf, const Vec3& wi_local,
                       Sampler& sampler, ThreadStats& stats, float light_frac, float bsdf_frac) {
     DirectSample ds;

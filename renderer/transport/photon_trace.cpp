@@ -50,40 +50,10 @@ struct Item {
     std::vector<uint32_t> path_end;  // photons stored by the item's paths 0..i (cumulative)
 };
 
-// The light walk's vertices, one buffer per thread (its capacity kept
-// from path to path), and one path traced into `out` with it.
+// The light walk's vertices for trace_photon_path, one buffer per thread.
 std::vector<PathVertex>& light_scratch() {
     thread_local std::vector<PathVertex> v;
     return v;
-}
-void trace_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path, uint64_t pass,
-                std::vector<Photon>& out, ThreadStats& stats, std::vector<PathVertex>& light);
-
-// Traces the paths [g0, g0 + n) in items of kItemPaths; returns false on cancel.
-bool trace_chunk(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass, uint64_t g0, uint64_t n,
-                 std::vector<Item>& items, int threads, const std::function<bool()>& poll,
-                 std::vector<ThreadStats>& tstats) {
-    size_t n_items = size_t((n + kItemPaths - 1) / kItemPaths);
-    if (items.size() < n_items) items.resize(n_items);
-    std::atomic<bool> cancel{false};
-    auto work = [&](size_t i, int t) {
-        Item& it = items[i];
-        it.photons.clear();
-        it.path_end.clear();
-        uint64_t a = g0 + i * kItemPaths, b = std::min(g0 + n, a + kItemPaths);
-        std::vector<PathVertex>& light = light_scratch();
-        for (uint64_t g = a; g < b; ++g) {
-            trace_path(scene, spec, seed, g, pass, it.photons, tstats[t], light);
-            it.path_end.push_back(uint32_t(it.photons.size()));
-        }
-    };
-    return run_parallel(threads, n_items, work, poll, cancel);
-}
-
-void normalise(std::vector<Photon>& ph, uint64_t paths) {
-    if (paths == 0) return;
-    float inv = float(1.0 / double(paths));
-    for (Photon& p : ph) p.power *= inv;
 }
 
 // Photon storage (Jensen 2001, sec. 5.2), a visitor on the vertices of the
@@ -107,10 +77,23 @@ void normalise(std::vector<Photon>& ph, uint64_t paths) {
 class PhotonStore {
 public:
     PhotonStore(const PhotonTraceSpec& spec, std::vector<Photon>& out, ThreadStats& stats)
-        : spec_(spec), out_(out), stats_(stats) {}
+        : out_(out),
+          stats_(stats),
+          caustic_only_(spec.caustic_only),
+          volume_(spec.volume),
+          keep_(spec.caustic_only    ? kKeepCaustic
+                : spec.indirect_only ? kKeepIndirect
+                                     : (spec.store_direct ? kKeepAll : kKeepAll & ~kKeepDirect)) {}
 
     // The walk's window mode (subpath_walk.h): vertex n and its predecessor.
     static constexpr bool kLastTwo = true;
+
+    // A new light path: no vertex before the next one.
+    void start_path() {
+        k_ = 0;
+        all_specular_ = true;
+        medium_flags_ = 0;
+    }
 
     bool operator()(const PathVertex& v, const PathVertex* prev_vertex, int n) {
         if (n == 0) return true;  // y0: the emission sample leaves no photon
@@ -127,66 +110,116 @@ public:
             }
         }
         // A caustic path ends once it scattered through a non-specular lobe.
-        if (spec_.caustic_only && !all_specular_) return false;
+        if (caustic_only_ && !all_specular_) return false;
         const uint32_t depth = uint32_t(std::min(n, 255)) << kPhotonDepthShift;
         // 2. A volume photon at a multiple-scattering event (k > 0); a
         //    medium vertex ends a caustic path.
         if (v.type == VType::Medium) {
-            if (spec_.volume && k_ > 0)
-                store(v, kPhotonIndirect | depth | (uint32_t(v.medium + 1) << kPhotonMediumShift));
-            return !spec_.caustic_only;
+            if (volume_ && k_ > 0) store(v, kPhotonIndirect | depth | (uint32_t(v.medium + 1) << kPhotonMediumShift));
+            return !caustic_only_;
         }
-        // 3. A surface photon where a non-specular lobe can scatter it.
-        if (!spec_.volume && v.bsdf->has_smooth()) {
-            bool direct = k_ == 0, caustic = k_ > 0 && all_specular_;
-            bool keep = spec_.caustic_only    ? caustic
-                        : spec_.indirect_only ? !all_specular_
-                                              : (spec_.store_direct || !direct);
-            if (keep)
+        // 3. A surface photon where a non-specular lobe can scatter it: the
+        //    spec's choice by the path so far (keep_).
+        if (!volume_ && v.bsdf->has_smooth()) {
+            const bool direct = k_ == 0;
+            if (keep_ & (direct ? kKeepDirect : all_specular_ ? kKeepCausticPath : kKeepIndirectPath))
                 store(v,
                       (direct ? kPhotonDirect : 0u) | (all_specular_ ? 0u : kPhotonIndirect) | medium_flags_ | depth);
         }
         // 4. A caustic path goes on only through a delta lobe (a BSDF with a
         //    delta and a smooth lobe, plastic's coat, passes caustics on
         //    through the delta one: step 1 at the next vertex decides).
-        return !spec_.caustic_only || (v.bsdf->flags() & kDelta);
+        return !caustic_only_ || (v.bsdf->flags() & kDelta);
     }
 
 private:
+    // The paths whose photons the spec keeps, by the scattering vertices
+    // before the photon: none (direct), all specular (caustic), or not.
+    static constexpr uint8_t kKeepDirect = 1, kKeepCausticPath = 2, kKeepIndirectPath = 4;
+    static constexpr uint8_t kKeepAll = kKeepDirect | kKeepCausticPath | kKeepIndirectPath;
+    static constexpr uint8_t kKeepCaustic = kKeepCausticPath;    // L S+ D
+    static constexpr uint8_t kKeepIndirect = kKeepIndirectPath;  // a non-specular vertex before
+
     void store(const PathVertex& v, uint32_t flags) {
         if (!is_finite(v.beta) || is_black(v.beta)) return;
-        Photon ph;
+        Photon& ph = out_.emplace_back();  // written in place (no temporary copied)
         ph.p = v.it.p;
         ph.wi = v.it.wi;
         ph.power = v.beta;
         ph.flags = flags;
-        out_.push_back(ph);
         ++stats_.photons;
     }
 
-    const PhotonTraceSpec& spec_;
     std::vector<Photon>& out_;
     ThreadStats& stats_;
+    const bool caustic_only_, volume_;
+    const uint8_t keep_;
     int k_ = 0;                  // scattering vertices before the current one (null boundaries excluded)
     bool all_specular_ = true;   // each of them scattered specularly
     uint32_t medium_flags_ = 0;  // kPhotonVolumePath / kPhotonSubsurfacePath once the path scattered in a medium
 };
 
-void trace_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path, uint64_t pass,
-                std::vector<Photon>& out, ThreadStats& stats, std::vector<PathVertex>& light) {
-    Sampler sampler(mix64(seed + 0x70686f746f6eULL + spec.stream), path, pass);
-    PhotonStore store(spec, out, stats);
+// Traces light paths [g0, g1) of pass `pass` into `out` (path_end, when
+// given, gets the photon count after each path), with the walk compiled
+// for media or without them (kMedia: the scene has media), on the same
+// random stream either way.
+template <bool kMedia>
+void trace_paths(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass, uint64_t g0,
+                 uint64_t g1, std::vector<Photon>& out, std::vector<uint32_t>* path_end, ThreadStats& stats,
+                 std::vector<PathVertex>& light) {
+    const uint64_t stream = mix64(seed + 0x70686f746f6eULL + spec.stream);
     // A photon of depth d is vertex y_d: max_depth segments are max_depth + 1 vertices.
     const int max_vertices = spec.max_depth < 0 ? INT_MAX : spec.max_depth + 1;
-    EmissionSample es;
-    light_subpath_with(scene, sampler, max_vertices, spec.rr_depth, light, es, stats, store, false);
+    PhotonStore store(spec, out, stats);
+    for (uint64_t g = g0; g < g1; ++g) {
+        store.start_path();
+        EmissionSample es;
+        if constexpr (kMedia) {
+            Sampler sampler(stream, g, pass);
+            light_subpath_with(scene, sampler, max_vertices, spec.rr_depth, light, es, stats, store, false);
+        } else {
+            IndependentSampler sampler(stream, g, pass);
+            light_subpath_with<false>(scene, sampler, max_vertices, spec.rr_depth, light, es, stats, store, false);
+        }
+        if (path_end) path_end->push_back(uint32_t(out.size()));
+    }
+}
+
+// Traces the paths [g0, g0 + n) in items of kItemPaths; returns false on cancel.
+bool trace_chunk(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass, uint64_t g0, uint64_t n,
+                 std::vector<Item>& items, int threads, const std::function<bool()>& poll,
+                 std::vector<ThreadStats>& tstats) {
+    size_t n_items = size_t((n + kItemPaths - 1) / kItemPaths);
+    if (items.size() < n_items) items.resize(n_items);
+    std::atomic<bool> cancel{false};
+    auto work = [&](size_t i, int t) {
+        Item& it = items[i];
+        it.photons.clear();
+        it.path_end.clear();
+        uint64_t a = g0 + i * kItemPaths, b = std::min(g0 + n, a + kItemPaths);
+        std::vector<PathVertex> light;  // the walk's two slots, one buffer per item
+        if (scene.features.has_media)
+            trace_paths<true>(scene, spec, seed, pass, a, b, it.photons, &it.path_end, tstats[t], light);
+        else
+            trace_paths<false>(scene, spec, seed, pass, a, b, it.photons, &it.path_end, tstats[t], light);
+    };
+    return run_parallel(threads, n_items, work, poll, cancel);
+}
+
+void normalise(std::vector<Photon>& ph, uint64_t paths) {
+    if (paths == 0) return;
+    float inv = float(1.0 / double(paths));
+    for (Photon& p : ph) p.power *= inv;
 }
 
 }  // namespace
 
 void trace_photon_path(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t path, uint64_t pass,
                        std::vector<Photon>& out, ThreadStats& stats) {
-    trace_path(scene, spec, seed, path, pass, out, stats, light_scratch());
+    if (scene.features.has_media)
+        trace_paths<true>(scene, spec, seed, pass, path, path + 1, out, nullptr, stats, light_scratch());
+    else
+        trace_paths<false>(scene, spec, seed, pass, path, path + 1, out, nullptr, stats, light_scratch());
 }
 
 uint64_t photon_path_bound(uint64_t target) {

@@ -6,6 +6,7 @@
 // loop. `visit(path)` returns false to end the walk, as VertexVisitor's.
 #pragma once
 #include <algorithm>
+#include <utility>
 
 #include "transport/subpath.h"
 
@@ -26,8 +27,10 @@ extern const PathVertex kFreshVertex;
 // visitor that reads only a vertex and its predecessor (photon storage):
 // no vertex record is copied per vertex, a reused slot gets only the
 // fields the walk does not write at a surface vertex reset, and there are
-// no densities (they read the vertex two back). The walk's arithmetic and
-// random numbers are the same in both modes.
+// no densities (they read the vertex two back). A surface vertex's
+// `emitter` is not set, and y0 holds the fields light_subpath_with
+// writes (its interaction p, n and eps). The walk's arithmetic and random
+// numbers are the same in both modes.
 template <class V, class = void>
 struct WalksLastTwo : std::false_type {};
 template <class V>
@@ -54,12 +57,18 @@ inline void reset_walk_slot(PathVertex& v) {
 // moved densities by 1 %, measured by bdpt_mis_check). The walk's steps
 // follow pbrt-v4's RandomWalk (bdpt.cpp) with SmallVCM's light loop
 // (vertexcm.hxx): every vertex is handed to `visit` as it is made.
-template <class Visit>
-void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta, TransportMode mode, int max_vertices,
-                      int rr_depth, std::vector<PathVertex>& path, ThreadStats& stats, Visit& visit,
-                      const MediumTracker* media, bool densities) {
+// kMedia false compiles the walk for a scene without media (media must be
+// null; the sampler then needs only next_1d and next_2d, as
+// IndependentSampler's). Inlined into its caller, so that a sampler local
+// there stays in registers.
+template <bool kMedia = true, class S, class Visit>
+[[gnu::always_inline]] inline void random_walk_with(const Scene& scene, S& sampler, Ray ray, Color beta,
+                                                    TransportMode mode, int max_vertices, int rr_depth,
+                                                    std::vector<PathVertex>& path, ThreadStats& stats, Visit& visit,
+                                                    const MediumTracker* media, bool densities) {
     constexpr bool kWindow = WalksLastTwo<Visit>::value;
     if constexpr (kWindow) densities = false;  // the window keeps no vertex two back
+    if constexpr (!kMedia) media = nullptr;
     BsdfContext ctx{mode};
     // Vertices made so far, the start included (path.size() outside the window mode).
     int count = int(path.size());
@@ -67,9 +76,10 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
         count = 1;
         if (path.size() < 2) path.resize(2);
     }
-    // The window's two slots (the buffer does not move during the walk: a
-    // pointer held once, not reloaded after every store into a vertex).
-    PathVertex* const slots = kWindow ? path.data() : nullptr;
+    // The window's two slots (the buffer does not move during the walk):
+    // `cur` holds the last vertex made, `other` the one before it.
+    PathVertex* cur = kWindow ? path.data() : nullptr;
+    PathVertex* other = kWindow ? cur + 1 : nullptr;
     Color thr(1.f);         // throughput since the start (Russian roulette without media)
     float eta_scale = 1.f;  // undoes radiance scaling by eta^2 (Russian roulette)
     // Through media: the hero channel of spectral MIS (media_common.h),
@@ -83,7 +93,7 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
     auto add_vertex = [&]() {
         const size_t n = size_t(count) - 1;  // index of v
         if constexpr (kWindow) {
-            if (!visit(slots[n & 1], &slots[(n - 1) & 1], int(n))) return false;
+            if (!visit(*cur, static_cast<const PathVertex*>(other), int(n))) return false;
             return count < max_vertices;
         }
         PathVertex& v = path[n];
@@ -107,16 +117,19 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
     auto new_vertex = [&]() -> PathVertex& {
         ++count;
         if constexpr (kWindow) {
-            PathVertex& v = slots[size_t(count - 1) & 1];
-            reset_walk_slot(v);
-            return v;
+            std::swap(cur, other);
+            reset_walk_slot(*cur);
+            return *cur;
         } else {
             return path.emplace_back(kFreshVertex);
         }
     };
     auto drop_vertex = [&]() {
         --count;
-        if constexpr (!kWindow) path.pop_back();
+        if constexpr (kWindow)
+            std::swap(cur, other);
+        else
+            path.pop_back();
     };
     // Russian roulette after the depth-th scattering vertex (common.h):
     // Mitsuba's rule on the throughput since the start, volpath's in media.
@@ -134,8 +147,10 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
     };
     // depth: scattering vertices from the start to the new vertex (every
     // surface vertex without media; null boundaries excluded with them).
+    // Every vertex is checked against max_vertices as it is added
+    // (add_vertex), a dropped one lowers the count: only the start needs it here.
+    if (count >= max_vertices) return;
     for (int depth = 1, guard = 0; guard < (1 << 20); ++guard) {
-        if (count >= max_vertices) break;
         // 1. The next surface along the ray, intersected straight into the
         //    vertex it may become (no Interaction copied per bounce); the
         //    slot is reset or dropped when it becomes another vertex or none.
@@ -147,33 +162,35 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
         // 2. Free flight through the current medium (media_common.h); a
         //    scattering event is a Medium vertex, whose next direction the
         //    phase function samples (weight eval / pdf = 1 for ours).
-        if (media && mt.medium >= 0) {
-            const Medium& med = *scene.media[mt.medium];
-            float t = 0.f;
-            FlightEvent event = free_flight(med, ray, hit ? it.t : ray.tmax, sampler, th, t);
-            if (event == kAbsorbed) {
-                drop_vertex();
-                break;
-            }
-            if (event == kScattered) {
-                v = kFreshVertex;
-                v.type = VType::Medium;
-                v.it.kind = VertexKind::Medium;
-                v.it.valid = true;
-                v.it.p = ray.o + ray.d * t;
-                v.it.wi = -ray.d;
-                v.it.t = t;
-                v.beta = th.beta;
-                v.phase = med.phase.get();
-                v.medium = mt.medium;
-                v.enclosed = mt.enclosed;
-                if (!add_vertex()) break;
-                PhaseSample ps = v.phase->sample(v.it.wi, sampler.next_2d());
-                if (!(ps.pdf_w > 0.f)) break;
-                th.beta *= ps.weight;
-                ray = Ray{v.it.p, ps.wo, 0.f, kInf};
-                if (!roulette(depth++, sampler.next_1d())) break;
-                continue;
+        if constexpr (kMedia) {
+            if (media && mt.medium >= 0) {
+                const Medium& med = *scene.media[mt.medium];
+                float t = 0.f;
+                FlightEvent event = free_flight(med, ray, hit ? it.t : ray.tmax, sampler, th, t);
+                if (event == kAbsorbed) {
+                    drop_vertex();
+                    break;
+                }
+                if (event == kScattered) {
+                    v = kFreshVertex;
+                    v.type = VType::Medium;
+                    v.it.kind = VertexKind::Medium;
+                    v.it.valid = true;
+                    v.it.p = ray.o + ray.d * t;
+                    v.it.wi = -ray.d;
+                    v.it.t = t;
+                    v.beta = th.beta;
+                    v.phase = med.phase.get();
+                    v.medium = mt.medium;
+                    v.enclosed = mt.enclosed;
+                    if (!add_vertex()) break;
+                    PhaseSample ps = v.phase->sample(v.it.wi, sampler.next_2d());
+                    if (!(ps.pdf_w > 0.f)) break;
+                    th.beta *= ps.weight;
+                    ray = Ray{v.it.p, ps.wo, 0.f, kInf};
+                    if (!roulette(depth++, sampler.next_1d())) break;
+                    continue;
+                }
             }
         }
 
@@ -209,7 +226,7 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
         // 5. A surface vertex.
         v.beta = th.beta;
         v.bsdf = bsdf;
-        v.emitter = shape.emitter >= 0 ? scene.emitters[shape.emitter].get() : nullptr;
+        if constexpr (!kWindow) v.emitter = shape.emitter >= 0 ? scene.emitters[shape.emitter].get() : nullptr;
         v.medium = mt.medium;
         if (!add_vertex()) break;
 
@@ -236,10 +253,10 @@ void random_walk_with(const Scene& scene, Sampler& sampler, Ray ray, Color beta,
     }
 }
 
-template <class Visit>
-bool light_subpath_with(const Scene& scene, Sampler& sampler, int max_vertices, int rr_depth,
-                        std::vector<PathVertex>& light, EmissionSample& es, ThreadStats& stats, Visit& visit,
-                        bool densities) {
+template <bool kMedia = true, class S, class Visit>
+[[gnu::always_inline]] inline bool light_subpath_with(const Scene& scene, S& sampler, int max_vertices, int rr_depth,
+                                                      std::vector<PathVertex>& light, EmissionSample& es,
+                                                      ThreadStats& stats, Visit& visit, bool densities) {
     constexpr bool kWindow = WalksLastTwo<Visit>::value;
     if constexpr (!kWindow) light.clear();
     // 1. An emitter picked (pick_start_emitter: by the render's light
@@ -263,7 +280,10 @@ bool light_subpath_with(const Scene& scene, Sampler& sampler, int max_vertices, 
     //    y1's comes from the origin disk through emitter_pdf_to.
     if constexpr (kWindow) {
         if (light.size() < 2) light.resize(2);
-        light[0] = kFreshVertex;
+        reset_walk_slot(light[0]);
+        light[0].beta = Color(0.f);
+        light[0].bsdf = nullptr;
+        light[0].medium = -1;
     }
     PathVertex& y0 = kWindow ? light[0] : light.emplace_back();
     y0.type = VType::Light;
@@ -285,7 +305,7 @@ bool light_subpath_with(const Scene& scene, Sampler& sampler, int max_vertices, 
     ray.d = es.d;
     MediumTracker mt;
     Color beta = es.weight / pick;
-    if (scene.features.has_media) {
+    if (kMedia && scene.features.has_media) {
         mt = emitter_medium(scene, ray, es.n, emitter_shape(scene, *e));
         y0.medium = mt.medium;
         y0.enclosed = mt.enclosed;
@@ -298,8 +318,8 @@ bool light_subpath_with(const Scene& scene, Sampler& sampler, int max_vertices, 
     }
     if (is_black(beta)) return true;  // y0 alone: light from infinity that no unbounded medium lets through
     // 4. The adjoint walk.
-    random_walk_with(scene, sampler, ray, beta, TransportMode::Importance, max_vertices, rr_depth, light, stats, visit,
-                     scene.features.has_media ? &mt : nullptr, densities);
+    random_walk_with<kMedia>(scene, sampler, ray, beta, TransportMode::Importance, max_vertices, rr_depth, light, stats,
+                             visit, kMedia && scene.features.has_media ? &mt : nullptr, densities);
     return true;
 }
 
