@@ -1,4 +1,4 @@
-"""Issue 17 point 4, many lights: error against time of path under the
+"""Many lights: error against time of path under the
 uniform, power and tree light samplers, and of bdpt, vpl and rowcolumn
 (light tree), on reference_scenes/many_lights (10 000 emitters). A
 benchmark, not a timed test.
