@@ -39,14 +39,11 @@ from __future__ import annotations
 
 import argparse
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from radiometer.analysis.metrics import time_to_error
-from radiometer.benchmarks.store import Store
 from radiometer.benchmarks.studies import record
 
 MATRIX = record.REPO / "benchmarks" / "cache_wins.toml"
@@ -184,12 +181,7 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2)
     a = ap.parse_args(argv)
     root = Path(a.results)
-    if a.run is None:
-        subprocess.run([sys.executable, "-m", "radiometer.cli", "bench", str(MATRIX), "--workers", str(a.workers),
-                        "--results", str(root)], check=True)
-    with Store(root / "bench.sqlite", readonly=True) as st:
-        rid = st.resolve_run(a.run)
-        recs = st.jobs(rid)
+    rid, recs = record.run_matrix(MATRIX, root, a.run, workers=a.workers)
     summary = summarise(recs)
     curves = [{"scene": r["scene"], "estimator": r["estimator"], "seed": r["seed"], "status": r["status"],
                "curve": r.get("curve"), "stats": {k: v for k, v in (r.get("stats") or {}).items()

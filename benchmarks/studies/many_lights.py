@@ -20,13 +20,10 @@ eps 1e-2): the reference's own noise adds its relative variance of the mean
 from __future__ import annotations
 
 import argparse
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 
-from radiometer.benchmarks.store import Store
 from radiometer.benchmarks.studies import record
 from radiometer.benchmarks.studies.vcm_wins import _at
 
@@ -103,12 +100,7 @@ def main(argv=None):
     ap.add_argument("--run", default=None, help="read this run of the store instead of running the matrix")
     a = ap.parse_args(argv)
     root = Path(a.results)
-    if a.run is None:
-        subprocess.run([sys.executable, "-m", "radiometer.cli", "bench", str(MATRIX), "--workers", "2",
-                        "--results", str(root)], check=True)
-    with Store(root / "bench.sqlite", readonly=True) as st:
-        rid = st.resolve_run(a.run)
-        recs = st.jobs(rid)
+    rid, recs = record.run_matrix(MATRIX, root, a.run, workers=2)
     summary = summarise(recs)
     floor = reference_relvar()
     print(f"{SCENE}: relMSE (geometric mean over seeds) at " + ", ".join(f"{t:g}" for t in TIMES)

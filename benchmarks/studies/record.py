@@ -66,3 +66,22 @@ def write(study: str, params: dict, results: dict, out=None, plot=None) -> Path:
     if plot is not None:
         plot(out.with_suffix(".png"))
     return out
+
+
+def run_matrix(matrix, results, run=None, workers=2):
+    """A benchmark matrix's jobs for an error-against-time study: runs
+    `radiometer bench matrix` into the folder `results` (a fresh process,
+    `workers` jobs at a time) unless `run` names a run already in its
+    store; returns (run id, job records)."""
+    import subprocess
+    import sys
+
+    from radiometer.benchmarks.store import Store
+
+    root = Path(results)
+    if run is None:
+        subprocess.run([sys.executable, "-m", "radiometer.cli", "bench", str(matrix), "--workers", str(workers),
+                        "--results", str(root)], check=True)
+    with Store(root / "bench.sqlite", readonly=True) as st:
+        rid = st.resolve_run(run)
+        return rid, st.jobs(rid)

@@ -18,13 +18,10 @@ from __future__ import annotations
 import argparse
 import math
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 
-from radiometer.benchmarks.store import Store
 from radiometer.benchmarks.studies import record
 
 MATRIX = record.REPO / "benchmarks" / "vcm_wins.toml"
@@ -72,12 +69,7 @@ def main(argv=None):
     ap.add_argument("--run", default=None, help="read this run of the store instead of running the matrix")
     a = ap.parse_args(argv)
     root = Path(a.results)
-    if a.run is None:
-        subprocess.run([sys.executable, "-m", "radiometer.cli", "bench", str(MATRIX), "--workers", "2",
-                        "--results", str(root)], check=True)
-    with Store(root / "bench.sqlite", readonly=True) as st:
-        rid = st.resolve_run(a.run)
-        recs = st.jobs(rid)
+    rid, recs = record.run_matrix(MATRIX, root, a.run, workers=2)
     summary = summarise(recs)
     curves = [{"scene": r["scene"], "estimator": r["estimator"], "seed": r["seed"], "status": r["status"],
                "curve": r.get("curve")} for r in recs]
