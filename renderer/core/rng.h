@@ -57,15 +57,15 @@ public:
     virtual uint32_t bounce_stride() const { return 0; }
 };
 
-// Sampler: what estimators ask for 1D/2D samples. By default the
-// independent PCG stream of (seed, pixel, sample); given a SampleSource
-// (not owned; it outlives the sampler) the values come from it instead.
-// The independent stream pays one predictable branch per draw for that.
 // The PCG stream of (seed, pixel, sample) that Sampler draws from without a SampleSource.
 inline Pcg32 independent_stream(uint64_t seed, uint64_t pixel, uint64_t sample_index) {
     return Pcg32(mix64(seed ^ mix64(sample_index + 0x632be59bd9b4e019ULL)), mix64(pixel + (seed << 1)));
 }
 
+// Sampler: what estimators ask for 1D/2D samples. By default the
+// independent PCG stream of (seed, pixel, sample); given a SampleSource
+// (not owned; it outlives the sampler) the values come from it instead.
+// The independent stream pays one predictable branch per draw for that.
 class Sampler {
 public:
     Sampler(uint64_t seed, uint64_t pixel, uint64_t sample_index)
