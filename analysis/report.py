@@ -720,6 +720,44 @@ def cache_bias_figures(scene, recs, ref_image, root: Path, out: Path) -> list:
 # -- the page -------------------------------------------------------------------
 
 
+def metropolis_chains_html(recs) -> str:
+    """The chains of a scene's Metropolis jobs (pssmlt, mmlt: the records
+    whose stats carry mlt_chains), one row per job: acceptance, the longest
+    run of consecutive rejections, and the chains whose run exceeded the
+    job's `stuck_rejections` (res.stats mlt_stuck_chains). A stuck chain
+    splats one sample hundreds of times, a bright blotch its image keeps:
+    nothing is clamped or dropped, so the images above show it as rendered,
+    and this table says where to look. "" when the scene has none."""
+    rows = sorted((r for r in recs if r.get("status") == "ok" and "mlt_chains" in (r.get("stats") or {})),
+                  key=lambda r: (r["estimator"], str(r["budget"]), r["seed"]))
+    if not rows:
+        return ""
+
+    def num(st, k, fmt):
+        v = st.get(k)
+        return "?" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
+
+    out = ["<table class='chains'><thead><tr><th>estimator</th><th>budget</th><th>seed</th><th>spp</th>"
+           "<th>acceptance</th><th>longest rejection run</th><th>stuck chains</th></tr></thead><tbody>"]
+    stuck_jobs = 0
+    for r in rows:
+        st = r["stats"]
+        n_stuck = int(st.get("mlt_stuck_chains") or 0)
+        stuck_jobs += n_stuck > 0
+        cls = " class='failed'" if n_stuck else ""
+        out.append(f"<tr><td>{esc(r['estimator'])}</td><td>{esc(T.budget_label(r['budget']))}</td>"
+                   f"<td>{r['seed']}</td><td>{r.get('spp', '?')}</td><td>{num(st, 'mlt_acceptance', '.3f')}</td>"
+                   f"<td>{num(st, 'mlt_longest_rejection_run', '.0f')}</td>"
+                   f"<td{cls}>{n_stuck} of {num(st, 'mlt_chains', '.0f')} (over "
+                   f"{num(st, 'mlt_stuck_rejections', '.0f')})</td></tr>")
+    out.append("</tbody></table>")
+    head = (f"<p class='note'>Metropolis chains: {stuck_jobs} of {len(rows)} jobs have a stuck chain (one that "
+            "rejected more consecutive proposals than its <code>stuck_rejections</code>). A stuck chain splats the "
+            "same sample again and again: a bright blotch that its image keeps, as rendered (nothing is clamped), "
+            "while the other seeds miss it; such a render is unbiased but far from its mean.</p>")
+    return head + "".join(out)
+
+
 def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, history=None) -> Path:
     """Writes the report of one run (its store row `run` and job records
     `recs`, renders under `root`) into the folder `out`; `source` names
@@ -880,6 +918,7 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, 
         if ref is not None:
             parts += cache_bias_figures(scene, brecs, ref.image, root, out)
         parts.append("</div>")
+        parts.append(metropolis_chains_html(srecs))
         # Errors of failed jobs.
         bad = [r for r in srecs if r["status"] != "ok"]
         if bad:

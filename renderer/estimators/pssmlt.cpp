@@ -52,7 +52,9 @@
 // variance, from all bootstrap samples), "mlt_acceptance" (overall),
 // "mlt_acceptance_per_chain", "mlt_large_step_acceptance",
 // "mlt_small_step_acceptance", "mlt_max_rejections_per_chain" (the longest
-// run of consecutive rejections of each chain, the stuck-chain symptom),
+// run of consecutive rejections of each chain, the stuck-chain symptom;
+// "mlt_longest_rejection_run" its maximum, "mlt_stuck_chains" the chains
+// whose run exceeds `stuck_rejections`, a threshold that is only reported),
 // "mlt_dead_chains" (chains whose bootstrap found no light: they add 0).
 //
 // `mmlt`: multiplexed MLT (Hachisuka, Kaplanyan and Dachsbacher 2014) on
@@ -110,6 +112,11 @@ std::vector<ParamSpec> chain_params(int64_t bootstrap) {
         ParamSpec::real("sigma", 0.01, "standard deviation of a small step in primary sample space")
             .greater_than(0)
             .at_most(1),
+        ParamSpec::integer("stuck_rejections", 256,
+                           "a chain whose longest run of consecutive rejections exceeds this is counted as stuck "
+                           "(res.stats mlt_stuck_chains); only reported, nothing is changed")
+            .at_least(1)
+            .at_most(int64_t(1) << 30),
     };
 }
 
@@ -176,7 +183,8 @@ public:
           bootstrap_(p.get_int("bootstrap_samples")),
           mpp_(p.get_int("mutations_per_pixel")),
           large_p_(p.get_float("large_step_probability")),
-          sigma_(p.get_float("sigma")) {}
+          sigma_(p.get_float("sigma")),
+          stuck_(p.get_int("stuck_rejections")) {}
 
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator '" + type + "' renders through its own driver");
@@ -190,6 +198,7 @@ private:
     bool hide_, bidir_, multiplexed_;
     int chains_, bootstrap_, mpp_;
     float large_p_, sigma_;
+    int64_t stuck_;
 };
 
 class PssmltIntegrator::Passes final : public PassStep {
@@ -283,7 +292,7 @@ public:
     }
 
     void finish(RenderOutput& out) const override {
-        double b_sum = 0, f_sum = 0, f_sq = 0, n_f = 0, dead = 0;
+        double b_sum = 0, f_sum = 0, f_sq = 0, n_f = 0, dead = 0, stuck = 0, longest = 0;
         uint64_t acc = 0, prop = 0, lacc = 0, lprop = 0;
         std::vector<double> per_chain, max_rej;
         for (const Chain& ch : chains_) {
@@ -299,6 +308,8 @@ public:
             per_chain.push_back(ch.proposed ? double(ch.accepted) / double(ch.proposed)
                                             : std::numeric_limits<double>::quiet_NaN());
             max_rej.push_back(double(ch.max_run));
+            stuck += ch.max_run > uint64_t(m_.stuck_) ? 1 : 0;
+            longest = std::max(longest, double(ch.max_run));
         }
         auto ratio = [](uint64_t a, uint64_t b) {
             return b ? double(a) / double(b) : std::numeric_limits<double>::quiet_NaN();
@@ -320,6 +331,9 @@ public:
         st.push_back({"mlt_small_step_acceptance", {ratio(acc - lacc, prop - lprop)}});
         st.push_back({"mlt_acceptance_per_chain", per_chain});
         st.push_back({"mlt_max_rejections_per_chain", max_rej});
+        st.push_back({"mlt_longest_rejection_run", {longest}});
+        st.push_back({"mlt_stuck_rejections", {double(m_.stuck_)}});
+        st.push_back({"mlt_stuck_chains", {stuck}});
         image_mean_variance(st);
         if (m_.multiplexed_) {
             // Acceptance by the proposal's depth 1 .. max_depth.
