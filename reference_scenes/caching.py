@@ -1,13 +1,15 @@
 """Scenes built for the caching estimators (irrcache, radcache), as
 scene dicts for radiometer.load_dict; used by tests/test_irrcache.py,
 tests/test_radcache.py and benchmarks/studies/irrcache_bias.py. Not in the
-registry: thin_wall's lit side and glossy_box have no exact answer, and no
-Mitsuba reference was made for them (their references are long `path`
-renders where they are used).
+registry: thin_wall's lit side, glossy_box and corner_room have no exact
+answer, and no Mitsuba reference was made for them (their references are
+long `path` renders where they are used).
 
 - thin_wall: light leaks through a thin wall (docs/irrcache.md).
 - glossy_box: a rough metal floor reflecting coloured walls, for
   radcache's error against the harmonics' order.
+- corner_room: a diffuse room full of concave corners (a staircase and
+  boxes against its walls), for irrcache's interpolation bias.
 """
 from __future__ import annotations
 
@@ -119,11 +121,10 @@ def corner_room(res=32):
                        "bsdf": _diffuse([0.15, 0.7, 0.15])},
              "light": {"type": "rectangle", "to_world": _rect((0.25, 0.25, 1), _rx(np.pi), (0, -0.1, 1.499)),
                        "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [12.0, 12.0, 12.0]}}}}
-    for k in range(4):  # the staircase, rising towards the back wall
-        scene[f"step{k}"] = {"type": "cube", "to_world": _box((0.1, 0.2 + 0.2 * k, 0), (e, min(0.4 + 0.2 * k, e),
-                                                                                        0.25 * (k + 1))),
-                             "bsdf": box}
-    for name, lo, hi in (("box_back", (-e, 0.4, 0), (-0.5, e, 0.6)), ("box_top", (-e, 0.7, 0.6), (-0.7, e, 0.9)),
-                         ("box_front", (-e, -0.6, 0), (-0.6, -0.2, 0.3)), ("box_floor", (-0.3, -0.1, 0), (0, 0.2, 0.3))):
+    boxes = {f"step{k}": ((0.1, 0.2 + 0.2 * k, 0), (e, min(0.4 + 0.2 * k, e), 0.25 * (k + 1)))
+             for k in range(4)}  # the staircase, rising towards the back wall
+    boxes.update(box_back=((-e, 0.4, 0), (-0.5, e, 0.6)), box_top=((-e, 0.7, 0.6), (-0.7, e, 0.9)),
+                 box_front=((-e, -0.6, 0), (-0.6, -0.2, 0.3)), box_floor=((-0.3, -0.1, 0), (0, 0.2, 0.3)))
+    for name, (lo, hi) in boxes.items():
         scene[name] = {"type": "cube", "to_world": _box(lo, hi), "bsdf": box}
     return scene
