@@ -79,7 +79,7 @@ def make(scene: str, params: dict, spp: int, out: Path, threads: int = 0, progre
              "max_depth": _scenes.max_depth(spec, params)}
     t0 = time.monotonic()
     res = rm.render(s, integrator=integ, spp=spp, seed=SEED, threads=threads, progress=progress)
-    ref = rm.read_exr(spec.xml.parent / "reference.exr")
+    ref = rm.read_exr(spec.reference_file(params.get("res")))
     splatted = _splatted(s)
     floor = None if splatted else reference_variance_floor(ref.variance, int(ref.metadata["total_spp"]), res.spp)
     passed, msg = blocked_z_test(res.image, res.variance, ref.image, ref.variance, b_splatted=splatted,
@@ -110,7 +110,7 @@ def ensure(root, jobs, spp_override=None, threads: int = 0, log=print) -> dict:
     for (scene, pkey), js in needed.items():
         params = json.loads(pkey)
         spec = _scenes.get(scene)
-        spp = spp_override or spec.effect_ref_spp
+        spp = spp_override or spec.budget(params.get("res"))[2]
         out = ref_path(root, scene, params, spp)
         m, broken = cached(out)
         if broken:
