@@ -27,8 +27,14 @@ jobs and per-effect references) and the scene tests all read this table.
   Mitsuba reference: mean and variance of the mean, `fixed_params`
   unchanged; no per-effect reference.
 
+A scene may carry committed references at further resolutions
+(`more_refs`, reference_<res>.exr, each with its own budget): the main job
+renders at 128 x 128 where one exists, the tests compare at the
+registry's own resolution (reference.exr). A job at a resolution with no
+reference is refused, naming those that exist.
+
 Committed references stay small: at most 256 px a side (64 x 64 keeps the
-EXR ~100 KB). Budgets and times of the Mitsuba references: llvm_ad_rgb on
+EXR ~100 KB, 128 x 128 ~390 KB). Budgets and times of the Mitsuba references: llvm_ad_rgb on
 2 shared cores. Most scenes are box-filtered, so a sample lands in one
 pixel and Mitsuba's pixels are independent (its box filter splats nowhere
 else); card.md in each folder says what the scene isolates.
