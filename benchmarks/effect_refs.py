@@ -15,8 +15,10 @@ the scene's parameters, the estimator, its budget and seed, so a cache
 survives commits (the z-test re-decides whenever one is made). A cached
 file that does not read back whole (a copy cut short, a full disk) is
 remade, not trusted and not fatal to every later run. A 64 x 64
-reference with its seven effect layers is about 0.3 MB; they are not
-committed.
+reference with its seven effect layers is about 0.3 MB (cornell_box at
+128 x 128: 0.7 MB); they are not committed. At a resolution of the
+registry's more_refs the budget is that entry's (registry.budget) and the
+z-test is against that resolution's Mitsuba reference.
 """
 from __future__ import annotations
 

@@ -47,8 +47,9 @@ def _set_variant(mi, variant: str):
 
 def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 1024, variant: str = "llvm_ad_rgb",
                            progress: bool = True, integrator: dict | None = None, scene_note: str = "",
-                           **scene_params):
-    """Renders `scene_xml` with Mitsuba 3 `runs` times (seed = 0 .. runs-1,
+                           first_seed: int = 0, **scene_params):
+    """Renders `scene_xml` with Mitsuba 3 `runs` times (seed = first_seed ..
+    first_seed + runs-1,
     `spp` samples per pixel each) and writes to `out_exr` the mean image and
     the variance of that mean (sample variance across runs / runs).
     `scene_params` override the XML's <default> parameters; `integrator`, a
@@ -70,7 +71,7 @@ def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 102
     mean = m2 = None
     t0 = time.perf_counter()
     for i in range(runs):
-        img = np.array(mi.render(scene, integrator=integ, seed=i, spp=spp), dtype=np.float64)
+        img = np.array(mi.render(scene, integrator=integ, seed=first_seed + i, spp=spp), dtype=np.float64)
         if img.ndim != 3 or img.shape[2] < 3:
             raise ValueError(f"make_mitsuba_reference: expected an (H, W, 3) RGB film, got {img.shape}")
         img = img[..., :3]
@@ -96,7 +97,7 @@ def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 102
         "spp_per_run": int(spp),
         "runs": int(runs),
         "total_spp": int(spp) * int(runs),
-        "seeds": f"0..{runs - 1}",
+        "seeds": f"{first_seed}..{first_seed + runs - 1}",
         "scene": scene_xml.name,
         "scene_note": scene_note or "the scene's XML",
         "scene_params": json.dumps(scene_params, sort_keys=True),
@@ -130,6 +131,7 @@ def make_scene_reference(spec, res=None, runs=None, spp=None, variant: str = "ll
     path both this module's command and `radiometer refs` take. Returns
     (out, var_mean, metadata)."""
     r_runs, r_spp, _ = spec.budget(res)  # ValueError naming the resolutions with a reference
+    first_seed = spec.first_seed(res)
     runs, spp = runs or r_runs, spp or r_spp
     out = Path(out) if out else spec.reference_file(res)
     params = dict(spec.fixed_params)
@@ -141,7 +143,7 @@ def make_scene_reference(spec, res=None, runs=None, spp=None, variant: str = "ll
         xml, note = mitsuba_xml(spec, Path(tmp))
         _, var_mean, meta = make_mitsuba_reference(xml, out, runs=runs, spp=spp, variant=variant,
                                                    integrator=spec.mitsuba_integrator, scene_note=note,
-                                                   progress=progress, **params)
+                                                   progress=progress, first_seed=first_seed, **params)
     return out, var_mean, meta
 
 
