@@ -69,6 +69,9 @@ def test_reference_exists_with_its_budget(name, res):
     assert ref.image.shape == (res, res, 3) and ref.variance.shape == (res, res, 3)
     assert res <= 256  # committed references stay small (registry.py)
     assert int(ref.metadata["total_spp"]) == runs * spp and int(ref.metadata.get("runs", runs)) == runs
+    if spec.kind == "mitsuba":  # made from the seeds the registry names (first_seed)
+        first = spec.first_seed(res)
+        assert ref.metadata["seeds"] == f"{first}..{first + runs - 1}"
     assert np.all(np.isfinite(ref.image)) and np.all(ref.variance >= 0)
     # The runs differed (a pixel wholly on an emitter may not: veach_mis's
     # lights, 2.0 to 50.0 exactly in every run, at 64 x 64 too).

@@ -204,7 +204,8 @@ def _effect_refs(a) -> int:
     from .benchmarks import effect_refs
     from .reference_scenes import registry as scenes
 
-    names = a.scenes or [n for n, s in sorted(scenes.SCENES.items()) if s.kind == "mitsuba"]
+    names = a.scenes or [n for n, s in sorted(scenes.SCENES.items())
+                         if s.kind == "mitsuba" and (a.res is None or a.res in s.resolutions)]
     for n in names:
         spec = scenes.get(n)
         if spec.kind != "mitsuba":
