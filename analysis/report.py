@@ -340,7 +340,11 @@ def image_comparison(scene, recs, ref_image, root: Path, out: Path, title: str) 
     vmax = max(float(np.percentile(np.concatenate(pos), 99.5)), 1e-12) if pos else 1.0
     vmin = vmax * 1e-4
     rows = [("reference", ref_image, None)] + [(lab, im, err) for (lab, im, _), err in zip(shown, errs)]
-    fig, axes = plt.subplots(len(rows), 3, figsize=(7.5, 2.5 * len(rows)), dpi=90, squeeze=False)
+    # A panel is about 1.6 in square: at 90 dpi a 64 x 64 image gets ~2
+    # screen pixels per pixel, a 128 x 128 one would get ~1 (smaller than
+    # the film); the dpi grows so that every image keeps at least 2.
+    dpi = max(90, int(np.ceil(2 * max(ref_image.shape[:2]) / 1.6)))
+    fig, axes = plt.subplots(len(rows), 3, figsize=(7.5, 2.5 * len(rows)), dpi=dpi, squeeze=False)
     from matplotlib.colors import LogNorm
     from matplotlib.patches import Rectangle
 

@@ -15,8 +15,10 @@ the scene's parameters, the estimator, its budget and seed, so a cache
 survives commits (the z-test re-decides whenever one is made). A cached
 file that does not read back whole (a copy cut short, a full disk) is
 remade, not trusted and not fatal to every later run. A 64 x 64
-reference with its seven effect layers is about 0.3 MB; they are not
-committed.
+reference with its seven effect layers is about 0.3 MB (cornell_box at
+128 x 128: 0.7 MB); they are not committed. At a resolution of the
+registry's more_refs the budget is that entry's (registry.budget) and the
+z-test is against that resolution's Mitsuba reference.
 """
 from __future__ import annotations
 
@@ -79,7 +81,7 @@ def make(scene: str, params: dict, spp: int, out: Path, threads: int = 0, progre
              "max_depth": _scenes.max_depth(spec, params)}
     t0 = time.monotonic()
     res = rm.render(s, integrator=integ, spp=spp, seed=SEED, threads=threads, progress=progress)
-    ref = rm.read_exr(spec.xml.parent / "reference.exr")
+    ref = rm.read_exr(spec.reference_file(params.get("res")))
     splatted = _splatted(s)
     floor = None if splatted else reference_variance_floor(ref.variance, int(ref.metadata["total_spp"]), res.spp)
     passed, msg = blocked_z_test(res.image, res.variance, ref.image, ref.variance, b_splatted=splatted,
@@ -110,7 +112,7 @@ def ensure(root, jobs, spp_override=None, threads: int = 0, log=print) -> dict:
     for (scene, pkey), js in needed.items():
         params = json.loads(pkey)
         spec = _scenes.get(scene)
-        spp = spp_override or spec.effect_ref_spp
+        spp = spp_override or spec.budget(params.get("res"))[2]
         out = ref_path(root, scene, params, spp)
         m, broken = cached(out)
         if broken:

@@ -12,7 +12,8 @@ ratio estimator); only the per-pixel variance is used by the z-test.
 
 regenerates reference_scenes/cornell_box/reference.exr (64 x 64, small enough
 to commit) with the parameters and budget that reference_scenes/registry.py
-gives it.
+gives it; `--res 128` makes its reference_128.exr where the registry
+declares one (more_refs).
 """
 from __future__ import annotations
 
@@ -46,8 +47,9 @@ def _set_variant(mi, variant: str):
 
 def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 1024, variant: str = "llvm_ad_rgb",
                            progress: bool = True, integrator: dict | None = None, scene_note: str = "",
-                           **scene_params):
-    """Renders `scene_xml` with Mitsuba 3 `runs` times (seed = 0 .. runs-1,
+                           first_seed: int = 0, **scene_params):
+    """Renders `scene_xml` with Mitsuba 3 `runs` times (seed = first_seed ..
+    first_seed + runs-1,
     `spp` samples per pixel each) and writes to `out_exr` the mean image and
     the variance of that mean (sample variance across runs / runs).
     `scene_params` override the XML's <default> parameters; `integrator`, a
@@ -69,7 +71,7 @@ def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 102
     mean = m2 = None
     t0 = time.perf_counter()
     for i in range(runs):
-        img = np.array(mi.render(scene, integrator=integ, seed=i, spp=spp), dtype=np.float64)
+        img = np.array(mi.render(scene, integrator=integ, seed=first_seed + i, spp=spp), dtype=np.float64)
         if img.ndim != 3 or img.shape[2] < 3:
             raise ValueError(f"make_mitsuba_reference: expected an (H, W, 3) RGB film, got {img.shape}")
         img = img[..., :3]
@@ -95,7 +97,7 @@ def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 102
         "spp_per_run": int(spp),
         "runs": int(runs),
         "total_spp": int(spp) * int(runs),
-        "seeds": f"0..{runs - 1}",
+        "seeds": f"{first_seed}..{first_seed + runs - 1}",
         "scene": scene_xml.name,
         "scene_note": scene_note or "the scene's XML",
         "scene_params": json.dumps(scene_params, sort_keys=True),
@@ -120,27 +122,45 @@ def mitsuba_xml(spec, tmp: Path):
     return Path(writer(tmp / spec.xml.name)), f"{spec.folder}/{mod}.py {fn}: {writer.__doc__.split(chr(10))[0]}"
 
 
+def make_scene_reference(spec, res=None, runs=None, spp=None, variant: str = "llvm_ad_rgb", out=None,
+                         progress: bool = True):
+    """Makes the Mitsuba reference of registry scene `spec` at resolution
+    `res` (None: the registry's own; otherwise one its more_refs declares)
+    with that resolution's budget unless `runs` / `spp` are given, into
+    `out` (default: the committed file, spec.reference_file(res)). The one
+    path both this module's command and `radiometer refs` take. Returns
+    (out, var_mean, metadata)."""
+    r_runs, r_spp, _ = spec.budget(res)  # ValueError naming the resolutions with a reference
+    first_seed = spec.first_seed(res)
+    runs, spp = runs or r_runs, spp or r_spp
+    out = Path(out) if out else spec.reference_file(res)
+    params = dict(spec.fixed_params)
+    if res is not None:
+        params["res"] = int(res)
+    print(f"{spec.name}: {runs} runs x {spp} spp, params {params}, variant {variant} -> {out}", file=sys.stderr)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        xml, note = mitsuba_xml(spec, Path(tmp))
+        _, var_mean, meta = make_mitsuba_reference(xml, out, runs=runs, spp=spp, variant=variant,
+                                                   integrator=spec.mitsuba_integrator, scene_note=note,
+                                                   progress=progress, first_seed=first_seed, **params)
+    return out, var_mean, meta
+
+
 def main(argv=None):
     scenes = mitsuba_scenes()
     ap = argparse.ArgumentParser(prog="python -m radiometer.reference_scenes.make_reference",
                                  description="Regenerates the committed Mitsuba 3 reference of a canonical scene.")
     ap.add_argument("scene", choices=sorted(scenes), help="scene folder under reference_scenes/")
+    ap.add_argument("--res", type=int, help="resolution (default: the scene's own; others as registry more_refs "
+                                            "declares, written to reference_RES.exr)")
     ap.add_argument("--runs", type=int, help="independent Mitsuba renders (default: the scene's)")
     ap.add_argument("--spp", type=int, help="samples per pixel per run (default: the scene's)")
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument("-o", "--out", help="output EXR (default: reference_scenes/SCENE/reference.exr)")
     args = ap.parse_args(argv)
-    spec = scenes[args.scene]
-    runs = args.runs or spec.runs
-    spp = args.spp or spec.spp
-    out = Path(args.out) if args.out else spec.reference_exr
-    print(f"{args.scene}: {runs} runs x {spp} spp, params {spec.fixed_params}, variant {args.variant} -> {out}",
-          file=sys.stderr)
-    with tempfile.TemporaryDirectory() as tmp:
-        xml, note = mitsuba_xml(spec, Path(tmp))
-        _, var_mean, meta = make_mitsuba_reference(xml, out, runs=runs, spp=spp, variant=args.variant,
-                                                   integrator=spec.mitsuba_integrator, scene_note=note,
-                                                   **spec.fixed_params)
+    out, var_mean, meta = make_scene_reference(scenes[args.scene], args.res, args.runs, args.spp, args.variant,
+                                               args.out)
     print(f"wrote {out} ({out.stat().st_size / 1024:.0f} KB) in {meta['seconds']:.0f} s with {meta['variant']}; "
           f"mean variance of the mean {var_mean.mean():.3g}", file=sys.stderr)
 

@@ -66,10 +66,12 @@ def _cached(name: str, params_key: tuple, effect_ref: Optional[str]):
         return _analytic(spec, p)
     from radiometer import read_exr
 
-    path = spec.xml.parent / "reference.exr"
+    res = p.get("res")
+    path = spec.reference_file(res)  # ValueError naming the resolutions with a reference
     if not path.exists():
-        how = (f"python -m radiometer.reference_scenes.{spec.folder}.make_reference" if spec.kind == "ours"
-               else f"radiometer refs {name}")
+        opt = f" --res {res}" if path != spec.reference_exr else ""
+        how = (f"python -m radiometer.reference_scenes.{spec.folder}.make_reference{opt}" if spec.kind == "ours"
+               else f"radiometer refs {name}{opt}")
         raise FileNotFoundError(f"{path}: {spec.kind} reference missing ({how})")
     ref = read_exr(path)
     effects = None

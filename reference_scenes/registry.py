@@ -27,8 +27,14 @@ jobs and per-effect references) and the scene tests all read this table.
   Mitsuba reference: mean and variance of the mean, `fixed_params`
   unchanged; no per-effect reference.
 
+A scene may carry committed references at further resolutions
+(`more_refs`, reference_<res>.exr, each with its own budget): the main job
+renders at 128 x 128 where one exists, the tests compare at the
+registry's own resolution (reference.exr). A job at a resolution with no
+reference is refused, naming those that exist.
+
 Committed references stay small: at most 256 px a side (64 x 64 keeps the
-EXR ~100 KB). Budgets and times of the Mitsuba references: llvm_ad_rgb on
+EXR ~100 KB, 128 x 128 ~390 KB). Budgets and times of the Mitsuba references: llvm_ad_rgb on
 2 shared cores. Most scenes are box-filtered, so a sample lands in one
 pixel and Mitsuba's pixels are independent (its box filter splats nowhere
 else); card.md in each folder says what the scene isolates.
@@ -83,11 +89,61 @@ class SceneSpec:
     # selection its samples are heavy-tailed and the total's z-test
     # rejects it, card.md).
     effect_ref_params: dict = field(default_factory=dict)
+    # mitsuba and ours: committed references at further resolutions, res ->
+    # (runs, spp, effect_ref_spp[, first_seed]), each in reference_<res>.exr beside
+    # reference.exr (which is at fixed_params["res"] and stays what the
+    # tests compare with). A job may set `res` to any resolution listed
+    # here, nothing else of fixed_params. Keyed by resolution, not a second
+    # scene, so that a matrix names the scene once and its records stay one
+    # scene in the store and the report.
+    more_refs: dict = field(default_factory=dict)
 
     @property
     def reference_exr(self) -> Path:
-        """The committed reference (mitsuba and ours scenes)."""
+        """The committed reference at the registry's own resolution
+        (mitsuba and ours scenes)."""
         return self.xml.parent / "reference.exr"
+
+    @property
+    def resolutions(self) -> tuple:
+        """The resolutions a committed reference exists for, ascending
+        (empty for analytic scenes, which render at any)."""
+        base = self.fixed_params.get("res")
+        return tuple(sorted(([int(base)] if base is not None else []) + [int(r) for r in self.more_refs]))
+
+    def _check_res(self, res) -> Optional[int]:
+        base = self.fixed_params.get("res")
+        if res is None or (base is not None and res == base):
+            return None
+        if res not in self.more_refs:
+            have = ", ".join(f"{r} x {r}" for r in self.resolutions) or "none: its film is fixed"
+            whose = "Mitsuba reference" if self.kind == "mitsuba" else "reference of ours"
+            raise ValueError(f"{self.name}: no {whose} at res = {res!r} (references exist at: {have}); "
+                             f"another resolution needs a new reference (registry.py more_refs)")
+        return int(res)
+
+    def reference_file(self, res=None) -> Path:
+        """The committed reference at resolution `res` (None: the registry's
+        own); ValueError naming the scene and the resolutions that exist
+        when there is none at `res`."""
+        r = self._check_res(res)
+        return self.reference_exr if r is None else self.xml.parent / f"reference_{r}.exr"
+
+    def budget(self, res=None) -> tuple:
+        """(runs, spp, effect_ref_spp) of the reference at `res`."""
+        r = self._check_res(res)
+        return (self.runs, self.spp, self.effect_ref_spp) if r is None else tuple(self.more_refs[r][:3])
+
+    def first_seed(self, res=None) -> int:
+        """The first of the reference's `runs` consecutive seeds: 0, or a
+        more_refs entry's fourth value. Why one may need another: Mitsuba's
+        light tracer traces the same light paths for the same seed and
+        sample count whatever the film, so a 128 x 128 reference at 1/4
+        of the spp from seeds 0.. is the 64 x 64 one's samples binned
+        finer (ajar_door's first one: its 2 x 2 means equalled the 64 x 64
+        image to |z| < 6e-4) and the two cannot check each other."""
+        r = self._check_res(res)
+        return 0 if r is None or len(self.more_refs[r]) < 4 else int(self.more_refs[r][3])
 
 
 def _analytic(name, xml, folder):
@@ -95,12 +151,22 @@ def _analytic(name, xml, folder):
 
 
 def _mitsuba(name, params, runs, spp, effect_ref_spp, effect_ref_estimator="path", integrator=None,
-             exclusions=None, mitsuba_writer="", effect_ref_params=None):
+             exclusions=None, mitsuba_writer="", effect_ref_params=None, more_refs=None):
     return SceneSpec(name, HERE / name / "scene.xml", "mitsuba", name, dict(params), runs, spp, integrator,
                      effect_ref_spp, effect_ref_estimator, dict(exclusions or {}), mitsuba_writer=mitsuba_writer,
-                     effect_ref_params=dict(effect_ref_params or {}))
+                     effect_ref_params=dict(effect_ref_params or {}), more_refs=dict(more_refs or {}))
 
 
+# 128 x 128 references (more_refs, the main job's resolution): each in
+# about the time of its 64 x 64 one, so 1/4 of the spp per pixel (the
+# same runs); a 3 s job at 128 reaches about 1/4 of its spp at 64 too
+# (cornell_box path: 90 against 366 spp, glass_sphere_caustic 239 against
+# 956, veach_mis 112 against 499; one thread, 2 loaded cores, 2026-12-03),
+# so the reference keeps its ratio to a job's noise: 180 x (cornell_box),
+# 550 x (glass_sphere_caustic), 590 x (veach_mis) less variance. Their
+# per-effect references likewise at 1/4 of the spp. Times measured
+# 2026-12-03 with llvm_ad_rgb sharing 2 cores with a test suite (about
+# one core left to it), beside the 64 x 64 ones' own times.
 # Per-effect reference budgets (surface scenes): about 15-60 s each with
 # `path` on 2 cores (measured 2026-11: cornell ~250 spp/s, glass ~650, veach
 # ~550 at 64 x 64), 10-30 x what a 4 s benchmark job reaches. Media scenes:
@@ -116,19 +182,23 @@ _SCENES = [
     # 256 spp test render's, so it barely widens the z-test. About 3-4
     # minutes. Gaussian-filtered (Mitsuba's splats correlate its pixels:
     # tests/test_cornell_reference.py). ptracer: nothing left out (every
-    # surface is diffuse: there is no specular class to miss).
-    _mitsuba("cornell_box", {"res": 64, "max_depth": 8}, 32, 2048, 8192, exclusions={"ptracer": []}),
+    # surface is diffuse: there is no specular class to miss). 128 x 128:
+    # 32 x 512 spp in 162 s (the 64 x 64: 117 s).
+    _mitsuba("cornell_box", {"res": 64, "max_depth": 8}, 32, 2048, 8192, exclusions={"ptracer": []},
+             more_refs={128: (32, 512, 2048)}),
     # 524288 spp in all, ~2.5 min. ptracer: the sphere itself is seen
     # through a delta BSDF (L ... S E), which a light path can never
     # connect to a pinhole camera through, so light tracing renders it 0.
+    # 128 x 128: 32 x 4096 spp in 324 s (64 x 64: 225 s).
     _mitsuba("glass_sphere_caustic", {"res": 64, "max_depth": 12}, 32, 16384, 16384,
-             exclusions={"ptracer": [(16, 14, 41, 39)]}),
+             exclusions={"ptracer": [(16, 14, 41, 39)]}, more_refs={128: (32, 4096, 4096)}),
     # 262144 spp, ~3 min. ptracer: the plates of alpha 0.005 and 0.02
     # reflect the indirectly lit room into the camera through lobes so
     # narrow that light tracing's estimate is carried by rare huge samples
-    # (a heavy tail, not a bias; measured in card.md).
+    # (a heavy tail, not a bias; measured in card.md). 128 x 128: 32 x
+    # 2048 spp in 348 s (64 x 64: 200 s).
     _mitsuba("veach_mis", {"res": 64, "max_depth": 8}, 32, 8192, 16384,
-             exclusions={"ptracer": [(0, 28, 64, 34), (0, 34, 64, 39)]}),
+             exclusions={"ptracer": [(0, 28, 64, 34), (0, 34, 64, 39)]}, more_refs={128: (32, 2048, 4096)}),
     # Mitsuba's light tracer, not its path tracer: the near room is lit only
     # by a narrow strip the lamp throws through the door's gap, which a
     # camera path finds by BSDF sampling less than 1 time in 100 per
@@ -140,8 +210,11 @@ _SCENES = [
     # less error per sample, card.md), in about 20 s on 2 cores. ptracer:
     # nothing left out (every surface is diffuse, so light tracing renders
     # every path class there is; tests/test_canonical_mitsuba.py).
+    # 128 x 128: 32 x 1024 spp in 725 s (64 x 64: 875 s); per-effect
+    # reference bdpt at 256 spp.
     _mitsuba("ajar_door", {"res": 64, "max_depth": 10}, 32, 4096, 1024, "bdpt",
-             integrator={"type": "ptracer", "max_depth": 10}, exclusions={"ptracer": []}),
+             integrator={"type": "ptracer", "max_depth": 10}, exclusions={"ptracer": []},
+             more_refs={128: (32, 1024, 256)}),
     # Media and subsurface scenes: Mitsuba's volpath (the scene's integrator).
     # ptracer: nothing left out of these two (no surface seen only through
     # glass; tests/test_ptracer_media.py measured them whole).
@@ -171,9 +244,11 @@ _SCENES = [
 # so Mitsuba's path tracer (NEE blocked by the glass, the small light found
 # by chance through the sphere) would need hours for a 64 x 64 reference.
 # bdpt on the unfolded scene (method of images; card.md) at 16 x 1024 spp,
-# about 3 minutes on 2 shared cores.
+# about 3 minutes on 2 shared cores. 128 x 128: 16 x 256 spp in 104 s
+# (ours, threads 0: both cores; the 64 x 64 took 129 s).
 _SCENES.append(SceneSpec("caustic_in_mirror", HERE / "caustic_in_mirror" / "scene.xml", "ours", "caustic_in_mirror",
-                         {"res": 64, "max_depth": 16}, 16, 1024, ours_estimator="bdpt", ours_scene="unfolded.xml"))
+                         {"res": 64, "max_depth": 16}, 16, 1024, ours_estimator="bdpt", ours_scene="unfolded.xml",
+                         more_refs={128: (16, 256, 0)}))
 SCENES = {s.name: s for s in _SCENES}
 
 
@@ -227,12 +302,16 @@ def scene_params(spec: SceneSpec, overrides: Optional[dict] = None) -> dict:
     differ from the reference's)."""
     overrides = dict(overrides or {})
     if spec.kind in ("mitsuba", "ours"):
+        out = dict(spec.fixed_params)
+        if "res" in overrides and "res" in spec.fixed_params:
+            spec.reference_file(overrides["res"])  # a resolution without a reference: the error names those with one
+            out["res"] = overrides.pop("res")
         for k, v in overrides.items():
             if k not in spec.fixed_params or spec.fixed_params[k] != v:
                 whose = "Mitsuba" if spec.kind == "mitsuba" else "our own"
                 raise ValueError(f"parameter '{k}' = {v!r}: {spec.name}'s {whose} reference was made with "
                                  f"{spec.fixed_params}; these cannot change without a new reference")
-        return dict(spec.fixed_params)
+        return out
     defaults = xml_defaults(spec)
     for k in overrides:
         if k not in defaults:

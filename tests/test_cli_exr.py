@@ -95,7 +95,14 @@ def test_cli_refs_regenerates_a_reference(tmp_path):
     assert ref.image.shape == (64, 64, 3) and ref.variance is not None
     assert ref.metadata["runs"] == 2 and ref.metadata["total_spp"] == 4
     assert ref.metadata["mitsuba_version"].startswith("3.")
+    # A second resolution the registry declares: its own file, its own size.
+    r = _cli("refs", "cornell_box", "--res", "128", "--runs", "2", "--spp", "1", "--out-dir", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    assert rm.read_exr(tmp_path / "cornell_box" / "reference_128.exr").image.shape == (128, 128, 3)
     listing = _cli("refs", "--list")
-    assert "cornell_box" in listing.stdout
+    assert "cornell_box" in listing.stdout and "'res': 128" in listing.stdout
     bad = _cli("refs", "no_such_scene")
     assert bad.returncode == 2 and "no Mitsuba reference is defined for no_such_scene" in bad.stderr
+    bad = _cli("refs", "cornell_box", "--res", "96", "--out-dir", str(tmp_path))
+    assert bad.returncode == 2 and "cornell_box: no Mitsuba reference at res = 96" in bad.stderr
+    assert "Traceback" not in bad.stderr

@@ -156,11 +156,12 @@ def cmd_refs(a) -> int:
     """Regenerates the Mitsuba 3 references of the canonical scenes."""
     if a.effects:
         return _effect_refs(a)
-    from .reference_scenes.make_reference import make_mitsuba_reference
+    from .reference_scenes.make_reference import make_scene_reference
     from .reference_scenes.registry import mitsuba_scenes
 
     scenes = mitsuba_scenes()
-    names = a.scenes or sorted(scenes)
+    # With --res and no scene named: those with a reference declared at it.
+    names = a.scenes or sorted(n for n, s in scenes.items() if a.res is None or a.res in s.resolutions)
     unknown = [n for n in names if n not in scenes]
     if unknown:
         raise SceneError(f"refs: no Mitsuba reference is defined for {', '.join(unknown)} "
@@ -168,26 +169,30 @@ def cmd_refs(a) -> int:
     if a.list:
         for n in names:
             spec = scenes[n]
-            ref = spec.reference_exr
-            state = "missing"
-            if ref.exists():
-                from . import read_exr
+            for r in spec.resolutions or (None,):
+                ref = spec.reference_file(r)
+                state = "missing"
+                if ref.exists():
+                    from . import read_exr
 
-                m = read_exr(ref).metadata
-                state = (f"{m.get('total_spp', '?')} spp, Mitsuba {m.get('mitsuba_version', '?')} "
-                         f"{m.get('variant', '?')}, {m.get('date', '?')}")
-            integ = (spec.mitsuba_integrator or {}).get("type", "the scene's integrator")
-            print(f"{n}: {spec.runs} runs x {spec.spp} spp, Mitsuba {integ}, params {spec.fixed_params} -- {state}")
+                    m = read_exr(ref).metadata
+                    state = (f"{m.get('total_spp', '?')} spp, Mitsuba {m.get('mitsuba_version', '?')} "
+                             f"{m.get('variant', '?')}, {m.get('date', '?')}")
+                runs, spp, _ = spec.budget(r)
+                integ = (spec.mitsuba_integrator or {}).get("type", "the scene's integrator")
+                params = {**spec.fixed_params, **({"res": r} if r else {})}
+                print(f"{n}: {runs} runs x {spp} spp, Mitsuba {integ}, params {params} -- {state}")
         return 0
     out_dir = Path(a.out_dir) if a.out_dir else None
     for n in names:
         spec = scenes[n]
-        runs, spp = a.runs or spec.runs, a.spp or spec.spp
-        out = (out_dir / n / "reference.exr") if out_dir else spec.reference_exr
-        out.parent.mkdir(parents=True, exist_ok=True)
-        print(f"{n}: {runs} runs x {spp} spp with Mitsuba {a.variant} -> {out}", file=sys.stderr)
-        _, var, meta = make_mitsuba_reference(spec.xml, out, runs=runs, spp=spp, variant=a.variant,
-                                              integrator=spec.mitsuba_integrator, **spec.fixed_params)
+        res = a.res
+        try:
+            committed = spec.reference_file(res)
+        except ValueError as e:
+            raise SceneError(f"refs: {e}") from None
+        out = (out_dir / n / committed.name) if out_dir else None
+        out, var, meta = make_scene_reference(spec, res, a.runs, a.spp, a.variant, out)
         print(f"  wrote {out} in {meta['seconds']:.0f} s ({meta['variant']}); mean variance {var.mean():.3g}")
     return 0
 
@@ -199,14 +204,21 @@ def _effect_refs(a) -> int:
     from .benchmarks import effect_refs
     from .reference_scenes import registry as scenes
 
-    names = a.scenes or [n for n, s in sorted(scenes.SCENES.items()) if s.kind == "mitsuba"]
+    names = a.scenes or [n for n, s in sorted(scenes.SCENES.items())
+                         if s.kind == "mitsuba" and (a.res is None or a.res in s.resolutions)]
     for n in names:
         spec = scenes.get(n)
         if spec.kind != "mitsuba":
             print(f"{n}: analytic; its per-effect reference is exact")
             continue
         params = dict(spec.fixed_params)
-        spp = a.spp or spec.effect_ref_spp
+        if a.res is not None:
+            try:
+                spec.reference_file(a.res)
+            except ValueError as e:
+                raise SceneError(f"refs --effects: {e}") from None
+            params["res"] = a.res
+        spp = a.spp or spec.budget(a.res)[2]
         out = effect_refs.ref_path(a.results, n, params, spp)
         m, broken = (None, None) if a.force else effect_refs.cached(out)
         if broken:
@@ -367,6 +379,8 @@ def main(argv=None) -> int:
     r.set_defaults(func=cmd_render)
     f = sub.add_parser("refs", help="regenerate the Mitsuba 3 references of the canonical scenes")
     f.add_argument("scenes", nargs="*", help="scene folders (default: every scene with a Mitsuba reference)")
+    f.add_argument("--res", type=int, help="resolution (default: each scene's own; another only where the "
+                                           "registry declares a reference at it, reference_RES.exr)")
     f.add_argument("--runs", type=int, help="independent Mitsuba renders (default: the scene's)")
     f.add_argument("--spp", type=int, help="samples per pixel per run (default: the scene's)")
     f.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (falls back to scalar_rgb)")
