@@ -37,6 +37,17 @@ def thin_wall(res=32, thickness=0.01):
                       "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20.0, 20.0, 20.0]}}}}
 
 
+def look_at(o, t):
+    """Camera-to-world matrix from o towards t, z up (Mitsuba's lookat:
+    columns left, up, forward, origin)."""
+    f = (t - o) / np.linalg.norm(t - o)
+    left = np.cross([0, 0, 1.0], f)
+    left /= np.linalg.norm(left)
+    cam = np.eye(4)
+    cam[:3, 0], cam[:3, 1], cam[:3, 2], cam[:3, 3] = left, np.cross(f, left), f, o
+    return cam
+
+
 def _rect(scale, rot, at):
     a = np.eye(4)
     a[:3, :3] = rot @ np.diag(scale)
@@ -63,11 +74,7 @@ def glossy_box(res=24, alpha=0.2):
     third of the image's light is indirect, most of it the walls seen in
     the floor."""
     o, t = np.array([0, -2.6, 1.6]), np.array([0, 0, 0.3])
-    f = (t - o) / np.linalg.norm(t - o)
-    left = np.cross([0, 0, 1.0], f)
-    left /= np.linalg.norm(left)
-    cam = np.eye(4)
-    cam[:3, 0], cam[:3, 1], cam[:3, 2], cam[:3, 3] = left, np.cross(f, left), f, o
+    cam = look_at(o, t)
     metal = {"type": "roughconductor", "alpha": alpha, "eta": {"type": "rgb", "value": [0.2] * 3},
              "k": {"type": "rgb", "value": [3.9] * 3}}
     return {"type": "scene",
@@ -103,11 +110,7 @@ def corner_room(res=32):
     e = 0.999
     grey, box = _diffuse([0.7, 0.7, 0.7]), _diffuse([0.6, 0.6, 0.6])
     o, t = np.array([0, -2.4, 1.1]), np.array([0, 0.2, 0.45])
-    f = (t - o) / np.linalg.norm(t - o)
-    left = np.cross([0, 0, 1.0], f)
-    left /= np.linalg.norm(left)
-    cam = np.eye(4)
-    cam[:3, 0], cam[:3, 1], cam[:3, 2], cam[:3, 3] = left, np.cross(f, left), f, o
+    cam = look_at(o, t)
     scene = {"type": "scene",
              "sensor": {"type": "perspective", "fov": 45, "to_world": cam,
                         "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}},

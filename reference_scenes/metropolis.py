@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .caching import look_at
+
 
 def tiny_caustic(res=32, light_radius=0.02, power=50.0, sky=0.02, fov=40.0):
     """The light is a sphere of `light_radius` at height 1.6 emitting
@@ -26,11 +28,7 @@ def tiny_caustic(res=32, light_radius=0.02, power=50.0, sky=0.02, fov=40.0):
         return a
 
     o, t = np.array([0, -2.5, 2.0]), np.array([0, 0, 0.2])
-    f = (t - o) / np.linalg.norm(t - o)
-    left = np.cross([0, 0, 1.0], f)
-    left /= np.linalg.norm(left)
-    cam = np.eye(4)
-    cam[:3, 0], cam[:3, 1], cam[:3, 2], cam[:3, 3] = left, np.cross(f, left), f, o
+    cam = look_at(o, t)
     radiance = power / (4 * np.pi ** 2 * light_radius ** 2)
     return {"type": "scene",
             "sensor": {"type": "perspective", "fov": fov, "to_world": cam,
