@@ -758,7 +758,8 @@ def metropolis_chains_html(recs) -> str:
     head = (f"<p class='note'>Metropolis chains: {stuck_jobs} of {len(rows)} jobs have a stuck chain (one that "
             "rejected more consecutive proposals than its <code>stuck_rejections</code>). A stuck chain splats the "
             "same sample again and again: a bright blotch that its image keeps, as rendered (nothing is clamped), "
-            "while the other seeds miss it; the estimator stays unbiased over seeds, but such a render may be far from the mean.</p>")
+            "while the other seeds miss it; the estimator stays unbiased over seeds, but such a render may be far "
+            "from the mean.</p>")
     return head + "".join(out)
 
 
