@@ -687,6 +687,20 @@ def bias_maps(images, ref, block: int = BIAS_BLOCK, eps: float = 1e-2):
     return pix, (blocks(lum_mean) - blocks(lum_ref)) / (blocks(lum_ref) + eps)
 
 
+def bias_map_panels(axes, pix, blk, v, prefix="", sep=" ", block=BIAS_BLOCK):
+    """Draws bias_maps' pixel and block maps into the two axes `axes` on the
+    symmetric scale [-v, v], each titled with its RMS and mean (`prefix`
+    before the title, `sep` before its figures); returns the last image
+    for a colour bar."""
+    for ax, m, name in ((axes[0], pix, "per pixel"), (axes[1], blk, f"{block} x {block} blocks")):
+        h = ax.imshow(m, cmap="RdBu_r", vmin=-v, vmax=v, interpolation="nearest")
+        ax.set_title(f"{prefix}{name}:{sep}RMS {float(np.sqrt(np.mean(m ** 2))):.3g}, mean {float(m.mean()):+.3g}",
+                     fontsize=8)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    return h
+
+
 def cache_bias_figures(scene, recs, ref_image, root: Path, out: Path) -> list:
     """The page's parts for the bias of each estimator whose jobs kept cache
     records: its seeds' mean against the reference (bias_maps), signed, on
@@ -703,13 +717,7 @@ def cache_bias_figures(scene, recs, ref_image, root: Path, out: Path) -> list:
         pix, blk = bias_maps(ims, ref_image)
         plt = _plt()
         fig, axes = plt.subplots(1, 2, figsize=(7.2, 3.3), dpi=90)
-        v = max(float(np.percentile(np.abs(pix), 99)), 1e-6)
-        for ax, m, name in ((axes[0], pix, "per pixel"), (axes[1], blk, f"{BIAS_BLOCK} x {BIAS_BLOCK} blocks")):
-            h = ax.imshow(m, cmap="RdBu_r", vmin=-v, vmax=v, interpolation="nearest")
-            ax.set_title(f"{name}: RMS {float(np.sqrt(np.mean(m ** 2))):.3g}, mean {float(m.mean()):+.3g}",
-                         fontsize=8)
-            ax.set_xticks([])
-            ax.set_yticks([])
+        h = bias_map_panels(axes, pix, blk, max(float(np.percentile(np.abs(pix), 99)), 1e-6))
         fig.colorbar(h, ax=axes.tolist(), shrink=0.8, label="(mean - ref) / (ref + 0.01), luminance")
         fig.suptitle(f"{scene}: {est}, mean of {len(ims)} seeds against the reference", fontsize=9)
         png = f"{scene}-{est}-bias.png"

@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 import radiometer as rm
-from radiometer.analysis.report import bias_maps
+from radiometer.analysis.report import bias_map_panels, bias_maps
 from radiometer.benchmarks.studies import record
 from radiometer.reference_scenes import registry
 from radiometer.reference_scenes.caching import corner_room, glossy_box
@@ -71,12 +71,7 @@ def plot_maps(scene, maps, n_seeds, ref_label, png):
     v = max(max(float(np.percentile(np.abs(p), 99)) for p, _ in maps.values()), 1e-6)
     fig, axes = plt.subplots(len(maps), 2, figsize=(7.2, 3.2 * len(maps)), dpi=90, squeeze=False)
     for row, (label, (pix, blk)) in zip(axes, maps.items()):
-        for ax, m, what in ((row[0], pix, "per pixel"), (row[1], blk, f"{BLOCK} x {BLOCK} blocks")):
-            h = ax.imshow(m, cmap="RdBu_r", vmin=-v, vmax=v, interpolation="nearest")
-            ax.set_title(f"{label}, {what}:\nRMS {float(np.sqrt(np.mean(m ** 2))):.3g}, mean {float(m.mean()):+.3g}",
-                         fontsize=8)
-            ax.set_xticks([])
-            ax.set_yticks([])
+        h = bias_map_panels(row, pix, blk, v, prefix=f"{label}, ", sep="\n", block=BLOCK)
     fig.colorbar(h, ax=axes.ravel().tolist(), shrink=0.8, label="(mean - ref) / (ref + 0.01), luminance")
     fig.suptitle(f"{scene}: irrcache's indirect class, mean of {n_seeds} seeds against {ref_label}", fontsize=9)
     fig.savefig(png)
