@@ -423,6 +423,43 @@ def test_defaults_match_mitsuba(mi):
             mi.load_dict({"type": t}).radius()) == radius
 
 
+def test_default_bsdf_is_black_on_emitters_as_in_mitsuba(mi):
+    """A shape without a BSDF is a diffuse of reflectance 0.5, but an
+    emitter without one reflects nothing (Mitsuba 3's Shape constructor).
+    A radiance meter looks at square A (an emitter of radiance 1, no BSDF)
+    while square B (radiance 2) faces it 1 away: with A black the meter
+    reads exactly A's 1, as Mitsuba does; with the 0.5 default, B's light
+    reflected off A adds 0.5 x 2 x F (F, the configuration factor from A's
+    centre to B, about 0.55)."""
+    def scene(bsdf_a=None):
+        a = {"type": "rectangle", "emitter": {"type": "area", "radiance": 1.0}}
+        if bsdf_a is not None:
+            a["bsdf"] = bsdf_a
+        return {"type": "scene",
+                "integrator": {"type": "path", "max_depth": 3},
+                "meter": {"type": "radiancemeter", "origin": [0, 0, 0.5], "direction": [0, 0, -1],
+                          "film": {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"}}},
+                "a": a,
+                "b": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0, 0, 1]) @
+                      mi.ScalarTransform4f().rotate([1, 0, 0], 180),
+                      "emitter": {"type": "area", "radiance": 2.0}},
+                # a plain shape without a BSDF keeps the 0.5 default
+                "c": {"type": "sphere", "radius": 0.01, "center": [5, 5, 5]}}
+
+    import radiometer as rm
+
+    desc = load_dict(scene())
+    assert desc.shapes[0].bsdf is None and desc.shapes[2].bsdf is None
+    ours = float(np.asarray(rm.render(rm.load_dict(scene()), spp=4096, seed=1).image).mean())
+    grey = float(np.asarray(rm.render(rm.load_dict(scene({"type": "diffuse"})), spp=4096, seed=1).image).mean())
+    theirs = float(np.asarray(mi.render(mi.load_dict(scene()), spp=4096, seed=1)).mean())
+    assert ours == pytest.approx(1.0, abs=1e-6)
+    assert theirs == pytest.approx(ours, abs=1e-4)
+    # the test sees the difference: A with the 0.5 default reflects B's light
+    f = 2 / math.pi * math.sqrt(2) * math.atan(1 / math.sqrt(2))  # square of half-side 1 at distance 1
+    assert grey == pytest.approx(1 + 0.5 * 2 * f, rel=0.01), grey
+
+
 def test_sphere_transform_and_mirror(mi):
     m = mi.ScalarTransform4f().translate([1, 2, 3]) @ mi.ScalarTransform4f().rotate(
         [0, math.sqrt(0.5), math.sqrt(0.5)], 30) @ mi.ScalarTransform4f().scale(-2)

@@ -74,16 +74,23 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
     """Builds and commits the C++ scene. C++ errors about a part are re-raised
     as SceneError naming that part."""
     scene = _core.Scene()
-    default_bsdf = None
+    # A shape without a BSDF gets Mitsuba 3's default (its Shape
+    # constructor): a diffuse of reflectance 0.5, or 0 (black) when the
+    # shape is an emitter. One of each is shared by every such shape.
+    default_bsdfs = {}
     sensor_shape = -1
     media = {}
     for i, s in enumerate(desc.shapes):
         where = s.id or f"shape #{i}"
         try:
             if s.bsdf is None:
-                if default_bsdf is None:
-                    default_bsdf = scene.add_bsdf(_bsdf(BsdfDesc(id="default diffuse")))
-                b = default_bsdf
+                black = s.emitter is not None
+                if black not in default_bsdfs:
+                    d = BsdfDesc(id="default diffuse of an emitter" if black else "default diffuse")
+                    if black:
+                        d.reflectance = (0.0, 0.0, 0.0)
+                    default_bsdfs[black] = scene.add_bsdf(_bsdf(d))
+                b = default_bsdfs[black]
             else:
                 b = scene.add_bsdf(_bsdf(s.bsdf))
             if s.type == "mesh":

@@ -55,6 +55,8 @@ bsdf       diffuse: reflectance [0.5]
            twosided: one or two nested reflective bsdfs (as Mitsuba: not
                dielectric, thindielectric, roughdielectric or null); null: none.
            An IOR is a float or one of the names in NAMED_IOR (any case).
+           A shape without a bsdf gets Mitsuba 3's default: diffuse 0.5, or
+           diffuse 0 (black) when it carries an area emitter.
 emitter    area (nested in a shape): radiance [1]
            point: intensity [1], position or to_world
            spot: intensity [1], cutoff_angle [20], beam_width [3/4 cutoff],
