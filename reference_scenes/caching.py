@@ -1,9 +1,11 @@
 """Scenes built for the caching estimators (irrcache, radcache), as
 scene dicts for radiometer.load_dict; used by tests/test_irrcache.py,
 tests/test_radcache.py and benchmarks/studies/irrcache_bias.py. Not in the
-registry: thin_wall's lit side, glossy_box and corner_room have no exact
-answer, and no Mitsuba reference was made for them (their references are
-long `path` renders where they are used).
+registry: thin_wall's lit side and glossy_box have no exact answer, and no
+Mitsuba reference was made for them (their references are long `path`
+renders where they are used). corner_room is a registered scene (its XML
+and Mitsuba reference in reference_scenes/corner_room); corner_room()
+loads it.
 
 - thin_wall: light leaks through a thin wall (docs/irrcache.md).
 - glossy_box: a rough metal floor reflecting coloured walls, for
@@ -12,6 +14,8 @@ long `path` renders where they are used).
   boxes against its walls), for irrcache's interpolation bias.
 """
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
@@ -91,43 +95,9 @@ def glossy_box(res=24, alpha=0.2):
                       "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [15.0, 15.0, 15.0]}}}}
 
 
-def _box(lo, hi):
-    """A cube shape's to_world for the axis-aligned box [lo, hi]."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    a = np.diag(list((hi - lo) / 2) + [1.0])
-    a[:3, 3] = (hi + lo) / 2
-    return a
-
-
 def corner_room(res=32):
-    """Many concave corners, diffuse only: a room (2 x 2, 1.5 high, open
-    towards the camera) with a four-step staircase against the back and
-    right walls, two stacked boxes in the back left corner, one box in the
-    front left corner and a small one on the floor, lit by a square light
-    under the ceiling facing down. Walls grey (0.7), the left wall red and
-    the right one green for colour bleeding; boxes pale (0.6). Each box
-    stands 1e-3 off the walls it touches (no coincident faces)."""
-    e = 0.999
-    grey, box = _diffuse([0.7, 0.7, 0.7]), _diffuse([0.6, 0.6, 0.6])
-    o, t = np.array([0, -2.4, 1.1]), np.array([0, 0.2, 0.45])
-    cam = look_at(o, t)
-    scene = {"type": "scene",
-             "sensor": {"type": "perspective", "fov": 45, "to_world": cam,
-                        "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}},
-             "floor": {"type": "rectangle", "to_world": _rect((1, 1, 1), np.eye(3), (0, 0, 0)), "bsdf": grey},
-             "ceiling": {"type": "rectangle", "to_world": _rect((1, 1, 1), _rx(np.pi), (0, 0, 1.5)), "bsdf": grey},
-             "back": {"type": "rectangle", "to_world": _rect((1, 0.75, 1), _rx(np.pi / 2), (0, 1, 0.75)),
-                      "bsdf": grey},
-             "left": {"type": "rectangle", "to_world": _rect((0.75, 1, 1), _ry(np.pi / 2), (-1, 0, 0.75)),
-                      "bsdf": _diffuse([0.7, 0.15, 0.15])},
-             "right": {"type": "rectangle", "to_world": _rect((0.75, 1, 1), _ry(-np.pi / 2), (1, 0, 0.75)),
-                       "bsdf": _diffuse([0.15, 0.7, 0.15])},
-             "light": {"type": "rectangle", "to_world": _rect((0.25, 0.25, 1), _rx(np.pi), (0, -0.1, 1.499)),
-                       "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [12.0, 12.0, 12.0]}}}}
-    boxes = {f"step{k}": ((0.1, 0.2 + 0.2 * k, 0), (e, min(0.4 + 0.2 * k, e), 0.25 * (k + 1)))
-             for k in range(4)}  # the staircase, rising towards the back wall
-    boxes.update(box_back=((-e, 0.4, 0), (-0.5, e, 0.6)), box_top=((-e, 0.7, 0.6), (-0.7, e, 0.9)),
-                 box_front=((-e, -0.6, 0), (-0.6, -0.2, 0.3)), box_floor=((-0.3, -0.1, 0), (0, 0.2, 0.3)))
-    for name, (lo, hi) in boxes.items():
-        scene[name] = {"type": "cube", "to_world": _box(lo, hi), "bsdf": box}
-    return scene
+    """corner_room (reference_scenes/corner_room/scene.xml, a registered
+    scene with a Mitsuba reference; its card.md), loaded at res x res."""
+    import radiometer as rm
+
+    return rm.load_file(Path(__file__).resolve().parent / "corner_room" / "scene.xml", res=res)

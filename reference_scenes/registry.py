@@ -217,6 +217,12 @@ _SCENES = [
     _mitsuba("ajar_door", {"res": 64, "max_depth": 10}, 32, 4096, 1024, "bdpt",
              integrator={"type": "ptracer", "max_depth": 10}, exclusions={"ptracer": []},
              more_refs={128: (32, 1024, 256, 1000)}),
+    # Many concave corners, all diffuse (card.md): what irradiance caching
+    # interpolates worst. Mitsuba's path tracer (the scene's integrator):
+    # the light under the ceiling faces the open room, so NEE finds it from
+    # every surface. Per-effect reference: path, 1024 spp. ptracer: nothing
+    # left out (all diffuse, the camera sees no light).
+    _mitsuba("corner_room", {"res": 64, "max_depth": 8}, 32, 4096, 1024, exclusions={"ptracer": []}),
     # Media and subsurface scenes: Mitsuba's volpath (the scene's integrator).
     # ptracer: nothing left out of these two (no surface seen only through
     # glass; tests/test_ptracer_media.py measured them whole).

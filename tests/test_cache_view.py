@@ -164,9 +164,9 @@ def test_cache_wins_matrix_parses():
     from radiometer.benchmarks.studies import cache_wins
 
     m = MX.load(str(cache_wins.MATRIX))
-    assert {j.scene for j in m.jobs} == {"cornell_box", "ajar_door"}
+    assert {j.scene for j in m.jobs} == {"cornell_box", "ajar_door", "corner_room"}
     assert {j.estimator for j in m.jobs} == {"path", "photonmapper", "irrcache", "radcache"}
-    assert len(m.jobs) == 2 * 4 * 2
+    assert len(m.jobs) == 3 * 4 * 2
 
 
 @pytest.mark.parametrize("floor", [0.0, 1e-4, 3e-3])

@@ -152,7 +152,7 @@ def test_gradients_lower_the_bias(cornell_ref):
 
 @pytest.fixture(scope="module")
 def corner_ref():
-    scene = rm.load_dict(corner_room(24))
+    scene = corner_room(24)
     return scene, rm.render(scene, integrator={"type": "path", "max_depth": 8}, spp=2048, seed=98,
                             effects=["indirect"])
 

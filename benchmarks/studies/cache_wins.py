@@ -1,5 +1,6 @@
 """What caching buys: error against time of path, photonmapper (final
-gathering), irrcache and radcache on the Cornell box and ajar_door, the bias
+gathering), irrcache and radcache on the Cornell box, ajar_door and
+corner_room, the bias
 floor of each biased estimator, and the time path tracing needs to reach
 it. A benchmark, not a timed test.
 

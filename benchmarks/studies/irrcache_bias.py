@@ -92,7 +92,7 @@ def main(argv=None):
         ref_est, ref_spp, n_seeds, mapped = SCENES[name]
         ref_spp, n_seeds = args.ref_spp or ref_spp, args.seeds or n_seeds
         if name == "corner_room":
-            scene, base = rm.load_dict(corner_room(args.res)), {"max_depth": 8}
+            scene, base = corner_room(args.res), {"max_depth": 8}
         else:
             spec = registry.get(name)
             params = dict(spec.fixed_params, res=args.res)
