@@ -86,7 +86,7 @@ def test_analytic_formulas():
     assert abs(t60 / cie.floor_mean_irradiance(0.5, LE, LS)[0] - 1) < 1e-12
 
 
-@pytest.mark.parametrize("estimator,spp", [("path", 256), ("bdpt", 128)])
+@pytest.mark.parametrize("estimator,spp", [("path", 256), ("bdpt", 256)])
 def test_direct_light_pixels(estimator, spp):
     """max_depth 2: the floor lit by the light alone, pixel by pixel."""
     res = rm.render(_scene(res=16, max_depth=2), integrator={"type": estimator, "max_depth": 2}, spp=spp, seed=11)
