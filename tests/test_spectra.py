@@ -71,12 +71,12 @@ def _emitter(t, name):
     return (lambda s: ({"type": t, name: s}, f"{name}.value"), ours)
 
 
-def _medium(name):
+def _medium(name, t="homogeneous"):
     def ours(s):
-        m = {"type": "homogeneous", name: s}
+        m = {"type": t, name: s}
         return ({"type": "scene", "o": {"type": "sphere", "bsdf": {"type": "null"}, "interior": m}},
                 lambda d: getattr(d.shapes[0].interior, name))
-    return (lambda s: ({"type": "homogeneous", name: s}, f"{name}.value.value"), ours)
+    return (lambda s: ({"type": t, name: s}, f"{name}.value.value"), ours)
 
 
 def _constvolume():
@@ -88,7 +88,7 @@ def _constvolume():
 
 
 # Each with how Mitsuba converts it: D65-weighted and clamped to [0, 1]
-# (reflectances, and, in Mitsuba 3.9.1, a homogeneous medium's sigma_t);
+# (reflectances, and, in Mitsuba 3.9.1, a medium's sigma_t given as a value);
 # D65-weighted, unclamped above (eta, k, a constvolume's value); no D65,
 # unclamped (emitters).
 KINDS = {
@@ -105,6 +105,7 @@ KINDS = {
     "directional.irradiance": _emitter("directional", "irradiance"),
     "homogeneous.sigma_t": _medium("sigma_t"),
     "homogeneous.albedo": _medium("albedo"),
+    "heterogeneous.sigma_t": _medium("sigma_t", "heterogeneous"),
     "constvolume.value": _constvolume(),
 }
 
