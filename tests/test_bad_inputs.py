@@ -264,8 +264,9 @@ XML = [
                      '</bsdf></shape>' + MARK, ["parameter 'reflectance': negative value -0.1"]),
     ("rgb_nan", '<shape type="sphere"><bsdf type="diffuse"><rgb name="reflectance" value="0.5 nan 0.5"/>'
                 '</bsdf></shape>' + MARK, ["non-finite"]),
-    ("spectrum_pairs", '<shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" '
-                       'value="400:0.1, 700:0.5"/></bsdf></shape>' + MARK, ["only uniform spectra"]),
+    ("spectrum_pairs_unsorted", '<shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" '
+                                'value="700:0.1, 400:0.5"/></bsdf></shape>' + MARK,
+     ["parameter 'reflectance'", "wavelengths must increase strictly"]),
     ("point_missing_z", '<shape type="sphere"><point name="center" x="1" y="2"/></shape>' + MARK,
      ["missing attribute 'z'"]),
     ("point_value_and_x", '<shape type="sphere"><point name="center" value="1 2 3" x="1"/></shape>' + MARK,
@@ -327,8 +328,8 @@ XML = [
        "\n</bsdf></shape>", ["either alpha or alpha_u/alpha_v"]),
     ("alpha_u_only", '<shape type="sphere"><bsdf type="roughconductor">' + MARK
      + '\n<float name="alpha_u" value="0.1"/>\n</bsdf></shape>', ["give both alpha_u and alpha_v"]),
-    ("conductor_material", '<shape type="sphere"><bsdf type="conductor">' + MARK
-     + '\n<string name="material" value="Au"/>\n</bsdf></shape>', ["named conductor materials"]),
+    ("conductor_material", '<shape type="sphere"><bsdf type="conductor">\n<string name="material" value="au"/>'
+     + MARK + '\n</bsdf></shape>', ["parameter 'material'", "unknown conductor material 'au'", "Au, Be"]),
     ("twosided_three", '<shape type="sphere"><bsdf type="twosided">' + MARK
      + '\n<bsdf type="diffuse"/><bsdf type="diffuse"/><bsdf type="diffuse"/>\n</bsdf></shape>',
      ["one or two nested bsdfs, got 3"]),
@@ -673,7 +674,7 @@ DICTS = [
     ("rgb_huge_int", _ball_bsdf(type="diffuse", reflectance={"type": "rgb", "value": 10**400}), REFL,
      ["too large"]),
     ("spectrum_list", _ball_bsdf(type="diffuse", reflectance={"type": "spectrum", "value": [(400, 0.1)]}), REFL,
-     ["only uniform spectra"]),
+     ["at least two wavelength:value pairs"]),
     ("colour_bool_list", _ball_bsdf(type="diffuse", reflectance=[True, False, True]), REFL,
      ["expected real numbers, got bool"]),
     ("colour_string_array", _ball_bsdf(type="diffuse", reflectance=np.array(["1", "2", "3"])), REFL,

@@ -715,9 +715,8 @@ BAD_DICTS = [
      ["scene['mesh']['filename']", "mesh file not found"]),
     (_scene(lamp={"type": "point", "scale": 2.0}),
      ["scene['lamp']['scale']", "emitter 'point'", "'scale'"]),
-    (_scene(floor={"type": "rectangle", "bsdf": {"type": "conductor", "material": "Au"}}),
-     ["scene['floor']['bsdf']", "named conductor materials are not supported yet; give eta "
-                                "and k"]),
+    (_scene(floor={"type": "rectangle", "bsdf": {"type": "conductor", "material": "Unobtainium"}}),
+     ["scene['floor']['bsdf']['material']", "unknown conductor material 'Unobtainium'", "Au, Be"]),
     (_scene(a={"type": "perspective"}, b={"type": "orthographic"}),
      ["scene['b']", "more than one sensor"]),
     (_scene(meter={"type": "radiancemeter"}),

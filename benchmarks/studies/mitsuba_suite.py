@@ -6,8 +6,8 @@ Mitsuba's test_renders.py loads it (the integrator is the last `_` part of
 the file name, passed as $integrator where the file uses it) and records
 whether it loads or the first line of the SceneError: the first feature that
 blocks it. A static scan of each scene (its <include>s followed) lists every
-plugin type the loader's plugin table lacks, and non-uniform spectra, so the
-table also counts what blocks beyond the first error.
+plugin type the loader's plugin table lacks, so the table also counts what
+blocks beyond the first error.
 
     python -m radiometer.benchmarks.studies.mitsuba_suite [PATH] [--json [OUT]] [--render]
 
@@ -48,8 +48,8 @@ def scenes(root: Path) -> list:
 
 
 def _blockers(path: Path, plugins: dict) -> list:
-    """Every plugin type outside `plugins` and every non-uniform spectrum in
-    the scene, <include>s followed (folders from <path>, then the scene's)."""
+    """Every plugin type outside `plugins` in the scene, <include>s followed
+    (folders from <path>, then the scene's)."""
     search = [path.parent]
     found = []
 
@@ -79,8 +79,6 @@ def _blockers(path: Path, plugins: dict) -> list:
                 if not t.startswith("$") and t not in plugins.get(c.tag, ()):
                     found.append(f"{c.tag} {t}")
                 walk(c, src, depth + 1)
-            elif c.tag == "spectrum" and (":" in c.get("value", "") or "filename" in c.attrib):
-                found.append("spectrum (non-uniform)")
             else:
                 walk(c, src, depth + 1)
 
@@ -182,7 +180,7 @@ def _print(rows: list) -> None:
     for msg, n in first.most_common():
         print(f"  {n:3d}  {msg[:110]}")
     every = collections.Counter(b for r in rows for b in r["blockers"])
-    print("\nunsupported plugin types and spectra, static scan (scenes needing each):")
+    print("\nunsupported plugin types, static scan (scenes needing each):")
     for feat, n in every.most_common():
         print(f"  {n:3d}  {feat}")
 

@@ -28,6 +28,7 @@ from .images import read_rgb
 from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _rectangle_mesh
 from .nodes import _Node, _Prop, _Ref
 from .parameters import INT32_RANGE, _Params, _parse_float
+from .spectra import conductor_ior, conductor_materials
 from .transforms import FLOAT32_MAX, _frame_along, _translate, _unit
 from .volumes import _read_vol
 
@@ -97,11 +98,16 @@ class _Builder:
             material = p.string("material", "none") if p.has("material") else None
             if material is not None and (p.has("eta") or p.has("k")):
                 raise p.error("give either (eta, k) or material, not both")
-            if material is not None and material.lower() != "none":
-                raise p.error(f"named conductor materials are not supported yet; give eta "
-                              f"and k (material '{material}')")
-            b.eta = p.rgb("eta", 0.0)
-            b.k = p.rgb("k", 1.0)
+            if material is not None and material != "none":
+                try:
+                    b.eta, b.k = conductor_ior(material)
+                except KeyError:
+                    raise p.error(f"parameter 'material': unknown conductor material '{material}' (known, as "
+                                  f"in Mitsuba's data/ior: none, {', '.join(conductor_materials())})",
+                                  node.props["material"].place) from None
+            else:  # Mitsuba's material 'none': eta 0, k 1, a perfect mirror
+                b.eta = p.rgb("eta", 0.0, spectrum="unbounded")
+                b.k = p.rgb("k", 1.0, spectrum="unbounded")
             b.specular_reflectance = p.rgb("specular_reflectance", 1.0)
         elif t in ("dielectric", "roughdielectric", "thindielectric"):
             b.int_ior = p.ior("int_ior", "bk7")
@@ -169,11 +175,14 @@ class _Builder:
             raise p.error("give either sigma_t + albedo or sigma_a + sigma_s, not both")
         scale = p.float("scale", 1.0, check="nonneg")
         if given_06:
-            sa = np.array(p.rgb("sigma_a", 0.0))
-            ss = np.array(p.rgb("sigma_s", 0.0))
+            # not Mitsuba 3 parameters (its homogeneous takes sigma_t + albedo): spectra unclamped
+            sa = np.array(p.rgb("sigma_a", 0.0, spectrum="unbounded"))
+            ss = np.array(p.rgb("sigma_s", 0.0, spectrum="unbounded"))
             st = sa + ss
             albedo = np.divide(ss, st, out=np.zeros(3), where=st > 0)
         else:
+            # As Mitsuba 3.9.1: a sampled spectrum given here as sigma_t is clamped to [0, 1] (as
+            # a reflectance), unlike one given as a nested constvolume's value.
             st = np.array(p.rgb("sigma_t", 1.0))
             albedo = np.array(p.rgb("albedo", 0.75))
             if np.any(albedo > 1.0):
@@ -208,7 +217,7 @@ class _Builder:
         """gridvolume -> GridDesc; constvolume -> its value (3 floats)."""
         p, t = _Params(node), node.type
         if t == "constvolume":
-            v = p.rgb("value", 1.0)
+            v = p.rgb("value", 1.0, spectrum="unbounded")
             p.done()
             return v
         path = self.file(p, "volume")
@@ -254,16 +263,16 @@ class _Builder:
                           node.props["scale"].place)
         e = EmitterDesc(type=t, id=node.place)
         if t in ("area", "constant"):
-            e.radiance = p.rgb("radiance", 1.0)
+            e.radiance = p.rgb("radiance", 1.0, spectrum="emission")
         elif t == "point":
             pos = p.vec3("position")
             m = p.transform("to_world")
             if pos is not None and m is not None:
                 raise p.error("give either position or to_world, not both")
-            e.intensity = p.rgb("intensity", 1.0)
+            e.intensity = p.rgb("intensity", 1.0, spectrum="emission")
             e.to_world = _translate(pos) if pos is not None else (np.eye(4) if m is None else m)
         elif t == "spot":
-            e.intensity = p.rgb("intensity", 1.0)
+            e.intensity = p.rgb("intensity", 1.0, spectrum="emission")
             e.cutoff_angle = p.float("cutoff_angle", 20.0, check="positive")
             if e.cutoff_angle > 180.0:
                 raise p.error(f"cutoff_angle {e.cutoff_angle} exceeds 180 degrees")
@@ -276,7 +285,7 @@ class _Builder:
             m = p.transform("to_world")
             if d is not None and m is not None:
                 raise p.error("give either direction or to_world, not both")
-            e.irradiance = p.rgb("irradiance", 1.0)
+            e.irradiance = p.rgb("irradiance", 1.0, spectrum="emission")
             if d is None:
                 d = np.array([0.0, 0.0, 1.0]) if m is None else m[:3, 2]
             d = _unit(d)
@@ -406,10 +415,10 @@ class _Builder:
             raise p.error("needs sigma_a + sigma_s (or sigma_t + albedo)")
         scale = p.float("scale", 1.0, check="positive")
         if given_as:
-            sa = np.array(p.rgb(a_, 0.0))
-            ss = np.array(p.rgb(s_, 0.0))
+            sa = np.array(p.rgb(a_, 0.0, spectrum="unbounded"))
+            ss = np.array(p.rgb(s_, 0.0, spectrum="unbounded"))
         else:
-            st = np.array(p.rgb(t_, 1.0))
+            st = np.array(p.rgb(t_, 1.0, spectrum="unbounded"))
             albedo = np.array(p.rgb("albedo", 0.75))
             if np.any(albedo > 1.0):
                 raise p.error(f"albedo must lie in [0, 1], got {tuple(albedo.tolist())}",

@@ -8,7 +8,9 @@ import numpy as np
 from ..scene_desc import SceneDesc, SceneError
 from .build import _assemble
 from .nodes import _MAX_DEPTH, _fmt_path, _Node, _Prop, _quote, _Ref, _register
+from .parameters import _parse_float
 from .plugins import _CATEGORY_OF
+from .spectra import Sampled, check_samples, read_spd
 
 
 def _real(x):
@@ -96,8 +98,41 @@ def _check_inverse_transpose(t, m, place):
                          f"of unit length")
 
 
+def _dict_spectrum(v, place):
+    """{'type': 'spectrum', 'value': [(wavelength, value), ...]} or
+    {'type': 'spectrum', 'filename': 'x.spd'} (relative to the current
+    directory), as mitsuba.load_dict takes them."""
+    if set(v) != {"type", "filename"} or not isinstance(v["filename"], (str, os.PathLike)):
+        raise SceneError(f"{place}: a spectrum dict is {{'type': 'spectrum', 'value': ...}} or "
+                         f"{{'type': 'spectrum', 'filename': str}}")
+    fname = os.fspath(v["filename"])
+    if "\0" in fname:
+        raise SceneError(f"{place}: spectrum: the filename contains a NUL character")
+    path = os.path.abspath(fname)
+    if not os.path.isfile(path):
+        raise SceneError(f"{place}: spectrum file '{fname}' not found (looked for {path})")
+    try:
+        wl, vals = read_spd(path, path, _parse_float)
+    except ValueError as e:
+        raise SceneError(f"{place}: spectrum: {e}") from None
+    return _Prop("spectrum", Sampled(wl, vals, path), place)
+
+
+def _dict_pairs(val, place):
+    a = _real_array(val, place) if isinstance(val, (list, tuple, np.ndarray)) else None
+    if a is None or a.ndim != 2 or a.shape[1] != 2:
+        raise SceneError(f"{place}: spectrum value: expected a number or a list of (wavelength, value) pairs, "
+                         f"got {_quote(val)}")
+    why = check_samples(list(a[:, 0]), list(a[:, 1]))
+    if why:
+        raise SceneError(f"{place}: spectrum value: {why}")
+    return _Prop("spectrum", Sampled(a[:, 0], a[:, 1], place), place)
+
+
 def _dict_colour(v, keys):
     place = _fmt_path(keys)
+    if v["type"] == "spectrum" and "filename" in v:
+        return _dict_spectrum(v, place)
     extra = set(v) - {"type", "value"}
     if extra:
         raise SceneError(f"{place}: {v['type']} value: unknown key {_quote(sorted(map(str, extra))[0])}")
@@ -109,7 +144,7 @@ def _dict_colour(v, keys):
             raise SceneError(f"{place}: {v['type']} value must be a real number, got {_quote(val)}")
         return _Prop(v["type"], val, place)
     if v["type"] == "spectrum":
-        raise SceneError(f"{place}: only uniform spectra (a single float) are supported")
+        return _dict_pairs(val, place)
     a = _real_array(val, place)
     if a.shape != (3,):
         raise SceneError(f"{place}: rgb value must be 3 numbers, got {_quote(val)}")

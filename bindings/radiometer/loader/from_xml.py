@@ -14,6 +14,7 @@ from .build import _assemble
 from .nodes import _MAX_DEPTH, _Node, _Prop, _quote, _Ref, _register
 from .parameters import _parse_float, _parse_int
 from .plugins import PLUGINS
+from .spectra import Sampled, parse_pairs, read_spd
 from .transforms import _look_at, _rotate, _translate
 
 # XML tags of Mitsuba 3 that are outside the subset, for a precise message.
@@ -383,10 +384,8 @@ class _XmlReader:
                         raise SceneError(f"{place}: <{tag}>: missing attribute '{k}'")
                 v = [_numbers(a[k], place, f"<{tag}> {k}", (1,))[0] for k in "xyz"]
             return a["name"], _Prop(tag, np.array(v, dtype=np.float64), place)
-        if tag == "spectrum" and "filename" in elem.attrib:
-            label = f"{owner.label()}: " if owner is not None else ""
-            raise SceneError(f"{place}: {label}parameter '{elem.attrib.get('name', '?')}': <spectrum>: spectra "
-                             f"from files are not supported (only a single uniform value)")
+        if tag == "spectrum":
+            return self.spectrum(elem, owner)
         a = self.attrs(elem, ("name", "value"), ("name", "value"))
         name, text = a["name"], a["value"]
         if tag == "float":
@@ -409,13 +408,38 @@ class _XmlReader:
         elif tag == "rgb":
             vals = _numbers(text, place, "<rgb>", (1, 3))
             value = vals[0] if len(vals) == 1 else np.array(vals, dtype=np.float64)
-        else:  # spectrum
-            if ":" in text:
-                label = f"{owner.label()}: " if owner is not None else ""
-                raise SceneError(f"{place}: {label}parameter '{name}': <spectrum>: only uniform spectra (a single "
-                                 f"value) are supported, got wavelength:value pairs")
-            value = _numbers(text, place, "<spectrum>", (1,))[0]
         return name, _Prop(tag, value, place)
+
+    def spectrum(self, elem, owner):
+        """<spectrum name=".." value="0.5"/> (uniform), value="400:0.1, 700:0.5"
+        (wavelength:value pairs, nm) or filename="x.spd" (a spectrum file,
+        found as meshes are)."""
+        place = self.place(elem)
+        a = self.attrs(elem, ("name", "value", "filename"), ("name",))
+        name = a["name"]
+        where = f"{place}: {owner.label() + ': ' if owner is not None else ''}parameter '{name}': <spectrum>"
+        if ("value" in a) == ("filename" in a):
+            raise SceneError(f"{where}: give either value or filename")
+        if "filename" in a:
+            fname = a["filename"]
+            if "\0" in fname:
+                raise SceneError(f"{where}: the filename contains a NUL character")
+            path = self.confined(self.resolve(fname), elem, f"spectrum file '{fname}'")
+            if not os.path.isfile(path):
+                raise SceneError(f"{where}: spectrum file '{fname}' not found (looked for {path})")
+            try:
+                wl, vals = read_spd(path, path, _parse_float, quote=not self.confine)
+            except ValueError as e:
+                raise SceneError(f"{where}: {e}") from None
+            return name, _Prop("spectrum", Sampled(wl, vals, path), place)
+        text = a["value"]
+        if ":" not in text:
+            return name, _Prop("spectrum", _numbers(text, place, "<spectrum>", (1,))[0], place)
+        try:
+            wl, vals = parse_pairs(text, _parse_float)
+        except ValueError as e:
+            raise SceneError(f"{where}: {e} in {_quote(text)}") from None
+        return name, _Prop("spectrum", Sampled(wl, vals, place), place)
 
     def transform(self, elem):
         """Compose the ops of a <transform>; each op left-multiplies, as in

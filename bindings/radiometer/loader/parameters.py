@@ -9,6 +9,7 @@ import re
 import numpy as np
 
 from ..scene_desc import SceneError
+from .spectra import Sampled
 from .transforms import FLOAT32_MAX
 
 # Refractive indices at ~589 nm (sodium D line) of the materials Mitsuba names;
@@ -153,13 +154,19 @@ class _Params:
                              prop.place)
         return s
 
-    def rgb(self, name, default, nonneg=True):
-        """A colour: rgb, uniform spectrum, a float or (dicts) a 3-list."""
+    def rgb(self, name, default, nonneg=True, spectrum="bounded"):
+        """A colour: rgb, a spectrum, a float or (dicts) a 3-list. A sampled
+        spectrum becomes RGB as Mitsuba's RGB variants convert it (spectra.py);
+        `spectrum` says how: 'bounded' (clamped to [0, 1]: reflectances),
+        'unbounded' (e.g. eta, k) or 'emission' (no D65 weight, unbounded:
+        an emitter's radiance, intensity or irradiance)."""
         prop = self._take(name, ("rgb", "spectrum", "float", "integer", "vec3"),
                           "an rgb colour or a float")
         if prop is None:
             return (float(default),) * 3 if np.isscalar(default) else tuple(default)
         v = prop.value
+        if isinstance(v, Sampled):
+            v = v.rgb(spectrum)
         vals = [self._finite(name, c, prop.place) for c in ([v] * 3 if np.isscalar(v) else v)]
         for c in vals:
             if nonneg and c < 0:
