@@ -135,6 +135,23 @@ def test_inline_spectra_match_mitsuba(mi, kind):
     print(f"{kind}: max |ours - Mitsuba| over {len(SPECTRA)} spectra = {worst:.2e}")
 
 
+@pytest.mark.parametrize("kind", KINDS)
+def test_uniform_spectra_match_mitsuba(mi, kind):
+    """A single-valued spectrum: on an emitter Mitsuba's RGB variants make it
+    XYZ = (v, v, v) in sRGB (not grey); everywhere else it stays v. Tested
+    for each parameter kind, and the grey reading of an emitter's is caught."""
+    theirs_of, ours_of = KINDS[kind]
+    for v in (0.5,) if kind.endswith("albedo") else (0.5, 3.0):  # an albedo above 1 is refused by name
+        d, key = theirs_of({"type": "spectrum", "value": v})
+        o, get = ours_of({"type": "spectrum", "value": v})
+        a, b = _theirs(mi, d, key), _ours(o, get)
+        if a.shape == ():
+            a = np.full(3, float(a))
+        assert np.allclose(a, b, rtol=0, atol=TOL * max(1.0, v)), (kind, v, a, b)
+        if kind.split(".")[0] in ("area", "constant", "point", "spot", "directional"):
+            assert not np.allclose(a, v, rtol=0, atol=1e-2), (kind, a)  # the power check: grey would fail
+
+
 @pytest.mark.parametrize("kind", ["diffuse.reflectance", "conductor.k", "area.radiance", "constvolume.value"])
 def test_spd_files_match_mitsuba(mi, spd_files, kind):
     theirs_of, ours_of = KINDS[kind]

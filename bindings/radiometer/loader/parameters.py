@@ -9,7 +9,7 @@ import re
 import numpy as np
 
 from ..scene_desc import SceneError
-from .spectra import Sampled
+from .spectra import XYZ_TO_SRGB, Sampled
 from .transforms import FLOAT32_MAX
 
 # Refractive indices at ~589 nm (sodium D line) of the materials Mitsuba names;
@@ -167,6 +167,14 @@ class _Params:
         v = prop.value
         if isinstance(v, Sampled):
             v = v.rgb(spectrum)
+        elif prop.kind == "spectrum" and spectrum == "emission":
+            # A uniform spectrum on an emitter: Mitsuba 3's RGB variants
+            # (xml.cpp, create_texture_from_spectrum) take it as XYZ =
+            # (value, value, value) and convert that to sRGB, a slightly
+            # purple colour, value x (1.2048, 0.9483, 0.9088), so that RGB and
+            # spectral renders agree; as a float or rgb it stays grey.
+            c = self._finite(name, v, prop.place)
+            v = tuple(c * x for x in XYZ_TO_SRGB.sum(axis=1))
         vals = [self._finite(name, c, prop.place) for c in ([v] * 3 if np.isscalar(v) else v)]
         for c in vals:
             if nonneg and c < 0:
