@@ -57,6 +57,10 @@ bsdf       diffuse: reflectance [0.5]
            An IOR is a float or one of the names in NAMED_IOR (any case).
            A shape without a bsdf gets Mitsuba 3's default: diffuse 0.5, or
            diffuse 0 (black) when it carries an area emitter.
+colours   rgb, float, or spectrum: wavelength:value pairs or an .spd file,
+           converted as Mitsuba 3's RGB variants do (spectra.py); a uniform
+           spectrum is its value, except on an emitter, where it is XYZ
+           (v, v, v) in sRGB as in Mitsuba.
 emitter    area (nested in a shape): radiance [1]
            point: intensity [1], position or to_world
            spot: intensity [1], cutoff_angle [20], beam_width [3/4 cutoff],
