@@ -35,6 +35,7 @@ from radiometer.reference_scenes.cie171 import analytic as cie
 from radiometer.render import _core_integrator, _integrator_desc
 
 from refcompare import assert_clean, blocked_z
+from test_radiosity import _triangle_average
 
 ALPHA = 0.01
 Z = norm.ppf(1 - ALPHA / 2)  # 2.576
@@ -119,21 +120,6 @@ def _solve(rho, max_patches, ff_samples=2):
     spec = _integrator_desc({"type": "radiosity", "max_patches": max_patches, "ff_samples": ff_samples,
                              "residual": 1e-6}, scene.desc.integrator)
     return _core.radiosity_solution(scene.core(), _core_integrator(spec), 2)
-
-
-def _triangle_average(func, tri, m=12):
-    """The mean of func(x, y) over each triangle (T, 3, 3) by the centroids
-    of its m^2 similar sub-triangles."""
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    pts = []
-    for i in range(m):
-        for j in range(m - i):
-            pts.append(((i + 1 / 3) / m, (j + 1 / 3) / m))
-            if i + j <= m - 2:
-                pts.append(((i + 2 / 3) / m, (j + 2 / 3) / m))
-    u = np.array(pts)
-    p = a[:, None, :] + u[None, :, 0, None] * (b - a)[:, None, :] + u[None, :, 1, None] * (c - a)[:, None, :]
-    return func(p[..., 0], p[..., 1]).mean(axis=1)
 
 
 def floor_solution(rho, max_patches, ff_samples=2):
