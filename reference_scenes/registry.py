@@ -223,6 +223,16 @@ _SCENES = [
     # every surface. Per-effect reference: path, 1024 spp. ptracer: nothing
     # left out (all diffuse, the camera sees no light).
     _mitsuba("corner_room", {"res": 64, "max_depth": 8}, 32, 4096, 1024, exclusions={"ptracer": []}),
+    # keyhole: a room lit only through a 0.5 x 0.5 opening by a diffuse
+    # panel behind it (card.md). Mitsuba's light tracer, as for ajar_door:
+    # every surface is diffuse and no light is seen, so light tracing
+    # renders every path; a few per cent of its light paths cross the
+    # opening (3.1 % directly), so 64 x 1024 spp (ajar_door, where a
+    # fifth does, had 32 x 4096) took 509 s on 2 shared cores, median
+    # per-pixel standard error 1.38 % (1.41 % in the near room lit
+    # indirectly). Per-effect reference: bdpt at 256 spp (about 30 s).
+    _mitsuba("keyhole", {"res": 64, "max_depth": 10}, 64, 1024, 256, "bdpt",
+             integrator={"type": "ptracer", "max_depth": 10}, exclusions={"ptracer": []}),
     # Media and subsurface scenes: Mitsuba's volpath (the scene's integrator).
     # ptracer: nothing left out of these two (no surface seen only through
     # glass; tests/test_ptracer_media.py measured them whole).

@@ -57,6 +57,8 @@ The whole file: about 200 s on 2 shared cores (69 cells run; the slowest
 bdpt on ajar_door, 21 s, and on the Cornell box, 18 s), the renders that
 the per-estimator Mitsuba comparisons made before, in one place.
 many_lights (2026-12-03) adds 5 cells and 14 skips, 60-95 s (bdpt 19-37 s).
+keyhole (2026-12-03) adds 5 cells and 13 skips, about 45 s; corner_room 5 cells
+and 14 skips, about 45 s.
 """
 from __future__ import annotations
 
@@ -124,6 +126,8 @@ ANALYTIC_PER = {"ptracer": {"furnace": {"spp": 1024}},
 # a budget at its edge).
 AJAR_DOORWAY = (28, 15, 40, 41)  # ajar_door's card.md: the view through the doorway into the lit room
 AJAR_BEAM = (54, 18, 64, 40)  # the lamp's strip through the gap on the near room's right wall
+KEYHOLE_OPENING = (25, 24, 35, 32)  # keyhole's card.md: the far room seen through the opening
+KEYHOLE_PATCH = (20, 40, 60, 62)  # the panel's light through the opening on the near room's floor
 MITSUBA = {
     # test_cornell_reference.py's budgets: path 512, ptracer 256 (bdpt had
     # 128 there; the matrix holds it to 512).
@@ -144,6 +148,15 @@ MITSUBA = {
     # All diffuse, the light easy to reach: 256 spp (path's image mean has
     # a standard error of about 0.04 % there, so a 1 % bias is plain).
     "corner_room": {"spp": 256, "k": 4, "power": 1.01},
+    # keyhole (card.md): as ajar_door, the power check scales the near room
+    # lit only indirectly through the opening (every pixel outside the
+    # opening and the floor's directly lit patch) by 5 %. Budgets (2 loaded
+    # cores, 2026-12-03): path 256 spp (5 s), bdpt 64 (7 s), ptracer 512
+    # (12 s), pssmlt 64 (12 s), mmlt 256 (7 s); all pass under seed offsets
+    # 0-5 (path, bdpt, ptracer 0-7) but ptracer under offset 1 (one block's
+    # blue channel at p 2.6e-6 against 4.3e-6; image mean 1.004).
+    "keyhole": {"spp": 256, "k": 4, "power": ("near room, indirect only", [KEYHOLE_OPENING, KEYHOLE_PATCH], 1.05),
+                "per": {"bdpt": {"spp": 64}, "ptracer": {"spp": 512}, "pssmlt": {"spp": 64}}},
     # Media and subsurface scenes: path's (volpath's) budgets at the
     # scene's, measured per scene in its card.md (the block test's mean z
     # is biased negative for a heavy-tailed estimator, so each scene gets
@@ -483,7 +496,13 @@ MLT_POWER = {("pssmlt", "cornell_box"): 1.3, ("pssmlt", "glass_sphere_caustic"):
              # sd of the mean from the batch means 1.4-1.7 %; at 256 spp the
              # same 0.991: b's error, not the chains'), mmlt 256 spp
              # 1.040 / 0.993 / 1.007 (1.8-2.8 %).
-             ("pssmlt", "many_lights"): 1.10, ("mmlt", "many_lights"): 1.15}
+             ("pssmlt", "many_lights"): 1.10, ("mmlt", "many_lights"): 1.15,
+             # keyhole (2026-12-03, seeds 7, 8, 9; the batch means' relative
+             # sd of the image mean): pssmlt 64 spp 1.015 / 0.981 / 0.974 of
+             # the reference (sd 2.3-2.6 %), mmlt 256 spp 0.999 / 1.042 /
+             # 0.994 (sd 2.1-2.5 %; seed 7: 4 of 256 chains stuck, longest
+             # rejection run 287).
+             ("pssmlt", "keyhole"): 1.15, ("mmlt", "keyhole"): 1.15}
 
 
 # Cells that fail today and are being investigated, with what was measured

@@ -6,16 +6,17 @@ test_canonical_mitsuba.py average 4 x 4 pixels and so dilute a bias
 confined to a few pixels by 16; these do not.
 
 Significance: each comparison at ALPHA_EACH = 2.5e-4, and at most
-N_COMPARISONS = 17 comparisons in the file that can fail by chance (16
+N_COMPARISONS = 19 comparisons in the file that can fail by chance (18
 estimator x scene comparisons, and the unfloored test of the bdpt finding
 rejecting a pixel away from the light), so the file's false-alarm rate
-under fresh noise is at most 17 x 2.5e-4 = 0.43 % (Bonferroni; the power
+under fresh noise is at most 19 x 2.5e-4 = 0.48 % (Bonferroni; the power
 checks are not counted: they must reject). That is the nominal rate of
 t-tests on seed means; where those are far from normal (rare large
 samples) the floors below carry it. Measured: with the seeds re-rolled
 (RADIOMETER_SEED_OFFSET = 0, 1, 2, 3: conftest.py re-rolls
 every render's seed) none of the 4 x 16 comparisons failed. 95 to 135 s
-on 2 shared cores (about 105 s of CPU).
+on 2 shared cores (about 105 s of CPU). keyhole's two (bdpt, ptracer;
+2026-12-03) passed under offsets 0, 1, 2 and add 19-28 s.
 
 Floors on the seeds' variance (pixels.py explains both): the reference's
 per-sample variance scaled to our budget (rare paths), for every estimator,
@@ -47,10 +48,10 @@ from radiometer.reference_scenes import registry as _registry
 ROOT = Path(__file__).resolve().parents[1] / "reference_scenes"
 RES = 64
 ALPHA_EACH = 2.5e-4
-N_COMPARISONS = 17
+N_COMPARISONS = 19
 SEEDS = 32
 POWER = 1.1
-MAX_DEPTH = {"cornell_box": 8, "glass_sphere_caustic": 12, "veach_mis": 8, "ajar_door": 10}
+MAX_DEPTH = {"cornell_box": 8, "glass_sphere_caustic": 12, "veach_mis": 8, "ajar_door": 10, "keyhole": 10}
 EXCLUDE = {"ptracer": {n: s.exclusions.get("ptracer", []) for n, s in _registry.mitsuba_scenes().items()}}
 
 # Per (estimator, scene): samples per pixel per seed, and the bias factor
@@ -72,6 +73,8 @@ UNBIASED = {
     ("ptracer", "veach_mis"): (16, 1.2),  # 10 %: t > -6.6
     ("bdpt", "ajar_door"): (8, 1.2),  # 10 %: t -6.1
     ("ptracer", "ajar_door"): (16, POWER),
+    ("bdpt", "keyhole"): (8, 1.2),  # 10 %: t -5.8
+    ("ptracer", "keyhole"): (16, 1.2),  # 10 %: t -6.8
 }
 # `path` on ajar_door is left out: the near room is lit only through the
 # door's gap, which camera paths find less than once in 100 bounces (its
