@@ -1,6 +1,7 @@
 """Discretisation error of `radiosity` (not a test): on the Cornell box,
 the error against the Mitsuba reference as the patch count grows, for the
-per-patch display and the final gather, with the log-log slope; on the
+per-patch display, the vertex-interpolated display and the final gather,
+with the log-log slope; on the
 closed furnace, the error at every patch count (exact up to the residual).
 
     python -m radiometer.benchmarks.studies.radiosity_convergence [--patches 50,100,...] [--spp 4]
@@ -61,6 +62,7 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=64, help="camera samples per pixel (patch display, path)")
     ap.add_argument("--gather-spp", type=int, default=64)
     ap.add_argument("--gather-rays", type=int, default=8)
+    ap.add_argument("--displays", default="patch,vertex,gather", help="comma-separated subset of the displays")
     ap.add_argument("--out", default=str(record.default_path("radiosity_convergence")))
     ap.add_argument("--maps-only", action="store_true",
                     help="only write the error-map figure radiosity_convergence_maps.png beside --out")
@@ -94,7 +96,8 @@ def main(argv=None):
     rows, maps, raw = [], {}, {}
     print(f"{'display':<8}{'max_patches':>12}{'patches':>9}{'rel L1':>9}{'noise':>8}{'rel RMSE':>10}{'shots':>8}"
           f"{'solve s':>9}{'total s':>9}")
-    for display in ("patch", "gather"):
+    displays = [d for d in args.displays.split(",") if d]
+    for display in displays:
         for n in counts:
             integ = {"type": "radiosity", "display": display, "max_patches": n, "max_depth": md}
             spp = args.spp
@@ -123,7 +126,7 @@ def main(argv=None):
             print(f"{display:<8}{n:>12}{int(st['patches']):>9}{l1:>9.4f}{noise:>8.4f}{rmse:>10.4f}{int(st['shots']):>8}"
                   f"{st['solve_seconds']:>9.2f}{secs:>9.2f}", flush=True)
     slopes = {}
-    for display in ("patch", "gather"):
+    for display in displays:
         r = [x for x in rows if x["display"] == display]
         k = np.polyfit(np.log([x["patches"] for x in r]), np.log([x["rel_l1"] for x in r]), 1)[0]
         slopes[display] = float(k)
@@ -149,7 +152,9 @@ def main(argv=None):
         import matplotlib.pyplot as plt
 
         fig, ax = plt.subplots(1, 3, figsize=(14, 4.2))
-        for display, mk in (("patch", "o-"), ("gather", "s-")):
+        for display, mk in (("patch", "o-"), ("vertex", "^-"), ("gather", "s-")):
+            if display not in slopes:
+                continue
             r = [x for x in rows if x["display"] == display]
             ax[0].loglog([x["patches"] for x in r], [x["rel_l1"] for x in r], mk,
                          label=f"{display} (slope {slopes[display]:+.2f})")

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <unordered_map>
 
 namespace rm {
 
@@ -118,6 +119,17 @@ PatchMesh build_patches(const Scene& scene, double size, int m) {
         pm.patches.push_back(p);
     };
     std::vector<Vec3d> pts(size_t(pm.k)), nrm(size_t(pm.k));
+    // Display corners of every patch (4 each; a triangle's 4th unused): the
+    // point and the surface normal there, merged into vertices at the end.
+    std::vector<Vec3d> cpos, cnrm;
+    std::vector<char> cused;
+    auto corners = [&](int nc, const Vec3d* cp, const Vec3d* cn) {
+        for (int c = 0; c < 4; ++c) {
+            cpos.push_back(c < nc ? cp[c] : Vec3d());
+            cnrm.push_back(c < nc ? cn[c] : Vec3d());
+            cused.push_back(c < nc ? 1 : 0);
+        }
+    };
     for (size_t si = 0; si < scene.shapes.size(); ++si) {
         const Shape* sh = scene.shapes[si].get();
         PatchMesh::ShapeCut& cut = pm.cuts[si];
@@ -169,6 +181,8 @@ PatchMesh build_patches(const Scene& scene, double size, int m) {
                                     }
                                 }
                             add(q, pts.data(), nrm.data());
+                            const Vec3d cn[3] = {nf_, nf_, nf_};
+                            corners(3, q.v, cn);
                         }
             }
         } else if (const auto* sp = dynamic_cast<const Sphere*>(sh)) {
@@ -215,6 +229,13 @@ PatchMesh build_patches(const Scene& scene, double size, int m) {
                             nrm[size_t(t++)] = d * flip;
                         }
                     add(q, pts.data(), nrm.data());
+                    Vec3d cp[4], cn[4];
+                    for (int c = 0; c < 4; ++c) {
+                        Vec3d d = on(c < 2 ? z0 : z1, c % 2 ? f1 : f0);
+                        cp[c] = ctr + d * r;
+                        cn[c] = d * flip;
+                    }
+                    corners(4, cp, cn);
                 }
         } else if (const auto* dk = dynamic_cast<const Disk*>(sh)) {
             cut.kind = 2;
@@ -252,15 +273,74 @@ PatchMesh build_patches(const Scene& scene, double size, int m) {
                             nrm[size_t(t++)] = nd;
                         }
                     add(q, pts.data(), nrm.data());
+                    Vec3d cp[4], cn[4];
+                    for (int c = 0; c < 4; ++c) {
+                        cp[c] = at(c < 2 ? r0 : r1, c % 2 ? f1 : f0);
+                        cn[c] = nd;
+                    }
+                    corners(4, cp, cn);
                 }
         } else {
             throw std::invalid_argument("shape '" + sh->id + "': no patches for this kind of shape");
         }
     }
+    // Merge the corners into vertices: a hash grid of cell `tol`, each
+    // corner looked up in its cell and the 26 around it.
+    const double tol = 1e-5 * size;
+    pm.corner_vertex.assign(cpos.size(), -1);
+    std::vector<Vec3d>&vpos = pm.vpos, &vnrm = pm.vnrm;
+    std::vector<int> vshape;
+    std::unordered_map<uint64_t, std::vector<int>> grid;
+    auto cell = [&](double x) { return int64_t(std::floor(x / tol)); };
+    auto key = [](int64_t a, int64_t b, int64_t c) {
+        return uint64_t(a) * 0x9E3779B97F4A7C15ull ^ uint64_t(b) * 0xC2B2AE3D27D4EB4Full ^
+               uint64_t(c) * 0x165667B19E3779F9ull;
+    };
+    for (size_t c = 0; c < cpos.size(); ++c) {
+        if (!cused[c]) continue;
+        const Vec3d& p = cpos[c];
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) continue;
+        const int shape = pm.patches[c / 4].shape;
+        const int64_t ix = cell(p.x), iy = cell(p.y), iz = cell(p.z);
+        int found = -1;
+        for (int dx = -1; dx <= 1 && found < 0; ++dx)
+            for (int dy = -1; dy <= 1 && found < 0; ++dy)
+                for (int dz = -1; dz <= 1 && found < 0; ++dz) {
+                    auto hit = grid.find(key(ix + dx, iy + dy, iz + dz));
+                    if (hit == grid.end()) continue;
+                    for (int v : hit->second)
+                        if (vshape[size_t(v)] == shape && length(vpos[size_t(v)] - p) <= tol &&
+                            dot(vnrm[size_t(v)], cnrm[c]) >= 1.0 - 1e-6) {
+                            found = v;
+                            break;
+                        }
+                }
+        if (found < 0) {
+            found = int(vpos.size());
+            vpos.push_back(p);
+            vnrm.push_back(cnrm[c]);
+            vshape.push_back(shape);
+            grid[key(ix, iy, iz)].push_back(found);
+        }
+        pm.corner_vertex[c] = found;
+    }
+    pm.vertex_count = vpos.size();
     return pm;
 }
 
 int PatchMesh::locate(const Scene& scene, const Interaction& it) const {
+    double w[4];
+    return locate(scene, it, w);
+}
+
+int PatchMesh::locate(const Scene& scene, const Interaction& it, double wt[4]) const {
+    wt[0] = 1, wt[1] = wt[2] = wt[3] = 0;
+    // Bilinear weights of a cell's corners (z0 or r0 first, then phi) at
+    // fractions fi, fj of the cell.
+    auto bilinear = [&](double fi, double fj) {
+        fi = std::clamp(fi, 0.0, 1.0), fj = std::clamp(fj, 0.0, 1.0);
+        wt[0] = (1 - fi) * (1 - fj), wt[1] = (1 - fi) * fj, wt[2] = fi * (1 - fj), wt[3] = fi * fj;
+    };
     if (it.shape < 0 || size_t(it.shape) >= cuts.size()) return -1;
     const ShapeCut& cut = cuts[size_t(it.shape)];
     const Shape* sh = scene.shapes[size_t(it.shape)].get();
@@ -282,6 +362,21 @@ int PatchMesh::locate(const Scene& scene, const Interaction& it) const {
         int a = std::clamp(int(std::floor(u)), 0, n - 1);
         int b = std::clamp(int(std::floor(v)), 0, n - 1 - a);
         int up = (u - a) + (v - b) > 1.0 && a + b <= n - 2 ? 1 : 0;
+        // Barycentric weights of the sub-triangle's corners (build_patches'
+        // order): lower (a, b), (a + 1, b), (a, b + 1); upper (a + 1, b),
+        // (a + 1, b + 1), (a, b + 1).
+        const double s = u - a, t = v - b;
+        if (!up) {
+            wt[0] = 1 - s - t, wt[1] = s, wt[2] = t;
+        } else {
+            wt[0] = 1 - t, wt[1] = s + t - 1, wt[2] = 1 - s;
+        }
+        double sum = 0;
+        for (int c = 0; c < 3; ++c) sum += (wt[c] = std::max(0.0, wt[c]));
+        if (sum > 0)
+            for (int c = 0; c < 3; ++c) wt[c] /= sum;
+        else
+            wt[0] = 1, wt[1] = wt[2] = 0;
         return cut.tri_base[size_t(it.prim)] + a * (2 * n - a) + 2 * b + up;
     }
     if (cut.kind == 1) {
@@ -294,6 +389,7 @@ int PatchMesh::locate(const Scene& scene, const Interaction& it) const {
         if (phi < 0) phi += 2.0 * kPiD;
         int i = std::clamp(int((1.0 - zz) * 0.5 * cut.n1), 0, cut.n1 - 1);
         int j = std::clamp(int(phi / (2.0 * kPiD) * cut.n2), 0, cut.n2 - 1);
+        bilinear((1.0 - zz) * 0.5 * cut.n1 - i, phi / (2.0 * kPiD) * cut.n2 - j);
         return cut.base + i * cut.n2 + j;
     }
     const auto* dk = static_cast<const Disk*>(sh);
@@ -303,6 +399,7 @@ int PatchMesh::locate(const Scene& scene, const Interaction& it) const {
     if (phi < 0) phi += 2.0 * kPiD;
     int i = std::clamp(int(r2 * cut.n1), 0, cut.n1 - 1);
     int j = std::clamp(int(phi / (2.0 * kPiD) * cut.n2), 0, cut.n2 - 1);
+    bilinear(r2 * cut.n1 - i, phi / (2.0 * kPiD) * cut.n2 - j);
     return cut.base + i * cut.n2 + j;
 }
 

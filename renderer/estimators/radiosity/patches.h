@@ -7,7 +7,10 @@
 // triangle), its exact area, its front normal (the shape's, flip_normals
 // applied) and k = m^2 area-uniform stratified sample points; the arcs of
 // sphere and disk cells are chains of chords, at most 2 pi / 48 each. A hit point
-// maps back to its patch in constant time (locate).
+// maps back to its patch in constant time (locate). For a vertex-interpolated
+// display every patch also has display corners (a sub-triangle's 3, a
+// cell's 4 grid corners), shared between patches of the same shape whose
+// corners coincide with the same surface normal there (mesh vertices).
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -52,6 +55,19 @@ struct PatchMesh {
     int k = 1;                    // sample points per patch (m^2)
     // The patch that contains the hit `it`, or -1 (a degenerate triangle).
     int locate(const Scene& scene, const Interaction& it) const;
+    // The same, and the interpolation weights w[0..4) of the patch's display
+    // corners at the hit (barycentric in a sub-triangle, bilinear in a
+    // sphere's (cos theta, phi) or a disk's (r^2, phi) cell; >= 0, sum 1).
+    int locate(const Scene& scene, const Interaction& it, double w[4]) const;
+
+    // Display corners: 4 per patch, indices into the mesh vertices (a
+    // triangle's 4th is -1). Corners of the same shape at the same point
+    // (within 1e-5 patch sizes) with the same surface normal (cosine
+    // >= 1 - 1e-6) are one vertex, so a vertex never joins two shapes or
+    // two planes (a crease, a wall's edge), nor the two sides of a surface.
+    std::vector<int> corner_vertex;
+    size_t vertex_count = 0;
+    std::vector<Vec3d> vpos, vnrm;  // per vertex: its point and surface normal
 
     // Per shape: where its patches start and how it is cut.
     struct ShapeCut {

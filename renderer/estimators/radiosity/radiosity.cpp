@@ -45,11 +45,26 @@
 //    unshot_power, residual, shots).
 // 5. Display (`display`): "patch" shows B / pi of the element a camera
 //    ray hits (piecewise constant: the mesh, shadow leaks and Mach bands
-//    show); "gather" renders emission and direct light as `direct` does
+//    show); "vertex" interpolates it between the mesh vertices (below);
+//    "gather" renders emission and direct light as `direct` does
 //    (`direct_samples` light samples, unbiased) and the indirect light by `gather_rays`
 //    cosine-sampled rays per sample that read the solution's reflected
 //    radiosity where they land (the final gather of Reichert 1992 and
 //    Lischinski, Tampieri and Greenberg 1993).
+//    "vertex" (Cohen and Wallace 1993, "Radiosity and Realistic Image
+//    Synthesis", ch. 9, rendering: element values averaged to the nodes,
+//    then interpolated over each element): each mesh vertex gets, per side,
+//    the area-weighted mean B_v = sum_p A_p B_p / sum_p A_p of the patches
+//    that have it as a corner, and a hit reads sum_c w_c B_{v_c}, the
+//    barycentric (sub-triangle) or bilinear (cell) weights w_c of its
+//    patch's corners. A vertex joins only patches of one shape with the
+//    same surface normal at that point (patches.h), so the edge between two
+//    walls or two objects stays sharp: the radiosity is discontinuous there
+//    and an average across it would blur light into shadow. A vertex on
+//    the rim of its surface reads a plane fitted to the patches around it
+//    instead of their mean (vertex_values). The emission
+//    stays per element (constant on an emitter). The solution is the same;
+//    only what the camera reads of it changes.
 // Effect classes: emission (E seen directly), direct (one reflection of
 // the emission: the solution's first bounce, or light sampling under
 // "gather"), indirect (the rest). Bias: discretisation (patch size, the
@@ -61,6 +76,7 @@
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
+#include <unordered_map>
 
 #include "core/warp.h"
 #include "estimators/radiosity/patches.h"
@@ -121,6 +137,9 @@ struct Solution {
     // Reflected radiosity by bounce: direct (1), indirect (2 .. max_depth - 2,
     // or all >= 2 when unbounded), last (max_depth - 1 when that is >= 2).
     std::vector<Vec3d> Bd, Bi, Blast;
+    // Display "vertex": per vertex v and side s (index 2 v + s) the
+    // area-weighted mean of the direct and of the other reflected radiosity.
+    std::vector<Vec3d> vBd, vBi;
     std::vector<double> G, esc;  // form factors F_ij (row i: i * N + j), escaping fraction of each row
     std::vector<char> closed;    // rows from which no escape ray left the scene
     int balance_iterations = 0;
@@ -180,6 +199,7 @@ public:
 
 private:
     void setup(const Scene& scene, Solution& sol) const;
+    static void vertex_values(Solution& sol);
     double receiver_estimate(const Scene& scene, const Solution& sol, size_t j, size_t i, float scale,
                              uint64_t& rays) const;
     // The form-factor matrix (sol.G: F_ij at i * N + j), escape fractions; false when cancelled.
@@ -377,6 +397,130 @@ bool RadiosityIntegrator::form_factors(PassLoop& loop, Solution& sol, std::vecto
     return true;
 }
 
+void RadiosityIntegrator::vertex_values(Solution& sol) {
+    const PatchMesh& M = sol.mesh;
+    const size_t V = M.vertex_count, P = M.patches.size();
+    // The corner c of patch p counts once per vertex (a pole or the disk's
+    // centre is two corners of one cell).
+    auto first_at = [&](size_t p, int c) {
+        const int v = M.corner_vertex[4 * p + size_t(c)];
+        if (v < 0) return false;
+        for (int d = 0; d < c; ++d)
+            if (M.corner_vertex[4 * p + size_t(d)] == v) return false;
+        return true;
+    };
+    // Vertex -> its patches (compressed rows).
+    std::vector<uint32_t> start(V + 1, 0), adj;
+    for (size_t p = 0; p < P; ++p)
+        for (int c = 0; c < 4; ++c)
+            if (first_at(p, c)) ++start[size_t(M.corner_vertex[4 * p + size_t(c)]) + 1];
+    for (size_t v = 0; v < V; ++v) start[v + 1] += start[v];
+    adj.resize(start[V]);
+    {
+        std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+        for (size_t p = 0; p < P; ++p)
+            for (int c = 0; c < 4; ++c)
+                if (first_at(p, c)) adj[fill[size_t(M.corner_vertex[4 * p + size_t(c)])]++] = uint32_t(p);
+    }
+    // Boundary vertices: on an edge that only one patch has (the rim of a
+    // shape's plane: a wall's edge, a crease, a T-junction's long side).
+    std::vector<char> boundary(V, 0);
+    {
+        std::unordered_map<uint64_t, int> edges;
+        auto each_edge = [&](size_t p, auto&& f) {
+            static const int tri[3][2] = {{0, 1}, {1, 2}, {2, 0}}, cell[4][2] = {{0, 1}, {1, 3}, {3, 2}, {2, 0}};
+            const bool is_tri = M.corner_vertex[4 * p + 3] < 0;
+            for (int e = 0; e < (is_tri ? 3 : 4); ++e) {
+                const int* ab = is_tri ? tri[e] : cell[e];
+                int a = M.corner_vertex[4 * p + size_t(ab[0])], b = M.corner_vertex[4 * p + size_t(ab[1])];
+                if (a < 0 || b < 0 || a == b) continue;
+                f(a, b, uint64_t(uint32_t(std::min(a, b))) << 32 | uint32_t(std::max(a, b)));
+            }
+        };
+        for (size_t p = 0; p < P; ++p) each_edge(p, [&](int, int, uint64_t k) { ++edges[k]; });
+        for (size_t p = 0; p < P; ++p)
+            each_edge(p, [&](int a, int b, uint64_t k) {
+                if (edges[k] == 1) boundary[size_t(a)] = boundary[size_t(b)] = 1;
+            });
+    }
+    sol.vBd.assign(2 * V, Vec3d());
+    sol.vBi.assign(2 * V, Vec3d());
+    auto value = [&](size_t p, size_t side, bool direct) {
+        const size_t e = 2 * p + side;
+        return direct ? sol.Bd[e] : sol.Bi[e] + sol.Blast[e];
+    };
+    std::vector<uint32_t> ring;
+    for (size_t v = 0; v < V; ++v) {
+        if (start[v] == start[v + 1]) continue;
+        // Interior: the area-weighted mean of the patches at the vertex.
+        double wsum = 0;
+        for (uint32_t k = start[v]; k < start[v + 1]; ++k) wsum += M.patches[adj[k]].area;
+        for (size_t side = 0; side < 2; ++side)
+            for (int direct = 0; direct < 2; ++direct) {
+                Vec3d acc;
+                for (uint32_t k = start[v]; k < start[v + 1]; ++k)
+                    acc = acc + value(adj[k], side, direct) * M.patches[adj[k]].area;
+                (direct ? sol.vBd : sol.vBi)[2 * v + side] = wsum > 0 ? acc * (1.0 / wsum) : Vec3d();
+            }
+        if (!boundary[v]) continue;
+        // Boundary: the mean would be the value about half a patch inside;
+        // instead the plane B(x) = a + g . (x - v) fitted by area-weighted
+        // least squares to the patch centres of the vertex's two rings of
+        // patches, read at the vertex (a), kept >= 0. Too few or collinear
+        // centres (a rim corner with one patch): the mean stays.
+        ring.clear();
+        for (uint32_t k = start[v]; k < start[v + 1]; ++k)
+            for (int c = 0; c < 4; ++c) {
+                const int u = M.corner_vertex[4 * size_t(adj[k]) + size_t(c)];
+                if (u < 0) continue;
+                for (uint32_t m = start[size_t(u)]; m < start[size_t(u) + 1]; ++m) ring.push_back(adj[m]);
+            }
+        std::sort(ring.begin(), ring.end());
+        ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
+        const Vec3d n = unit(M.vnrm[v]);
+        const Vec3d t1 = unit(std::fabs(n.x) > 0.5 ? cross(n, Vec3d(0, 1, 0)) : cross(n, Vec3d(1, 0, 0)));
+        const Vec3d t2 = cross(n, t1);
+        double h2 = 0, W = 0;
+        for (uint32_t p : ring) h2 += M.patches[p].area, W += M.patches[p].area;
+        const double h = std::sqrt(h2 / double(ring.size()));
+        if (!(h > 0) || !(W > 0) || ring.size() < 3) continue;
+        double A[3][3] = {};
+        for (uint32_t p : ring) {
+            const Vec3d d = M.patches[p].c - M.vpos[v];
+            const double w = M.patches[p].area / W, r[3] = {1.0, dot(d, t1) / h, dot(d, t2) / h};
+            for (int a = 0; a < 3; ++a)
+                for (int b = 0; b < 3; ++b) A[a][b] += w * r[a] * r[b];
+        }
+        auto det3 = [](const double m[3][3]) {
+            return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+                   m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+                   m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+        };
+        const double det = det3(A);
+        if (!(std::fabs(det) > 1e-6)) continue;
+        for (size_t side = 0; side < 2; ++side)
+            for (int direct = 0; direct < 2; ++direct) {
+                double out[3];
+                for (int ch = 0; ch < 3; ++ch) {
+                    double rhs[3] = {};
+                    for (uint32_t p : ring) {
+                        const Vec3d d = M.patches[p].c - M.vpos[v];
+                        const Vec3d b = value(p, side, direct);
+                        const double bc = ch == 0 ? b.x : ch == 1 ? b.y : b.z;
+                        const double w = M.patches[p].area / W, r[3] = {1.0, dot(d, t1) / h, dot(d, t2) / h};
+                        for (int a = 0; a < 3; ++a) rhs[a] += w * r[a] * bc;
+                    }
+                    double Ax[3][3];  // Cramer: the first column replaced by rhs
+                    for (int a = 0; a < 3; ++a)
+                        for (int b = 0; b < 3; ++b) Ax[a][b] = b == 0 ? rhs[a] : A[a][b];
+                    const double x = det3(Ax) / det;
+                    out[ch] = std::isfinite(x) ? std::max(0.0, x) : 0.0;
+                }
+                (direct ? sol.vBd : sol.vBi)[2 * v + side] = Vec3d(out[0], out[1], out[2]);
+            }
+    }
+}
+
 bool RadiosityIntegrator::solve(PassLoop& loop, Solution& sol) const {
     auto t0 = std::chrono::steady_clock::now();
     setup(loop.scene(), sol);
@@ -488,6 +632,25 @@ void RadiosityIntegrator::shade(const Scene& scene, const Solution& sol, Sampler
         if (mask[kIndirect]) out.add(kIndirect, to_color(sol.Bi[size_t(e)] + sol.Blast[size_t(e)]) * inv_pi);
         return;
     }
+    if (c_.display == "vertex") {
+        double w[4];
+        const int p = sol.mesh.locate(scene, it, w);
+        if (p < 0) return;
+        const size_t side = dot(it.wi, it.n) >= 0.f ? 0 : 1, e = 2 * size_t(p) + side;
+        Vec3d bd, bi;
+        for (int c = 0; c < 4; ++c) {
+            const int v = sol.mesh.corner_vertex[4 * size_t(p) + size_t(c)];
+            if (v < 0 || w[c] == 0) continue;
+            bd = bd + sol.vBd[2 * size_t(v) + side] * w[c];
+            bi = bi + sol.vBi[2 * size_t(v) + side] * w[c];
+        }
+        const float inv_pi = kInvPi;
+        if (mask[kEmission]) out.add(kEmission, to_color(sol.el[e].E) * inv_pi);
+        if (c_.max_depth < 0 || c_.max_depth >= 2)
+            if (mask[kDirect]) out.add(kDirect, to_color(bd) * inv_pi);
+        if (mask[kIndirect]) out.add(kIndirect, to_color(bi) * inv_pi);
+        return;
+    }
     // Final gather: emission and direct light as `direct`, indirect from the solution.
     const Shape& sh = *scene.shapes[size_t(it.shape)];
     if (sh.emitter >= 0 && mask[kEmission]) out.add(kEmission, scene.emitters[size_t(sh.emitter)]->eval(it, it.wi));
@@ -522,11 +685,13 @@ RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions&
     PassLoop loop(scene, opts, poll);
     Solution sol;
     if (!solve(loop, sol)) return loop.cancelled_output();
+    if (c_.display == "vertex") vertex_values(sol);
     CameraView view(*this, [&](const Scene& sc, Sampler& sampler, const Ray& ray, EffectRadiance& o,
                                ThreadStats& stats) { shade(sc, sol, sampler, ray, o, stats); });
     RenderOutput out = render_camera_paths(loop, view);
     out.stats.shadow_rays += sol.rays;
     for (auto& [name, v] : sol.stats()) out.estimator_stats.push_back({name, {v}});
+    if (c_.display == "vertex") out.estimator_stats.push_back({"vertices", {double(sol.mesh.vertex_count)}});
     out.seconds = loop.elapsed();
     return out;
 }
@@ -536,12 +701,14 @@ RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions&
     e.name = "radiosity";
     e.doc =
         "radiosity (Goral et al. 1984; progressive refinement, Cohen et al. 1988): diffuse scenes cut into "
-        "patches, form factors in closed form with ray-cast visibility, displayed per patch or by a final gather";
+        "patches, form factors in closed form with ray-cast visibility, displayed per patch, interpolated between "
+        "vertices or by a final gather";
     e.params = {
         ParamSpec::string("display", "gather",
-                          "'patch': each patch's radiosity / pi; 'gather': emission and direct light by light "
-                          "sampling, indirect light gathered from the solution")
-            .one_of({"patch", "gather"}),
+                          "'patch': each patch's radiosity / pi; 'vertex': the radiosity averaged to the mesh "
+                          "vertices and interpolated over each patch; 'gather': emission and direct light by "
+                          "light sampling, indirect light gathered from the solution")
+            .one_of({"patch", "vertex", "gather"}),
         ParamSpec::real("patch_size", 0.0, "target patch edge length in scene units (0: from max_patches)")
             .at_least(0.0),
         ParamSpec::integer("max_patches", 1000,
