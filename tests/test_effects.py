@@ -21,7 +21,11 @@ def mirror_room(res=24):
         "floor": {"type": "rectangle", "to_world": np.diag([2.0, 2.0, 1, 1]),
                   "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.7, 0.7]}}},
         "mirror": {"type": "rectangle", "to_world": rot_y, "bsdf": {"type": "conductor"}},
+        # The light reflects (diffuse 0.5, explicit: an emitter without a
+        # BSDF is black, as in Mitsuba 3), so that indirect light exists:
+        # light -> floor -> light's face -> floor.
         "light": {"type": "rectangle", "to_world": light,
+                  "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.5, 0.5]}},
                   "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [20, 20, 20]}}},
         "sensor": {"type": "perspective", "fov": 70, "to_world": cam,
                    "film": {"type": "hdrfilm", "width": res, "height": res}},

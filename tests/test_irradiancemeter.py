@@ -61,7 +61,11 @@ def _room(meter_half=0.1):
                   "bsdf": {"type": "diffuse", "reflectance": _rgb(0.5)}},
         "ball": {"type": "sphere", "center": [0.5, 0.3, 0.0], "radius": 0.25,
                  "bsdf": {"type": "diffuse", "reflectance": _rgb(0.8)}},
-        "light": {"type": "disk", "to_world": light_xf, "emitter": {"type": "area", "radiance": _rgb(LE)}},
+        # The light's face reflects (diffuse 0.5, explicit: without a BSDF
+        # an emitter is black, as in Mitsuba 3): the meter's indirect
+        # irradiance is 0.0473 with it, 0.0190 without (path, 2^18 spp).
+        "light": {"type": "disk", "to_world": light_xf, "bsdf": {"type": "diffuse", "reflectance": _rgb(0.5)},
+                  "emitter": {"type": "area", "radiance": _rgb(LE)}},
         "meter": {"type": "rectangle", "to_world": _xf(meter_half),
                   "bsdf": {"type": "diffuse", "reflectance": _rgb(0.0)},
                   "sensor": {"type": "irradiancemeter",
