@@ -523,8 +523,13 @@ MLT_POWER = {("pssmlt", "cornell_box"): 1.3, ("pssmlt", "glass_sphere_caustic"):
 # cell runs a 2^20 bootstrap (above) and passes under offsets 0-5. mmlt
 # picks one strategy and multiplies by the number of strategies, so its
 # f is heavier still: b's relative sd 20 % at 2^20 (12 seeds), beyond the
-# matrix's budget; and its mean there, 1.15 x the reference (2.3 of its
-# standard errors), leaves a bias not ruled out. mmlt glass: at SEED 0.867
+# matrix's budget; its mean there, 1.15 x the reference (2.3 of its
+# standard errors), was the tail's fluctuation: per strategy, mmlt's
+# share of b matches bdpt's strategy images (2026-12-04, docs/mlt.md
+# "mmlt's strategies against bdpt's": 32 seeds x 2^20, chi-square 51.3
+# over 42 strategies, depths 3-6 within 0.7 %, b 0.971 +- 0.028 of bdpt),
+# and 36 % of b is depth 1 (camera rays hitting the small lights) with a
+# relative sd of 37 % per 2^20 points. mmlt glass: at SEED 0.867
 # of the reference with z -4.3 at the default bootstrap; its b over 16
 # seeds at 262144 samples is 1.022 +- 0.024 of the reference's luminance
 # sum (sd 9.6 %, pssmlt's 0.9 % at the same count), so its cell runs a
@@ -532,7 +537,8 @@ MLT_POWER = {("pssmlt", "cornell_box"): 1.3, ("pssmlt", "glass_sphere_caustic"):
 # 0.9996 of the reference under offsets 0-3, but the blocks fail the first
 # stage under offsets 0, 2 and 3 (each passes its rerun): the batch
 # variance of the caustic's blocks looks too small, not yet measured.
-_B_TAIL = "b's bootstrap heavy-tailed here (docs/mlt.md; measurements above UNDER_INVESTIGATION)"
+_B_TAIL = ("b's bootstrap heavy-tailed here, no strategy biased (docs/mlt.md; measurements above "
+           "UNDER_INVESTIGATION)")
 UNDER_INVESTIGATION = {
     ("mmlt", "veach_mis"): "mmlt: " + _B_TAIL,
     ("mmlt", "glass_sphere_caustic"): "mmlt: blocks rejected at the first stage under offsets 0, 2, 3 "

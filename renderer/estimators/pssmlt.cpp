@@ -66,7 +66,9 @@
 // max_depth. Its bootstrap evaluates each point with every strategy of
 // its depth (bootstrap(), below): b's variance without the strategy
 // choice's. Small steps keep the strategy mostly fixed, large steps
-// change it; "mlt_acceptance_per_depth" in res.stats. pbrt-v4's
+// change it; "mlt_acceptance_per_depth" in res.stats, and
+// "mlt_b_per_strategy" (each strategy's share of b, with its variance: the
+// check against bdpt's strategy images, docs/mlt.md). pbrt-v4's
 // MLTIntegrator runs separate chains per depth instead.
 //
 // Limits: no participating media, no dipole (refused by name: caps); no
@@ -348,6 +350,24 @@ public:
                 per_depth.push_back(ratio(a, p));
             }
             st.push_back({"mlt_acceptance_per_depth", per_depth});
+            // b by strategy: each (d, s)'s share of b (their sum is mlt_b)
+            // and the variance of that share's mean, from all bootstrap
+            // points (independent across chains). A strategy's share is the
+            // expectation of its MIS-weighted contribution, the luminance sum
+            // of bdpt's strategy image (s, d + 1 - s): the check that each
+            // strategy is unbiased, which b alone cannot localise.
+            std::vector<double> share(strategy_slots(), 0.0), share_var(strategy_slots(), 0.0);
+            std::vector<double> sq(strategy_slots(), 0.0);
+            for (const Chain& ch : chains_)
+                for (size_t k = 0; k < ch.fs_sum.size(); ++k) share[k] += ch.fs_sum[k], sq[k] += ch.fs_sq[k];
+            for (size_t k = 0; k < share.size(); ++k) {
+                const double m = n_f > 0 ? share[k] / n_f : 0.0;
+                share_var[k] = n_f > 1 ? std::max(0.0, (sq[k] - n_f * m * m) / (n_f - 1.0)) / n_f
+                                       : std::numeric_limits<double>::quiet_NaN();
+                share[k] = m;
+            }
+            st.push_back({"mlt_b_per_strategy", share});
+            st.push_back({"mlt_b_per_strategy_variance", share_var});
         }
     }
 
@@ -392,9 +412,12 @@ private:
     struct Chain {
         Chain(float sigma, float large_p) : pss(sigma, large_p) {}
         PssSampler pss;
-        double b = 0;                         // the chain's bootstrap estimate of b
-        double f_sum = 0, f_sq = 0;           // its bootstrap samples' f: sum, sum of squares
-        uint64_t n_f = 0;                     // and their count
+        double b = 0;                // the chain's bootstrap estimate of b
+        double f_sum = 0, f_sq = 0;  // its bootstrap samples' f: sum, sum of squares
+        uint64_t n_f = 0;            // and their count
+        // mmlt: per strategy (d, s) (strategy_slot), the sum and the sum of
+        // squares of its share f / (d + 1) of each bootstrap point's f_mean.
+        std::vector<double> fs_sum, fs_sq;
         std::vector<Splat> cur, prop;         // the current state's splats, the proposal's
         float f_cur = 0;                      // f of the current state
         double pending = 0;                   // expected-value weight the current state has gathered
@@ -494,6 +517,7 @@ private:
                 const int s0 = std::min(int(v * float(n)), d);
                 const float xi = std::min(std::max(v * float(n) - float(s0), 0.f), 1.f);
                 double sum = 0;
+                if (ch.fs_sum.empty()) ch.fs_sum.assign(strategy_slots(), 0.0), ch.fs_sq.assign(strategy_slots(), 0.0);
                 for (int st = 0; st < n; ++st) {
                     const float vs = st == s0 ? v : strategy_coordinate(st, n, xi);
                     double f = f0;
@@ -502,6 +526,11 @@ private:
                         f = evaluate(ch.pss, tmp, stats);
                     }
                     sum += f;
+                    const double share = f / double(n);
+                    if (d >= 1 && d <= m_.max_depth_) {
+                        ch.fs_sum[strategy_slot(d, st)] += share;
+                        ch.fs_sq[strategy_slot(d, st)] += share * share;
+                    }
                     cdf.push_back(cdf.back() + f / double(n));
                     point.push_back({i, vs});
                 }
@@ -530,6 +559,11 @@ private:
         ch.f_cur = evaluate(ch.pss, ch.cur, stats);
         ch.pss.reseed(own, uint64_t(c));
     }
+
+    // mmlt's strategies (d, s), d = 1 .. max_depth, s = 0 .. d, in that
+    // order: slot d (d + 1) / 2 - 1 + s.
+    size_t strategy_slots() const { return size_t(m_.max_depth_) * size_t(m_.max_depth_ + 3) / 2; }
+    static size_t strategy_slot(int d, int s) { return size_t(d) * size_t(d + 1) / 2 - 1 + size_t(s); }
 
     // mmlt's strategy coordinate: s of n strategies at relative place xi
     // in [0, 1) of its interval, kept inside it against rounding.
