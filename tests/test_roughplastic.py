@@ -1,5 +1,7 @@
 """roughplastic against Mitsuba 3 itself (scalar_rgb): eval and pdf on fixed
-random direction pairs, per lobe, and one rendered scene.
+random direction pairs, per lobe; sample() on the same random numbers; one
+rendered scene of ours against Mitsuba's renders; and Mitsuba's own two
+roughplastic suite scenes under its own protocol.
 
 The same dict goes to `mitsuba.load_dict` and to our loader, so parameter
 names and defaults are checked along with the values. Mitsuba's lobes are
@@ -27,6 +29,7 @@ each rejected by the same comparison.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -220,8 +223,9 @@ def test_sample_weights_match_mitsuba():
     assert n_diffuse > n // 4
 
 
-def _look_at_rotation(origin, target, up=np.array([0.0, 1.0, 0.0])):
-    """Mitsuba's look_at: columns (left, up, forward)."""
+def _look_at_rotation(origin, target):
+    """Mitsuba's look_at with up +y: columns (left, up, forward)."""
+    up = np.array([0.0, 1.0, 0.0])
     d = target - origin
     d /= np.linalg.norm(d)
     left = np.cross(up, d)
@@ -278,3 +282,35 @@ def test_render_matches_mitsuba_path():
     assert passed, f"ours / mitsuba = {ratio:.5f}\n{msg}"
     assert not blocked_z(res.image, res.variance, mean * 1.03, var * 1.03 ** 2)[0]
 
+
+
+SUITE = Path(__file__).resolve().parents[1].parent / "shared" / "peers" / "mitsuba-data" / "tests" / "scenes"
+
+
+@pytest.mark.skipif(not SUITE.is_dir(), reason="../shared/peers/mitsuba-data absent")
+@pytest.mark.parametrize("scene", ["bsdf_spheres/test_roughplastic_linear_path.xml",
+                                   "bsdf_spheres/test_roughplastic_nonlinear_path.xml"])
+def test_suite_scenes_pass_mitsubas_test(scene, monkeypatch):
+    """Mitsuba 3's own roughplastic scenes (four GGX spheres, alpha 0.01 to
+    1) under Mitsuba's own test protocol (benchmarks/studies/mitsuba_suite.py:
+    2e6 samples, seed 0, XYZ, Sidak 0.01, at most 0.75 % of the pixels'
+    channels rejected; measured: 0 rejected of 17 allowed in both); and the
+    protocol rejects every roughplastic alpha 10 % too large (measured on the
+    linear scene: 126 rejected; a 5 % brighter diffuse reflectance is not
+    resolved there: 19, so it is not the power check)."""
+    from radiometer.benchmarks.studies import mitsuba_suite as ms
+
+    r = ms.protocol(SUITE / scene, threads=2)
+    assert r["passes"], r
+    load = ms._load
+
+    def rougher(path):
+        d = load(path)
+        for s in d.shapes:
+            if s.bsdf is not None and s.bsdf.type == "roughplastic":
+                s.bsdf.alpha_u *= 1.1
+                s.bsdf.alpha_v *= 1.1
+        return d
+
+    monkeypatch.setattr(ms, "_load", rougher)
+    assert not ms.protocol(SUITE / scene, threads=2)["passes"]

@@ -535,7 +535,7 @@ private:
 struct RoughPlasticTables {
     static constexpr int kRes = 64;
     std::array<float, kRes> transmittance{};  // T(mu_k)
-    float internal_reflectance = 0.f;        // R_int
+    float internal_reflectance = 0.f;         // R_int
 };
 
 std::shared_ptr<const RoughPlasticTables> rough_plastic_tables(MicrofacetType type, float alpha, float eta) {
@@ -761,8 +761,7 @@ std::unique_ptr<Bsdf> make_bsdf(const BsdfDesc& d) {
         check_color(d, "diffuse_reflectance", d.diffuse_reflectance);
         check_color(d, "specular_reflectance", d.specular_reflectance);
         const MicrofacetDistribution distr = make_distribution(d);
-        if (d.alpha_u != d.alpha_v)
-            fail(d, "alpha_u", "must equal alpha_v (roughplastic is isotropic, as in Mitsuba)");
+        if (d.alpha_u != d.alpha_v) fail(d, "alpha_u", "must equal alpha_v (roughplastic is isotropic, as in Mitsuba)");
         return std::make_unique<RoughPlasticBsdf>(distr, eta, d.diffuse_reflectance, d.specular_reflectance,
                                                   d.nonlinear);
     }
