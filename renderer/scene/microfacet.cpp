@@ -253,11 +253,20 @@ template <typename G>
 double visible_normal_expectation(const MicrofacetDistribution& distr, const Vec3& wi, int res, G g) {
     std::vector<double> x, w;
     gauss_legendre(res, x, w);
+    const bool ggx = distr.type() == MicrofacetType::GGX;
+    // With wi in the xz plane and isotropic roughness the integrand is even in
+    // m.y, and the node mirrored about 0 along one axis (GGX: the first, which
+    // becomes the disk's x and then m.y; Beckmann: the second, the y slope)
+    // yields the mirrored normal: half the nodes, counted twice, give the
+    // same sum (to rounding) at half the cost. The nodes come in decreasing
+    // order, x[res - 1 - k] = -x[k].
+    const bool mirror = wi.y == 0.f && distr.alpha_u() == distr.alpha_v() && res % 2 == 0;
     double sum = 0.0;
     for (int i = 0; i < res; ++i) {
         for (int j = 0; j < res; ++j) {
+            if (mirror && (ggx ? i : j) >= res / 2) continue;
             Vec2 u(float(0.5 * x[size_t(i)] + 0.5), float(0.5 * x[size_t(j)] + 0.5));
-            if (distr.type() == MicrofacetType::GGX) {
+            if (ggx) {
                 // Mitsuba's GGX sampler starts from the concentric disk map
                 // (Shirley & Chiu 1997), ours from the polar one (r = sqrt(u.x),
                 // phi = 2 pi u.y): the nodes go through the former and back
@@ -270,7 +279,7 @@ double visible_normal_expectation(const MicrofacetDistribution& distr, const Vec
             const MicrofacetSample ms = distr.sample_visible_normal(wi, u);
             if (!(ms.pdf_w > 0.f)) continue;
             // The weights sum to 2 per axis on [-1, 1]: 1/4 maps them to [0, 1]^2.
-            sum += 0.25 * w[size_t(i)] * w[size_t(j)] * g(ms.m);
+            sum += (mirror ? 0.5 : 0.25) * w[size_t(i)] * w[size_t(j)] * g(ms.m);
         }
     }
     return sum;
