@@ -520,7 +520,8 @@ private:
 // cosine-weighted hemispherical reflectance, 2 int R(mu) mu dmu with R the
 // internal single-scattering reflectance (microfacet_reflectance(), 1 / eta).
 // As Mitsuba, T is tabulated at 64 cosines mu_k = max(1e-6, k / 63) and
-// interpolated linearly; R_int is 2 mean_k(R(mu_k) mu_k) over the same nodes.
+// interpolated linearly; R_int is 2 mean_k(R(mu_k) mu_k) over the same nodes
+// (Mitsuba's sum, with both end nodes at full weight, kept so that R_int agrees).
 // Mitsuba integrates with a Gauss-Legendre rule over its visible-normal
 // sampler's unit square (32^2 nodes where the relative IOR exceeds 1, 128^2
 // otherwise); we compute the same integrals, with our own sampler
@@ -539,7 +540,7 @@ struct RoughPlasticTables {
 };
 
 std::shared_ptr<const RoughPlasticTables> rough_plastic_tables(MicrofacetType type, float alpha, float eta) {
-    // Computing them costs ~10^6 visible-normal samples: a scene with many
+    // Computing them costs ~5 10^5 visible-normal samples: a scene with many
     // equal coatings, or a test building the same BSDF again, pays once.
     static std::mutex mutex;
     static std::map<std::tuple<int, float, float>, std::shared_ptr<const RoughPlasticTables>> cache;
