@@ -425,6 +425,53 @@ def test_defaults_match_mitsuba(mi):
             mi.load_dict({"type": t}).radius()) == radius
 
 
+ROUGHPLASTIC_XML = """<scene version="3.0.0">
+<shape type="sphere" id="a"><bsdf type="roughplastic"/></shape>
+<shape type="sphere" id="b">
+    <bsdf type="roughplastic">
+        <string name="distribution" value="ggx"/>
+        <float name="alpha" value="0.3"/>
+        <string name="int_ior" value="bk7"/>
+        <float name="ext_ior" value="1.33"/>
+        <rgb name="diffuse_reflectance" value="0.8 0.3 0.1"/>
+        <spectrum name="specular_reflectance" value="0.7"/>
+        <boolean name="nonlinear" value="true"/>
+        <boolean name="sample_visible" value="false"/>
+    </bsdf>
+</shape>
+</scene>"""
+ROUGHPLASTIC_DICT = {
+    "type": "scene",
+    "a": {"type": "sphere", "bsdf": {"type": "roughplastic"}},
+    "b": {"type": "sphere", "bsdf": {"type": "roughplastic", "distribution": "ggx", "alpha": 0.3, "int_ior": "bk7",
+                                     "ext_ior": 1.33, "diffuse_reflectance": {"type": "rgb", "value": [0.8, 0.3, 0.1]},
+                                     "specular_reflectance": 0.7, "nonlinear": True, "sample_visible": False}},
+}
+
+
+def test_roughplastic_xml_equals_dict_and_mitsuba(mi, tmp_path):
+    """roughplastic from XML and from a dict: the same description, with
+    Mitsuba 3's defaults (beckmann, alpha 0.1, polypropylene in air, 0.5
+    diffuse, 1 specular, linear, visible normals) and the parameters Mitsuba
+    itself builds (its traverse(): alpha, eta, diffuse_reflectance)."""
+    path = tmp_path / "rp.xml"
+    path.write_text(ROUGHPLASTIC_XML)
+    a, b = load_file(path), load_dict(ROUGHPLASTIC_DICT)
+    assert_same(a, b, atol=1e-12)
+    d, g = b.shapes[0].bsdf, b.shapes[1].bsdf
+    assert (d.type, d.distribution, d.alpha_u, d.alpha_v, d.nonlinear, d.sample_visible) == (
+        "roughplastic", "beckmann", 0.1, 0.1, False, True)
+    assert d.int_ior == NAMED_IOR["polypropylene"] and d.ext_ior == NAMED_IOR["air"]
+    assert tuple(d.diffuse_reflectance) == (0.5, 0.5, 0.5) and tuple(d.specular_reflectance) == (1, 1, 1)
+    assert (g.distribution, g.alpha_u, g.nonlinear, g.sample_visible) == ("ggx", 0.3, True, False)
+    assert g.int_ior == NAMED_IOR["bk7"] and g.ext_ior == 1.33
+    for key, ours in (("a", d), ("b", g)):
+        params = mi.traverse(mi.load_dict(ROUGHPLASTIC_DICT[key]["bsdf"]))
+        assert ours.alpha_u == pytest.approx(params["alpha"], rel=1e-6), key
+        assert ours.int_ior / ours.ext_ior == pytest.approx(params["eta"], rel=1e-6), key
+        np.testing.assert_allclose(ours.diffuse_reflectance, params["diffuse_reflectance.value"], rtol=1e-6)
+
+
 def test_default_bsdf_is_black_on_emitters_as_in_mitsuba(mi):
     """A shape without a BSDF is a diffuse of reflectance 0.5, but an
     emitter without one reflects nothing (Mitsuba 3's Shape constructor).
@@ -696,8 +743,8 @@ BAD_DICTS = [
     (_scene(floor={"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": {
         "type": "rgb", "value": [0.5, -0.1, 0.5]}}}),
      ["scene['floor']['bsdf']['reflectance']", "negative value -0.1"]),
-    (_scene(floor={"type": "rectangle", "bsdf": {"type": "roughplastic"}}),
-     ["scene['floor']['bsdf']", "'roughplastic' is not supported"]),
+    (_scene(floor={"type": "rectangle", "bsdf": {"type": "principled"}}),
+     ["scene['floor']['bsdf']", "'principled' is not supported"]),
     (_scene(floor={"type": "rectangle", "bsdf": {"type": "ref", "id": "nope"}}),
      ["scene['floor']['bsdf']", "unknown id 'nope'"]),
     (_scene(cam={"type": "perspective", "film": {"type": "hdrfilm", "width": 256.0}}),
@@ -737,6 +784,14 @@ BAD_DICTS = [
      ["scene['cam']['to_world']", "scale factors"]),
     (_scene(glass={"type": "dielectric", "int_ior": "unobtainium"}),
      ["scene['glass']['int_ior']", "unknown IOR name"]),
+    (_scene(rp={"type": "roughplastic", "roughness": 0.2}),
+     ["scene['rp']['roughness']", "bsdf 'roughplastic'", "unknown parameter"]),
+    (_scene(rp={"type": "roughplastic", "alpha_u": 0.1, "alpha_v": 0.2}),
+     ["scene['rp']['alpha_v']", "'alpha_u' and 'alpha_v' differ"]),
+    (_scene(rp={"type": "roughplastic", "int_ior": 1.3, "ext_ior": 1.3}),
+     ["scene['rp']", "'int_ior' and 'ext_ior' must differ"]),
+    (_scene(rp={"type": "roughplastic", "distribution": "phong"}),
+     ["scene['rp']['distribution']", "phong"]),
     ({"floor": RECT}, ["scene", "'type': 'scene'"]),
 ]
 
@@ -824,6 +879,18 @@ BAD_XML = [
     <point name="center" x="1" y="2"/>
 </shape>
 </scene>""", 3, ["missing attribute 'z'"]),
+    ("""<scene version="3.0.0">
+<bsdf type="roughplastic">
+    <float name="alpha" value="0.2"/>
+    <float name="alpha_v" value="0.2"/>
+</bsdf>
+</scene>""", 2, ["bsdf 'roughplastic'", "alpha"]),
+    ("""<scene version="3.0.0">
+<bsdf type="roughplastic">
+    <float name="alpha" value="0.2"/>
+    <boolean name="sample_visibles" value="false"/>
+</bsdf>
+</scene>""", 4, ["bsdf 'roughplastic': unknown parameter 'sample_visibles'"]),
 ]
 
 

@@ -60,6 +60,8 @@ PARAMS = {
         "dielectric": _DIEL, "thindielectric": _DIEL, "roughdielectric": {**_DIEL, **_MICRO},
         "plastic": {"diffuse_reflectance": "rgb", "specular_reflectance": "rgb", "int_ior": "ior",
                     "ext_ior": "ior", "nonlinear": "bool"},
+        "roughplastic": {"diffuse_reflectance": "rgb", "specular_reflectance": "rgb", "int_ior": "ior",
+                         "ext_ior": "ior", "nonlinear": "bool", **_MICRO},
         "twosided": {}, "null": {},
     },
     "emitter": {

@@ -314,4 +314,10 @@ def test_suite_scenes_get_past_the_format():
     for r in rows:
         assert not any(w in r["status"] for w in ("<scene>", "<path>", "<include>", "integrator 'moment'",
                                                   "integrator type 'moment'")), r
-    assert sum(r["status"] == "loads" for r in rows) >= 4
+    loads = {r["scene"] for r in rows if r["status"] == "loads"}
+    # Measured 2026-12-04: 7 of 41 load; roughplastic brought the two
+    # bsdf_spheres/test_roughplastic_* scenes (its other three users, in
+    # participating_media, stop first at a checkerboard texture).
+    assert len(loads) >= 7, sorted(loads)
+    assert {"bsdf_spheres/test_roughplastic_linear_path.xml",
+            "bsdf_spheres/test_roughplastic_nonlinear_path.xml"} <= loads

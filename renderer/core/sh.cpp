@@ -51,9 +51,9 @@ void ShBasis::eval(double x, double y, double z, double* out) const {
     }
 }
 
-SphereQuadrature sphere_quadrature(int n_theta) {
-    const int n = n_theta, nphi = 2 * n_theta;
-    std::vector<double> z(static_cast<size_t>(n)), w(static_cast<size_t>(n));
+void gauss_legendre(int n, std::vector<double>& z, std::vector<double>& w) {
+    z.assign(static_cast<size_t>(n), 0.0);
+    w.assign(static_cast<size_t>(n), 0.0);
     for (int i = 0; i < n; ++i) {
         // Newton's method on P_n from Tricomi's initial guess of the i-th root.
         double r = std::cos(kPiD * (i + 0.75) / (n + 0.5)), dp = 1.0;
@@ -71,6 +71,12 @@ SphereQuadrature sphere_quadrature(int n_theta) {
         z[size_t(i)] = r;
         w[size_t(i)] = 2.0 / ((1.0 - r * r) * dp * dp);
     }
+}
+
+SphereQuadrature sphere_quadrature(int n_theta) {
+    const int n = n_theta, nphi = 2 * n_theta;
+    std::vector<double> z, w;
+    gauss_legendre(n, z, w);
     SphereQuadrature q;
     q.dirs.reserve(size_t(n) * size_t(nphi));
     q.weights.reserve(size_t(n) * size_t(nphi));

@@ -48,6 +48,11 @@ private:
 // exact for trigonometric polynomials of degree < 2 n_theta). It integrates
 // every product of two SH of bands < n_theta exactly (Press et al.,
 // Numerical Recipes, 3rd ed., sec. 4.6, for the nodes by Newton's method).
+// Nodes x and weights w of the n-point Gauss-Legendre rule on [-1, 1]
+// (exact for polynomials of degree 2n - 1; Press et al., Numerical Recipes,
+// 3rd ed., sec. 4.6), nodes in decreasing order.
+void gauss_legendre(int n, std::vector<double>& x, std::vector<double>& w);
+
 struct SphereQuadrature {
     std::vector<Vec3> dirs;       // float, for lookups in the scene
     std::vector<double> xyz;      // the same directions in double, 3 per node, for the basis

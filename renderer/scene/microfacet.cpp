@@ -1,6 +1,11 @@
 #include "scene/microfacet.h"
 
 #include <cmath>
+#include <vector>
+
+#include "core/sh.h"
+#include "core/warp.h"
+#include "scene/fresnel.h"
 
 namespace rm {
 
@@ -238,6 +243,67 @@ float MicrofacetDistribution::pdf_visible(const Vec3& wi, const Vec3& m) const {
     if (!(wm > 0.f)) return 0.f;
     const float p = G1(wi, m) * wm * D(m) / wi.z;
     return std::isfinite(p) ? p : 0.f;
+}
+
+namespace {
+
+// E_m[g(m)] over the visible normals of wi by the res x res Gauss-Legendre
+// rule on [0, 1]^2 mapped through sample_visible_normal(), in double.
+template <typename G>
+double visible_normal_expectation(const MicrofacetDistribution& distr, const Vec3& wi, int res, G g) {
+    std::vector<double> x, w;
+    gauss_legendre(res, x, w);
+    const bool ggx = distr.type() == MicrofacetType::GGX;
+    // With wi in the xz plane and isotropic roughness the integrand is even in
+    // m.y, and the node mirrored about 0 along one axis (GGX: the first, which
+    // becomes the disk's x and then m.y; Beckmann: the second, the y slope)
+    // yields the mirrored normal: half the nodes, counted twice, give the
+    // same sum (to rounding) at half the cost. The nodes come in decreasing
+    // order, x[res - 1 - k] = -x[k].
+    const bool mirror = wi.y == 0.f && distr.alpha_u() == distr.alpha_v() && res % 2 == 0;
+    double sum = 0.0;
+    for (int i = 0; i < res; ++i) {
+        for (int j = 0; j < res; ++j) {
+            if (mirror && (ggx ? i : j) >= res / 2) continue;
+            Vec2 u(float(0.5 * x[size_t(i)] + 0.5), float(0.5 * x[size_t(j)] + 0.5));
+            if (ggx) {
+                // Mitsuba's GGX sampler starts from the concentric disk map
+                // (Shirley & Chiu 1997), ours from the polar one (r = sqrt(u.x),
+                // phi = 2 pi u.y): the nodes go through the former and back
+                // through the latter, so that the rule sees the same normals.
+                const Vec2 d = warp::square_to_uniform_disk_concentric(u);
+                float phi = std::atan2(d.y, d.x) * (0.5f * kInvPi);
+                if (phi < 0.f) phi += 1.f;
+                u = Vec2(std::min(d.x * d.x + d.y * d.y, 1.f), std::min(phi, 1.f - 1e-7f));
+            }
+            const MicrofacetSample ms = distr.sample_visible_normal(wi, u);
+            if (!(ms.pdf_w > 0.f)) continue;
+            // The weights sum to 2 per axis on [-1, 1]: 1/4 maps them to [0, 1]^2.
+            sum += (mirror ? 0.5 : 0.25) * w[size_t(i)] * w[size_t(j)] * g(ms.m);
+        }
+    }
+    return sum;
+}
+
+}  // namespace
+
+double microfacet_reflectance(const MicrofacetDistribution& distr, const Vec3& wi, float eta, int res) {
+    if (!(wi.z > 0.f)) return 0.0;
+    return visible_normal_expectation(distr, wi, res, [&](const Vec3& m) {
+        const Vec3 wo = reflect(wi, m);
+        if (!(wo.z > 0.f)) return 0.0;
+        return double(fresnel_dielectric(dot(wi, m), eta).F) * distr.G1(wo, m);
+    });
+}
+
+double microfacet_transmittance(const MicrofacetDistribution& distr, const Vec3& wi, float eta, int res) {
+    if (!(wi.z > 0.f)) return 0.0;
+    return visible_normal_expectation(distr, wi, res, [&](const Vec3& m) {
+        const FresnelDielectric fr = fresnel_dielectric(dot(wi, m), eta);
+        const Vec3 wo = refract(wi, m, fr.cos_theta_t, fr.eta_ti);
+        if (!(wo.z < 0.f)) return 0.0;
+        return double(1.f - fr.F) * distr.G1(wo, m);
+    });
 }
 
 }  // namespace rm

@@ -70,4 +70,22 @@ private:
     bool sample_visible_;
 };
 
+// Single-scattering directional albedos of a rough dielectric interface of
+// relative IOR eta (eta_t / eta_i as seen from wi, wi.z > 0) with this
+// distribution of smooth facets: the expectation over visible normals m
+// (Heitz & d'Eon 2014, eq. 2) of the Fresnel-weighted (Walter et al. 2007,
+// eqs. 20-21 integrated over wo) light that leaves the facet unmasked,
+//   reflectance(wi)   = E_m[F(wi.m) G1(wo_r, m)],       wo_r = reflect(wi, m), wo_r.z > 0,
+//   transmittance(wi) = E_m[(1 - F(wi.m)) G1(wo_t, m)], wo_t = refract(wi, m), wo_t.z < 0.
+// As Mitsuba 3's eval_reflectance / eval_transmittance
+// (include/mitsuba/render/microfacet.h), which roughplastic tabulates: a
+// res x res Gauss-Legendre product rule over the unit square of
+// sample_visible_normal()'s random numbers, so that the visible-normal
+// density is absorbed by the warp (for GGX the nodes are first taken through
+// Mitsuba's concentric disk map, so that both rules use the same normals).
+// The distribution's sample_visible flag is
+// not consulted (the visible normals are always used).
+double microfacet_reflectance(const MicrofacetDistribution& distr, const Vec3& wi, float eta, int res);
+double microfacet_transmittance(const MicrofacetDistribution& distr, const Vec3& wi, float eta, int res);
+
 }  // namespace rm

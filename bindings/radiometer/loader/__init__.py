@@ -52,6 +52,9 @@ bsdf       diffuse: reflectance [0.5]
            roughdielectric: as dielectric + the microfacet parameters
            plastic: diffuse_reflectance [0.5], specular_reflectance [1],
                int_ior ['polypropylene'], ext_ior ['air'], nonlinear [false]
+           roughplastic: as plastic + distribution ['beckmann'|'ggx'],
+               alpha [0.1] (alpha_u + alpha_v only if equal: isotropic, as
+               Mitsuba), sample_visible [true]; int_ior != ext_ior
            twosided: one or two nested reflective bsdfs (as Mitsuba: not
                dielectric, thindielectric, roughdielectric or null); null: none.
            An IOR is a float or one of the names in NAMED_IOR (any case).

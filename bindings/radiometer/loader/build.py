@@ -114,7 +114,7 @@ class _Builder:
             b.ext_ior = p.ior("ext_ior", "air")
             b.specular_reflectance = p.rgb("specular_reflectance", 1.0)
             b.specular_transmittance = p.rgb("specular_transmittance", 1.0)
-        elif t == "plastic":
+        elif t in ("plastic", "roughplastic"):
             b.diffuse_reflectance = p.rgb("diffuse_reflectance", 0.5)
             b.specular_reflectance = p.rgb("specular_reflectance", 1.0)
             b.int_ior = p.ior("int_ior", "polypropylene")
@@ -131,7 +131,7 @@ class _Builder:
                     raise p.error(f"a twosided bsdf nests only reflective bsdfs, got '{k.type}', which "
                                   f"transmits light", k.place)
             b.nested = [self.bsdf(k) for k in kids]
-        if t in ("roughconductor", "roughdielectric"):
+        if t in ("roughconductor", "roughdielectric", "roughplastic"):
             b.distribution = p.string("distribution", "beckmann", ("beckmann", "ggx"))
             if p.has("alpha") and (p.has("alpha_u") or p.has("alpha_v")):
                 raise p.error("give either alpha or alpha_u/alpha_v")
@@ -140,9 +140,14 @@ class _Builder:
             if p.has("alpha_u"):
                 b.alpha_u = p.float("alpha_u", check="positive")
                 b.alpha_v = p.float("alpha_v", check="positive")
+                if t == "roughplastic" and b.alpha_u != b.alpha_v:  # as Mitsuba
+                    raise p.error("parameters 'alpha_u' and 'alpha_v' differ: roughplastic supports only "
+                                  "isotropic roughness", node.props["alpha_v"].place)
             else:
                 b.alpha_u = b.alpha_v = p.float("alpha", 0.1, check="positive")
             b.sample_visible = p.bool("sample_visible", True)
+        if t == "roughplastic" and b.int_ior == b.ext_ior:  # as Mitsuba
+            raise p.error("parameters 'int_ior' and 'ext_ior' must differ")
         p.done()
         return b
 
