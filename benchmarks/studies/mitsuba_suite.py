@@ -108,8 +108,10 @@ def _load(path: Path):
         return load_file(path)  # the file does not take $integrator
 
 
-def protocol(path: Path, threads: int = 0) -> dict:
-    """Mitsuba's test on one scene (see the module docstring)."""
+def protocol(path: Path, threads: int = 0, change=None) -> dict:
+    """Mitsuba's test on one scene (see the module docstring). `change`
+    (a power check): a function that alters the loaded scene description
+    in place before it is rendered."""
     import warnings
 
     import numpy as np
@@ -121,6 +123,8 @@ def protocol(path: Path, threads: int = 0) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         desc = _load(path)
+        if change is not None:
+            change(desc)
         h, w = desc.sensor.height, desc.sensor.width
         spp = 2_000_000 // (h * w)
         res = rm.render(rm.Scene(desc), spp=spp, seed=0, threads=threads)

@@ -136,26 +136,24 @@ def main(argv=None):
     ap.add_argument("--long-run", default=None, help="read this run of the store for --long")
     a = ap.parse_args(argv)
     root = Path(a.results)
-    rid, recs = record.run_matrix(MATRIX, root, a.run, workers=2)
-    summary = summarise(recs)
-    for scene in summary:
-        png = root / "reports" / rid / f"{scene}-convergence.png"
-        if png.exists():
-            shutil.copy(png, record.RESULTS / f"mlt_wins_{scene}.png")
-    _print(summary)
-    params = {"matrix": str(MATRIX.relative_to(record.REPO)), "run": rid}
-    out = {"summary": summary, "curves": _curves(recs)}
-    if a.long:
-        lid, lrecs = record.run_matrix(LONG, root, a.long_run, workers=2)
-        lsum = summarise(lrecs)
-        for scene in lsum:
-            png = root / "reports" / lid / f"{scene}-convergence.png"
+
+    def run(matrix, run_id, prefix):
+        """The matrix run (or read), summarised, its convergence plots copied to results/<prefix>_<scene>.png."""
+        rid, recs = record.run_matrix(matrix, root, run_id, workers=2)
+        summary = summarise(recs)
+        for scene in summary:
+            png = root / "reports" / rid / f"{scene}-convergence.png"
             if png.exists():
-                shutil.copy(png, record.RESULTS / f"mlt_wins_long_{scene}.png")
+                shutil.copy(png, record.RESULTS / f"{prefix}_{scene}.png")
+        _print(summary)
+        return rid, {"summary": summary, "curves": _curves(recs)}
+
+    rid, out = run(MATRIX, a.run, "mlt_wins")
+    params = {"matrix": str(MATRIX.relative_to(record.REPO)), "run": rid}
+    if a.long:
         print("--long:")
-        _print(lsum)
+        lid, out["long"] = run(LONG, a.long_run, "mlt_wins_long")
         params.update(long_matrix=str(LONG.relative_to(record.REPO)), long_run=lid)
-        out["long"] = {"summary": lsum, "curves": _curves(lrecs)}
     record.write("mlt_wins", params, out)
 
 
