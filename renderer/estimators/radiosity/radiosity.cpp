@@ -131,6 +131,32 @@ struct Element {
     bool shoots() const { return rho.x > 0 || rho.y > 0 || rho.z > 0 || E.x > 0 || E.y > 0 || E.z > 0; }
 };
 
+// Hierarchical radiosity (Hanrahan, Salzman and Aupperle 1991, "A Rapid
+// Hierarchical Radiosity Algorithm"): a quadtree of elements over every
+// side of a patch (a mesh triangle splits at its edge midpoints into 4;
+// sphere and disk cells stay whole), links between elements at the level
+// the oracle asks for, gathering over the links and push-pull (sec. 4).
+struct HNode {
+    Patch g;       // geometry; g.first_point indexes Hierarchy::pts / nrm
+    int root = 0;  // its patch side (element 2 p + side), the root node's index
+    int parent = -1, child = -1;  // child: the first of 4 contiguous children; -1: a leaf
+    bool splittable = false;      // a triangle larger than min_area
+};
+struct HLink {
+    int r = 0, s = 0;  // receiver, sender
+    double F = 0;      // form factor F_rs (receiver-side estimate)
+};
+struct Hierarchy {
+    std::vector<HNode> nodes;  // nodes[e] for e < elements: the root of element e
+    std::vector<Vec3d> pts, nrm;
+    std::vector<HLink> links;
+    std::vector<double> scale;  // per node: the normalisation of a leaf's gathered factors
+    std::vector<char> closed;   // per root element
+    double min_area = 0;
+    int iterations = 0, rounds = 0;
+    size_t leaves = 0;
+};
+
 struct Solution {
     PatchMesh mesh;
     std::vector<Element> el;
@@ -146,7 +172,23 @@ struct Solution {
     double emitted = 0, absorbed = 0, escaped = 0, unshot = 0, residual = 0;
     uint64_t shots = 0, rays = 0;
     double seconds = 0, patch_size = 0;
+    bool hierarchical = false;
+    Hierarchy h;
+    // The element whose radiosity a value index e (into Bd, Bi, Blast) belongs
+    // to: itself, or under hierarchical refinement the root of node e.
+    size_t element_of(size_t e) const { return hierarchical ? size_t(h.nodes[e].root) : e; }
     std::vector<std::pair<std::string, double>> stats() const {
+        std::vector<std::pair<std::string, double>> s = base_stats();
+        if (hierarchical)
+            s.insert(s.end(), {{"hr_elements", double(h.leaves)},
+                               {"hr_nodes", double(h.nodes.size())},
+                               {"hr_links", double(h.links.size())},
+                               {"hr_iterations", double(h.iterations)},
+                               {"hr_rounds", double(h.rounds)},
+                               {"hr_min_area", h.min_area}});
+        return s;
+    }
+    std::vector<std::pair<std::string, double>> base_stats() const {
         return {{"patches", double(mesh.patches.size())},
                 {"elements", double(el.size())},
                 {"patch_size", patch_size},
@@ -170,6 +212,8 @@ public:
         double patch_size = 0;
         int max_patches = 1000, ff_samples = 2, max_depth = -1, gather_rays = 8, direct_samples = 8;
         double residual = 1e-3;
+        bool hierarchical = false;
+        double hr_epsilon = 1e-3, min_area = 0;
     };
     explicit RadiosityIntegrator(Config c) : c_(std::move(c)) {}
 
@@ -204,6 +248,12 @@ private:
                              uint64_t& rays) const;
     // The form-factor matrix (sol.G: F_ij at i * N + j), escape fractions; false when cancelled.
     bool form_factors(PassLoop& loop, Solution& sol, std::vector<uint64_t>& rays) const;
+    // Hierarchical refinement (Hanrahan et al. 1991): links, gathering, push-pull; false when cancelled.
+    bool solve_hierarchical(PassLoop& loop, Solution& sol) const;
+    void refine(Solution& sol, int r, int s, double b_scale, std::vector<HLink>& out) const;
+    void split(Solution& sol, int n) const;
+    // The node whose element holds the hit (its leaf under hierarchical refinement), or -1.
+    int value_index(const Scene& scene, const Solution& sol, const Interaction& h) const;
     Config c_;
 };
 
@@ -251,29 +301,38 @@ void RadiosityIntegrator::setup(const Scene& scene, Solution& sol) const {
     sol.Blast.assign(N, Vec3d());
 }
 
-// The receiver-side estimate of A_j F_ji for element j receiving from
-// element i: A_j times the mean over j's points y_t of the point-to-polygon
-// factor to i's polygon, each times the visibility of one ray to a point
-// of i (paired by index).
-double RadiosityIntegrator::receiver_estimate(const Scene& scene, const Solution& sol, size_t j, size_t i, float scale,
-                                              uint64_t& rays) const {
-    const PatchMesh& M = sol.mesh;
-    const Element &ei = sol.el[i], &ej = sol.el[j];
-    const Patch &pi = M.patches[size_t(ei.patch)], &pj = M.patches[size_t(ej.patch)];
-    const double si = ei.side ? -1.0 : 1.0, sj = ej.side ? -1.0 : 1.0;
+// One side of a surface piece as the form factor sees it: the geometry
+// (polygon, centre, front normal, areas), the side (+1 front, -1 back) and
+// its k sample points and front normals. Patches of the uniform mesh and
+// the elements of the hierarchical quadtrees are both read through it.
+struct SideView {
+    const Patch* p;
+    double side;
+    const Vec3d* pts;
+    const Vec3d* nrm;
+};
+
+// The receiver-side estimate of A_r F_rs for the receiver r gathering from
+// the sender s: a_r times the mean over r's k points y_t of the
+// point-to-polygon factor to s's polygon (Baum et al. 1989, eq. 5), each
+// times the visibility of one ray to a point of s (paired by index, shifted
+// by `pair`). With a_r = 1 it is the form factor F_rs itself.
+double receiver_factor(const Scene& scene, const SideView& snd, const SideView& rcv, int k, size_t pair, double a_r,
+                       float scale, uint64_t& rays) {
+    const Patch &pi = *snd.p, &pj = *rcv.p;
+    const double si = snd.side, sj = rcv.side;
     const Vec3d ni = pi.n * si;
-    const int k = M.k;
     auto eps_at = [&](const Vec3d& p) { return 1e-5f * scale + 4e-6f * max_component(abs(p.f())) + 1e-30f; };
     double acc = 0;
     for (int s = 0; s < k; ++s) {
-        const Vec3d& y = M.pts[pj.first_point + uint32_t(s)];
-        const Vec3d ny = M.nrm[pj.first_point + uint32_t(s)] * sj;
+        const Vec3d& y = rcv.pts[s];
+        const Vec3d ny = rcv.nrm[s] * sj;
         if (!(dot(y - pi.c, ni) > 0)) continue;  // behind the shooter's side
         double f = point_polygon_factor(y, ny, pi.v, pi.nv);
         if (!(f > 0)) continue;
-        const uint32_t xs = uint32_t((size_t(s) + i + j) % size_t(k));
-        const Vec3d& x = M.pts[pi.first_point + xs];
-        const Vec3d nx = M.nrm[pi.first_point + xs] * si;
+        const uint32_t xs = uint32_t((size_t(s) + pair) % size_t(k));
+        const Vec3d& x = snd.pts[xs];
+        const Vec3d nx = snd.nrm[xs] * si;
         Vec3d o = y + ny * double(eps_at(y)), to = x + nx * double(eps_at(x));
         Vec3d d = to - o;
         double dist = length(d);
@@ -288,8 +347,57 @@ double RadiosityIntegrator::receiver_estimate(const Scene& scene, const Solution
         }
         acc += f;
     }
-    double g = acc / k * pi.poly_scale * pj.area;
+    double g = acc / k * pi.poly_scale * a_r;
     return std::isfinite(g) ? g : 0.0;
+}
+
+// Whether the side `v` is closed: at most 1 % of about kEscapeRays
+// stratified cosine-distributed rays from its k points (and a ring just
+// above the horizon) leave the scene (rays slipping through the seams
+// between touching shapes must not open a closed box).
+bool side_is_closed(const Scene& scene, const SideView& v, int k, float R, uint64_t& rays) {
+    const double si = v.side;
+    int q = std::max(1, int(std::lround(std::sqrt(double(kEscapeRays) / k))));
+    int cast = 0, escaped = 0;
+    for (int s = 0; s < k; ++s) {
+        const Vec3d& x = v.pts[s];
+        Vec3 nx = (v.nrm[s] * si).f();
+        Frame fr(nx);
+        // q x q cosine-distributed directions, then a ring just above the
+        // horizon (where a cell-centred grid never looks: an open
+        // scene's light may leave only at grazing angles).
+        for (int a = 0; a < q + 1; ++a)
+            for (int b = 0; b < q; ++b) {
+                Vec3 w;
+                if (a < q) {
+                    w = fr.to_world(warp::square_to_cosine_hemisphere(Vec2((a + 0.5f) / q, (b + 0.5f) / q)));
+                } else {
+                    float phi = 2.f * kPi * (b + 0.5f) / q, ct = 0.02f, st = std::sqrt(1.f - ct * ct);
+                    w = fr.to_world(Vec3(st * std::cos(phi), st * std::sin(phi), ct));
+                }
+                Ray r;
+                r.o = (x + Vec3d(nx) * double(1e-5f * R + 4e-6f * max_component(abs(x.f())))).f();
+                r.d = w;
+                ++rays;
+                ++cast;
+                if (!scene.occluded(r)) ++escaped;
+            }
+    }
+    return escaped * 100 <= cast;
+}
+
+SideView side_view(const PatchMesh& M, const Element& e) {
+    const Patch& p = M.patches[size_t(e.patch)];
+    return {&p, e.side ? -1.0 : 1.0, &M.pts[p.first_point], &M.nrm[p.first_point]};
+}
+
+// The receiver-side estimate of A_j F_ji for element j receiving from element i.
+double RadiosityIntegrator::receiver_estimate(const Scene& scene, const Solution& sol, size_t j, size_t i, float scale,
+                                              uint64_t& rays) const {
+    const PatchMesh& M = sol.mesh;
+    const Element &ei = sol.el[i], &ej = sol.el[j];
+    return receiver_factor(scene, side_view(M, ei), side_view(M, ej), M.k, i + j,
+                           M.patches[size_t(ej.patch)].area, scale, rays);
 }
 
 bool RadiosityIntegrator::form_factors(PassLoop& loop, Solution& sol, std::vector<uint64_t>& rays) const {
@@ -322,38 +430,7 @@ bool RadiosityIntegrator::form_factors(PassLoop& loop, Solution& sol, std::vecto
             sol.G[i * N + j] = g;
         }
         // Escape test: stratified cosine-distributed rays from i's points.
-        const Patch& pi = M.patches[size_t(ei.patch)];
-        const double si = ei.side ? -1.0 : 1.0;
-        const int k = M.k;
-        int q = std::max(1, int(std::lround(std::sqrt(double(kEscapeRays) / k))));
-        int cast = 0, escaped = 0;
-        for (int s = 0; s < k; ++s) {
-            const Vec3d& x = M.pts[pi.first_point + uint32_t(s)];
-            Vec3 nx = (M.nrm[pi.first_point + uint32_t(s)] * si).f();
-            Frame fr(nx);
-            // q x q cosine-distributed directions, then a ring just above the
-            // horizon (where a cell-centred grid never looks: an open
-            // scene's light may leave only at grazing angles).
-            for (int a = 0; a < q + 1; ++a)
-                for (int b = 0; b < q; ++b) {
-                    Vec3 w;
-                    if (a < q) {
-                        w = fr.to_world(warp::square_to_cosine_hemisphere(Vec2((a + 0.5f) / q, (b + 0.5f) / q)));
-                    } else {
-                        float phi = 2.f * kPi * (b + 0.5f) / q, ct = 0.02f, st = std::sqrt(1.f - ct * ct);
-                        w = fr.to_world(Vec3(st * std::cos(phi), st * std::sin(phi), ct));
-                    }
-                    Ray r;
-                    r.o = (x + Vec3d(nx) * double(1e-5f * R + 4e-6f * max_component(abs(x.f())))).f();
-                    r.d = w;
-                    ++rays[size_t(t)];
-                    ++cast;
-                    if (!scene.occluded(r)) ++escaped;
-                }
-        }
-        // Closed: at most 1 % of the rays left (rays slipping through the
-        // seams between touching shapes must not open a closed box).
-        sol.closed[i] = escaped * 100 <= cast ? 1 : 0;
+        sol.closed[i] = side_is_closed(scene, side_view(M, ei), M.k, R, rays[size_t(t)]) ? 1 : 0;
     });
     if (!done) return false;
     for (size_t i = 0; i < N; ++i)
@@ -524,6 +601,11 @@ void RadiosityIntegrator::vertex_values(Solution& sol) {
 bool RadiosityIntegrator::solve(PassLoop& loop, Solution& sol) const {
     auto t0 = std::chrono::steady_clock::now();
     setup(loop.scene(), sol);
+    if (c_.hierarchical) {
+        if (!solve_hierarchical(loop, sol)) return false;
+        sol.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        return true;
+    }
     const size_t N = sol.el.size();
     const double bytes = double(N) * double(N) * sizeof(double);
     if (bytes > 3e9)
@@ -611,22 +693,353 @@ bool RadiosityIntegrator::solve(PassLoop& loop, Solution& sol) const {
     return true;
 }
 
+// Whether r and s can exchange light at all: some corner of each lies
+// strictly in front of the other's side (coplanar or back-to-back pieces
+// have no form factor).
+bool facing(const HNode& r, double sr, const HNode& s, double ss, double tol) {
+    auto front = [&](const Patch& a, double sa, const Patch& b) {
+        const Vec3d n = a.n * sa;
+        for (int i = 0; i < b.nv; ++i)
+            if (dot(b.v[i] - a.c, n) > tol) return true;
+        return false;
+    };
+    return front(r.g, sr, s.g) && front(s.g, ss, r.g);
+}
+
+// Splits triangle node n at its edge midpoints into 4 children, each with
+// the m^2 sample points build_patches gives a triangle (the centroids of its
+// m x m similar sub-triangles); they start from n's radiosity (the oracle's).
+void RadiosityIntegrator::split(Solution& sol, int n) const {
+    Hierarchy& h = sol.h;
+    const int m = c_.ff_samples;
+    const Patch g = h.nodes[size_t(n)].g;
+    const Vec3d a = g.v[0], b = g.v[1], c = g.v[2];
+    const Vec3d ab = (a + b) * 0.5, bc = (b + c) * 0.5, ca = (c + a) * 0.5;
+    const Vec3d tri[4][3] = {{a, ab, ca}, {ab, b, bc}, {ca, bc, c}, {ab, bc, ca}};
+    h.nodes[size_t(n)].child = int(h.nodes.size());
+    for (int k = 0; k < 4; ++k) {
+        HNode ch;
+        ch.root = h.nodes[size_t(n)].root;
+        ch.parent = n;
+        ch.g.shape = g.shape;
+        ch.g.nv = 3;
+        for (int i = 0; i < 3; ++i) ch.g.v[i] = tri[k][i];
+        ch.g.area = g.area * 0.25;
+        ch.g.n = g.n;
+        ch.g.c = (tri[k][0] + tri[k][1] + tri[k][2]) * (1.0 / 3.0);
+        ch.g.poly_scale = 1.0;
+        ch.g.first_point = uint32_t(h.pts.size());
+        const Vec3d g1 = (tri[k][1] - tri[k][0]) * (1.0 / m), g2 = (tri[k][2] - tri[k][0]) * (1.0 / m);
+        for (int s = 0; s < m; ++s)
+            for (int t = 0; t < m - s; ++t) {
+                h.pts.push_back(tri[k][0] + g1 * (s + 1.0 / 3.0) + g2 * (t + 1.0 / 3.0));
+                h.nrm.push_back(g.n);
+                if (s + t <= m - 2) {
+                    h.pts.push_back(tri[k][0] + g1 * (s + 2.0 / 3.0) + g2 * (t + 2.0 / 3.0));
+                    h.nrm.push_back(g.n);
+                }
+            }
+        ch.splittable = ch.g.area > h.min_area;
+        h.nodes.push_back(ch);
+        for (std::vector<Vec3d>* v : {&sol.Bd, &sol.Bi, &sol.Blast}) v->push_back((*v)[size_t(n)]);
+    }
+    h.scale.resize(h.nodes.size(), 1.0);
+}
+
+// Hanrahan et al. 1991, fig. 3 (Refine), with the radiosity-weighted oracle
+// of their sec. 4.3 ("BF refinement"): the error of receiver r's radiosity
+// through the link is about rho_r B_s F, F estimated unoccluded both ways
+// by the point-to-polygon closed form from each centre to the other's
+// polygon (F_rs large: s looks large from r, split s; F_sr large: split r).
+// Below hr_epsilon (B_s relative to b_scale, the brightest emission), or
+// with neither end splittable (min_area), r and s are linked.
+void RadiosityIntegrator::refine(Solution& sol, int r, int s, double b_scale, std::vector<HLink>& out) const {
+    Hierarchy& h = sol.h;
+    const HNode &nr = h.nodes[size_t(r)], &ns = h.nodes[size_t(s)];
+    const Element &er = sol.el[size_t(nr.root)], &es = sol.el[size_t(ns.root)];
+    const double sr = er.side ? -1.0 : 1.0, ss = es.side ? -1.0 : 1.0;
+    const bool split_r = nr.splittable, split_s = ns.splittable;
+    const double w = b_scale > 0 ? avg(er.rho) * avg(sol.Bd[size_t(s)] + sol.Bi[size_t(s)] + es.E) / b_scale : 0.0;
+    double f_rs = 0, f_sr = 0;
+    if (w > 0 && (split_r || split_s)) {
+        f_rs = point_polygon_factor(nr.g.c, nr.g.n * sr, ns.g.v, ns.g.nv) * ns.g.poly_scale;
+        f_sr = point_polygon_factor(ns.g.c, ns.g.n * ss, nr.g.v, nr.g.nv) * nr.g.poly_scale;
+    }
+    if (!(w * std::max(f_rs, f_sr) > c_.hr_epsilon)) {
+        out.push_back({r, s, 0.0});
+        return;
+    }
+    if (out.size() > size_t(50'000'000))
+        throw std::invalid_argument("integrator 'radiosity': hierarchical refinement made more than 5e7 links; "
+                                    "raise hr_epsilon or min_area");
+    const double tol = 1e-9 * std::sqrt(std::max(nr.g.area, ns.g.area));
+    if ((f_rs >= f_sr && split_s) || !split_r) {
+        if (h.nodes[size_t(s)].child < 0) split(sol, s);
+        const int c0 = h.nodes[size_t(s)].child;
+        for (int k = 0; k < 4; ++k)
+            if (facing(h.nodes[size_t(r)], sr, h.nodes[size_t(c0 + k)], ss, tol)) refine(sol, r, c0 + k, b_scale, out);
+    } else {
+        if (h.nodes[size_t(r)].child < 0) split(sol, r);
+        const int c0 = h.nodes[size_t(r)].child;
+        for (int k = 0; k < 4; ++k)
+            if (facing(h.nodes[size_t(c0 + k)], sr, h.nodes[size_t(s)], ss, tol)) refine(sol, c0 + k, s, b_scale, out);
+    }
+}
+
+bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) const {
+    const Scene& scene = loop.scene();
+    sol.hierarchical = true;
+    Hierarchy& h = sol.h;
+    const PatchMesh& M = sol.mesh;
+    const size_t N = sol.el.size();
+    Vec3 bc;
+    float R;
+    scene.bounding_sphere(bc, R);
+    std::vector<uint64_t> rays(size_t(loop.threads()), 0);
+    // The roots: every patch side as it is (a copy of its points).
+    double largest = 0;
+    for (size_t e = 0; e < N; ++e) {
+        const Patch& p = M.patches[size_t(sol.el[e].patch)];
+        HNode n;
+        n.g = p;
+        n.root = int(e);
+        n.g.first_point = uint32_t(h.pts.size());
+        for (int t = 0; t < M.k; ++t) {
+            h.pts.push_back(M.pts[p.first_point + uint32_t(t)]);
+            h.nrm.push_back(M.nrm[p.first_point + uint32_t(t)]);
+        }
+        n.splittable = M.cuts[size_t(p.shape)].kind == 0 && p.nv == 3;
+        if (n.splittable) largest = std::max(largest, p.area);
+        h.nodes.push_back(n);
+    }
+    // min_area 0: 4 levels below the largest triangle (1/256 of its area).
+    h.min_area = c_.min_area > 0 ? c_.min_area : largest / 256.0;
+    for (HNode& n : h.nodes) n.splittable = n.splittable && n.g.area > h.min_area;
+    h.scale.assign(N, 1.0);
+    // Closed roots (the escape test of the uniform mesh); their leaves inherit it.
+    h.closed.assign(N, 0);
+    if (!loop.parallel_for(N, [&](size_t e, int t) {
+            SideView v{&M.patches[size_t(sol.el[e].patch)], sol.el[e].side ? -1.0 : 1.0,
+                       &M.pts[M.patches[size_t(sol.el[e].patch)].first_point],
+                       &M.nrm[M.patches[size_t(sol.el[e].patch)].first_point]};
+            h.closed[e] = side_is_closed(scene, v, M.k, R, rays[size_t(t)]) ? 1 : 0;
+        }))
+        return false;
+    double b_scale = 0, emitted = 0;
+    for (size_t e = 0; e < N; ++e) {
+        b_scale = std::max(b_scale, avg(sol.el[e].E));
+        emitted += avg(sol.el[e].E) * M.patches[size_t(sol.el[e].patch)].area;
+    }
+    sol.emitted = emitted;
+    // Per node: B (radiosity), the reflected part split as the effect
+    // classes need it; the oracle reads the current solution (Bd + Bi + E).
+    std::vector<Vec3d> Rr, Rold, Hown, Hd;
+    auto view = [&](int n) {
+        const HNode& x = h.nodes[size_t(n)];
+        return SideView{&x.g, sol.el[size_t(x.root)].side ? -1.0 : 1.0, &h.pts[x.g.first_point],
+                        &h.nrm[x.g.first_point]};
+    };
+    const int max_rounds = 6;
+    std::vector<HLink> next, fresh;
+    for (int round = 0; round < max_rounds; ++round) {
+        sol.Bd.resize(h.nodes.size());
+        sol.Bi.resize(h.nodes.size());
+        sol.Blast.resize(h.nodes.size());
+        // 1. Refine (Hanrahan et al. 1991, fig. 3): the first round from every
+        //    pair of root elements that face each other, later rounds every
+        //    link again against the solution of the round before.
+        next.clear();
+        fresh.clear();
+        size_t changed = 0;
+        if (round == 0) {
+            const double tol0 = 1e-9;
+            for (size_t r = 0; r < N; ++r)
+                for (size_t s = 0; s < N; ++s) {
+                    if (sol.el[r].patch == sol.el[s].patch) continue;
+                    const double sr = sol.el[r].side ? -1.0 : 1.0, ss = sol.el[s].side ? -1.0 : 1.0;
+                    const double tol = tol0 * std::sqrt(std::max(h.nodes[r].g.area, h.nodes[s].g.area));
+                    if (facing(h.nodes[r], sr, h.nodes[s], ss, tol)) refine(sol, int(r), int(s), b_scale, fresh);
+                }
+            changed = 1;
+        } else {
+            for (const HLink& l : h.links) {
+                const size_t before = fresh.size();
+                refine(sol, l.r, l.s, b_scale, fresh);
+                if (fresh.size() == before + 1 && fresh.back().r == l.r && fresh.back().s == l.s) {
+                    fresh.pop_back();  // kept as it was: its factor is known
+                    next.push_back(l);
+                } else {
+                    ++changed;
+                }
+            }
+        }
+        if (!changed) break;
+        h.rounds = round + 1;
+        // 2. The new links' form factors (the receiver-side estimate of the
+        //    uniform mesh), in parallel; each depends only on its own pair.
+        if (!loop.parallel_for(fresh.size(), [&](size_t i, int t) {
+                HLink& l = fresh[i];
+                l.F = receiver_factor(scene, view(l.s), view(l.r), M.k, size_t(l.r) + size_t(l.s), 1.0, R,
+                                      rays[size_t(t)]);
+            }))
+            return false;
+        for (const HLink& l : fresh)
+            if (l.F > 0) next.push_back(l);
+        // Links in a fixed order (receiver, sender): the gather's sums do not
+        // depend on how the rounds found them.
+        std::sort(next.begin(), next.end(), [](const HLink& a, const HLink& b) {
+            return a.r != b.r ? a.r < b.r : a.s < b.s;
+        });
+        h.links.swap(next);
+        // 3. Conservation: a closed leaf's factors (its own links and its
+        //    ancestors') sum to 1; an open leaf's at most 1.
+        const size_t Nn = h.nodes.size();
+        std::vector<double> fsum(Nn, 0.0);
+        for (const HLink& l : h.links) fsum[size_t(l.r)] += l.F;
+        h.leaves = 0;
+        for (size_t n = 0; n < Nn; ++n) {
+            const HNode& x = h.nodes[n];
+            if (x.parent >= 0) fsum[n] += fsum[size_t(x.parent)];
+            if (x.child >= 0) continue;
+            ++h.leaves;
+            const double f = fsum[n];
+            h.scale[n] = (h.closed[size_t(x.root)] && f > 0) || f > 1.0 ? 1.0 / f : 1.0;
+        }
+        // 4. Solve by Jacobi iteration (Hanrahan et al. 1991, sec. 4:
+        //    gather over links, push the gathered irradiance down to the
+        //    leaves, B = E + rho H there, pull the area-weighted mean up).
+        //    Iteration g holds the paths of g reflections: max_depth D takes
+        //    D - 1 of them; unbounded, until the unshot power is at most
+        //    `residual` of the emitted.
+        auto gather = [&](const std::vector<Vec3d>& Bsrc, bool with_e, std::vector<Vec3d>& Hleaf) {
+            Hown.assign(Nn, Vec3d());
+            for (const HLink& l : h.links) {
+                const Vec3d b = with_e ? Bsrc[size_t(l.s)] + sol.el[size_t(h.nodes[size_t(l.s)].root)].E
+                                       : sol.el[size_t(h.nodes[size_t(l.s)].root)].E;
+                Hown[size_t(l.r)] = Hown[size_t(l.r)] + b * l.F;
+            }
+            Hleaf.assign(Nn, Vec3d());
+            for (size_t n = 0; n < Nn; ++n) {
+                const HNode& x = h.nodes[n];
+                Hleaf[n] = Hown[n] + (x.parent >= 0 ? Hleaf[size_t(x.parent)] : Vec3d());
+            }
+            for (size_t n = 0; n < Nn; ++n) Hleaf[n] = Hleaf[n] * h.scale[n];
+        };
+        auto pull = [&](std::vector<Vec3d>& v) {
+            for (size_t n = Nn; n-- > 0;) {
+                const HNode& x = h.nodes[n];
+                if (x.child < 0) continue;
+                Vec3d acc;
+                for (int k = 0; k < 4; ++k)
+                    acc = acc + v[size_t(x.child + k)] * h.nodes[size_t(x.child + k)].g.area;
+                v[n] = acc * (1.0 / x.g.area);
+            }
+        };
+        auto rho_of = [&](size_t n) { return sol.el[size_t(h.nodes[n].root)].rho; };
+        // Direct: one reflection of the emission.
+        std::vector<Vec3d> Hl;
+        gather(Rr, false, Hd);
+        std::vector<Vec3d> Rd(Nn);
+        for (size_t n = 0; n < Nn; ++n)
+            if (h.nodes[n].child < 0) Rd[n] = mul(rho_of(n), Hd[n]);
+        pull(Rd);
+        Rr.assign(Nn, Vec3d());
+        Rold.assign(Nn, Vec3d());
+        const int iters = c_.max_depth < 0 ? 10000 : std::max(0, c_.max_depth - 1);
+        const double target = c_.residual * emitted;
+        double absorbed = 0, escaped = 0, unshot = emitted;
+        h.iterations = 0;
+        for (int it = 0; it < iters; ++it) {
+            gather(Rr, true, Hl);
+            // The books of this step (B_old = E + Rr, B_new = E + rho H):
+            // absorbed sum A (1 - rho) H, escaped sum A B_old - sum A H (what
+            // left and arrived nowhere), unshot sum A (B_new - B_old).
+            double arrive = 0, leave = 0, absb = 0, uns = 0;
+            Rold = Rr;
+            for (size_t n = 0; n < Nn; ++n) {
+                const HNode& x = h.nodes[n];
+                if (x.child >= 0) continue;
+                const double A = x.g.area;
+                const Vec3d Bold = sol.el[size_t(x.root)].E + Rr[n], kept = mul(rho_of(n), Hl[n]);
+                arrive += A * avg(Hl[n]);
+                leave += A * avg(Bold);
+                absb += A * (avg(Hl[n]) - avg(kept));
+                uns += A * (avg(kept) - avg(Rr[n]));
+                Rr[n] = kept;
+            }
+            pull(Rr);
+            absorbed = absb;
+            escaped = leave - arrive;
+            unshot = uns;
+            ++h.iterations;
+            if (c_.max_depth < 0 && std::fabs(uns) <= target) break;
+            if (loop.cancelled()) return false;
+        }
+        // 5. The effect classes per node: direct, the rest, and the last
+        //    bounce on its own where max_depth D makes it D - 1 >= 2.
+        const bool last = c_.max_depth > 0 && c_.max_depth - 1 >= 2 && h.iterations == c_.max_depth - 1;
+        for (size_t n = 0; n < Nn; ++n) {
+            if (h.iterations == 0) {
+                sol.Bd[n] = sol.Bi[n] = sol.Blast[n] = Vec3d();
+                continue;
+            }
+            const Vec3d upto = last ? Rold[n] : Rr[n];
+            sol.Bd[n] = Rd[n];
+            auto pos = [](const Vec3d& v) { return Vec3d(std::max(0.0, v.x), std::max(0.0, v.y), std::max(0.0, v.z)); };
+            sol.Bi[n] = pos(upto - Rd[n]);
+            sol.Blast[n] = last ? pos(Rr[n] - Rold[n]) : Vec3d();
+        }
+        sol.absorbed = absorbed;
+        sol.escaped = escaped;
+        sol.unshot = unshot;
+        sol.residual = emitted > 0 ? unshot / emitted : 0.0;
+        sol.shots = uint64_t(h.iterations);
+    }
+    sol.closed.assign(h.closed.begin(), h.closed.end());
+    for (uint64_t r : rays) sol.rays += r;
+    return true;
+}
+
+int RadiosityIntegrator::value_index(const Scene& scene, const Solution& sol, const Interaction& hit) const {
+    int p = sol.mesh.locate(scene, hit);
+    if (p < 0) return -1;
+    int e = 2 * p + (dot(hit.wi, hit.n) >= 0.f ? 0 : 1);
+    if (!sol.hierarchical) return e;
+    // Down the quadtree: the child whose triangle holds the hit (the
+    // largest smallest barycentric coordinate, robust at the edges).
+    const Vec3d x(hit.p);
+    while (sol.h.nodes[size_t(e)].child >= 0) {
+        const int c0 = sol.h.nodes[size_t(e)].child;
+        int best = c0;
+        double best_w = -1e300;
+        for (int k = 0; k < 4; ++k) {
+            const Patch& g = sol.h.nodes[size_t(c0 + k)].g;
+            const Vec3d e1 = g.v[1] - g.v[0], e2 = g.v[2] - g.v[0], w = x - g.v[0];
+            const double a11 = dot(e1, e1), a12 = dot(e1, e2), a22 = dot(e2, e2), det = a11 * a22 - a12 * a12;
+            if (!(det > 0)) continue;
+            const double b1 = (a22 * dot(w, e1) - a12 * dot(w, e2)) / det;
+            const double b2 = (a11 * dot(w, e2) - a12 * dot(w, e1)) / det;
+            const double mn = std::min({b1, b2, 1.0 - b1 - b2});
+            if (mn > best_w) best_w = mn, best = c0 + k;
+        }
+        e = best;
+    }
+    return e;
+}
+
 void RadiosityIntegrator::shade(const Scene& scene, const Solution& sol, Sampler& sampler, const Ray& ray,
                                 EffectRadiance& out, ThreadStats& stats) const {
     ++stats.rays;
     ++stats.paths;
     Interaction it;
     if (!scene.intersect(ray, it)) return;  // no environment: refused by check_scene
-    auto element = [&](const Interaction& h) -> int {
-        int p = sol.mesh.locate(scene, h);
-        if (p < 0) return -1;
-        return 2 * p + (dot(h.wi, h.n) >= 0.f ? 0 : 1);
-    };
+    // The value the hit reads: its element's, or its leaf's under hierarchical refinement.
+    auto element = [&](const Interaction& h) -> int { return value_index(scene, sol, h); };
     if (c_.display == "patch") {
         int e = element(it);
         if (e < 0) return;
         const float inv_pi = kInvPi;
-        if (mask[kEmission]) out.add(kEmission, to_color(sol.el[size_t(e)].E) * inv_pi);
+        if (mask[kEmission]) out.add(kEmission, to_color(sol.el[sol.element_of(size_t(e))].E) * inv_pi);
         if (c_.max_depth < 0 || c_.max_depth >= 2)
             if (mask[kDirect]) out.add(kDirect, to_color(sol.Bd[size_t(e)]) * inv_pi);
         if (mask[kIndirect]) out.add(kIndirect, to_color(sol.Bi[size_t(e)] + sol.Blast[size_t(e)]) * inv_pi);
@@ -727,6 +1140,19 @@ RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions&
         ParamSpec::integer("gather_rays", 8, "final-gather rays per camera sample ('gather')")
             .at_least(1)
             .at_most(4096),
+        ParamSpec::boolean("hierarchical", false,
+                           "hierarchical refinement (Hanrahan et al. 1991): a quadtree of elements over every "
+                           "triangle patch, linked at the level the oracle asks for; display 'patch' shows its "
+                           "leaves"),
+        ParamSpec::real("hr_epsilon", 1e-3,
+                        "hierarchical: link when rho_r B_s F / (the brightest emitted radiosity) is at most this "
+                        "(F estimated unoccluded both ways)")
+            .greater_than(0.0)
+            .at_most(1.0),
+        ParamSpec::real("min_area", 0.0,
+                        "hierarchical: elements of at most this area (scene units^2) are not split (0: 1/256 of "
+                        "the largest triangle patch's area)")
+            .at_least(0.0),
     };
     e.caps.driver = Driver::OwnPasses;
     e.caps.bias = Bias::Biased;
@@ -741,6 +1167,16 @@ RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions&
         c.max_depth = p.get_int("max_depth");
         c.gather_rays = p.get_int("gather_rays");
         c.direct_samples = p.get_int("direct_samples");
+        c.hierarchical = p.get_bool("hierarchical");
+        c.hr_epsilon = p.get_float("hr_epsilon");
+        c.min_area = p.get_float("min_area");
+        if (!c.hierarchical && (c.hr_epsilon != double(float(1e-3)) || c.min_area != 0.0))
+            p.fail(c.min_area != 0.0 ? "min_area" : "hr_epsilon",
+                   "hr_epsilon and min_area only apply with hierarchical = true");
+        if (c.hierarchical && c.display == "vertex")
+            p.fail("display",
+                   "display 'vertex' is not available with hierarchical = true (the quadtrees' leaves share no "
+                   "mesh vertices); use 'patch' or 'gather'");
         return std::make_unique<RadiosityIntegrator>(c);
     };
     return e;
