@@ -90,6 +90,10 @@ namespace {
 
 constexpr double kPiD = 3.14159265358979323846;
 constexpr int kEscapeRays = 256;  // per element, over its sample points (plus a ring at the horizon)
+// Hierarchical refinement: rounds of refine-and-solve at most, and the share
+// of hr_epsilon at which a partly occluded link is refined.
+constexpr int kMaxRounds = 8;
+constexpr double kPartialShare = 0.125;
 
 Vec3d unit(const Vec3d& v) {
     double l = length(v);
@@ -145,6 +149,7 @@ struct HNode {
 struct HLink {
     int r = 0, s = 0;  // receiver, sender
     double F = 0;      // form factor F_rs (receiver-side estimate)
+    bool partial = false;  // some of its visibility rays blocked, some not
 };
 struct Hierarchy {
     std::vector<HNode> nodes;  // nodes[e] for e < elements: the root of element e
@@ -213,7 +218,7 @@ public:
         int max_patches = 1000, ff_samples = 2, max_depth = -1, gather_rays = 8, direct_samples = 8;
         double residual = 1e-3;
         bool hierarchical = false;
-        double hr_epsilon = 1e-3, min_area = 0;
+        double hr_epsilon = 0.05, min_area = 0;
     };
     explicit RadiosityIntegrator(Config c) : c_(std::move(c)) {}
 
@@ -250,7 +255,7 @@ private:
     bool form_factors(PassLoop& loop, Solution& sol, std::vector<uint64_t>& rays) const;
     // Hierarchical refinement (Hanrahan et al. 1991): links, gathering, push-pull; false when cancelled.
     bool solve_hierarchical(PassLoop& loop, Solution& sol) const;
-    void refine(Solution& sol, int r, int s, double b_scale, std::vector<HLink>& out) const;
+    void refine(Solution& sol, int r, int s, double b_scale, bool partial, std::vector<HLink>& out) const;
     void split(Solution& sol, int n) const;
     // The node whose element holds the hit (its leaf under hierarchical refinement), or -1.
     int value_index(const Scene& scene, const Solution& sol, const Interaction& h) const;
@@ -316,9 +321,10 @@ struct SideView {
 // the sender s: a_r times the mean over r's k points y_t of the
 // point-to-polygon factor to s's polygon (Baum et al. 1989, eq. 5), each
 // times the visibility of one ray to a point of s (paired by index, shifted
-// by `pair`). With a_r = 1 it is the form factor F_rs itself.
+// by `pair`). With a_r = 1 it is the form factor F_rs itself; `blocked`
+// (if given) counts the rays that were occluded.
 double receiver_factor(const Scene& scene, const SideView& snd, const SideView& rcv, int k, size_t pair, double a_r,
-                       float scale, uint64_t& rays) {
+                       float scale, uint64_t& rays, int* blocked = nullptr) {
     const Patch &pi = *snd.p, &pj = *rcv.p;
     const double si = snd.side, sj = rcv.side;
     const Vec3d ni = pi.n * si;
@@ -343,7 +349,10 @@ double receiver_factor(const Scene& scene, const SideView& snd, const SideView& 
             r.d = (d * (1.0 / dist)).f();
             r.tmin = 0.f;
             r.tmax = float(dist) * (1.f - 1e-5f);
-            if (scene.occluded(r)) continue;
+            if (scene.occluded(r)) {
+                if (blocked) ++*blocked;
+                continue;
+            }
         }
         acc += f;
     }
@@ -751,9 +760,13 @@ void RadiosityIntegrator::split(Solution& sol, int n) const {
 // through the link is about rho_r B_s F, F estimated unoccluded both ways
 // by the point-to-polygon closed form from each centre to the other's
 // polygon (F_rs large: s looks large from r, split s; F_sr large: split r).
-// Below hr_epsilon (B_s relative to b_scale, the brightest emission), or
-// with neither end splittable (min_area), r and s are linked.
-void RadiosityIntegrator::refine(Solution& sol, int r, int s, double b_scale, std::vector<HLink>& out) const {
+// Below hr_epsilon (B_s relative to b_scale, the emitted power spread over
+// all surfaces: a typical radiosity), or with neither end splittable
+// (min_area), r and s are linked. A link found partly occluded (a shadow
+// boundary crosses it) is refined at kPartialShare of the threshold (our
+// rule: the oracle is unoccluded and would not see the shadow).
+void RadiosityIntegrator::refine(Solution& sol, int r, int s, double b_scale, bool partial,
+                                 std::vector<HLink>& out) const {
     Hierarchy& h = sol.h;
     const HNode &nr = h.nodes[size_t(r)], &ns = h.nodes[size_t(s)];
     const Element &er = sol.el[size_t(nr.root)], &es = sol.el[size_t(ns.root)];
@@ -765,7 +778,7 @@ void RadiosityIntegrator::refine(Solution& sol, int r, int s, double b_scale, st
         f_rs = point_polygon_factor(nr.g.c, nr.g.n * sr, ns.g.v, ns.g.nv) * ns.g.poly_scale;
         f_sr = point_polygon_factor(ns.g.c, ns.g.n * ss, nr.g.v, nr.g.nv) * nr.g.poly_scale;
     }
-    if (!(w * std::max(f_rs, f_sr) > c_.hr_epsilon)) {
+    if (!(w * std::max(f_rs, f_sr) > c_.hr_epsilon * (partial ? kPartialShare : 1.0))) {
         out.push_back({r, s, 0.0});
         return;
     }
@@ -777,12 +790,12 @@ void RadiosityIntegrator::refine(Solution& sol, int r, int s, double b_scale, st
         if (h.nodes[size_t(s)].child < 0) split(sol, s);
         const int c0 = h.nodes[size_t(s)].child;
         for (int k = 0; k < 4; ++k)
-            if (facing(h.nodes[size_t(r)], sr, h.nodes[size_t(c0 + k)], ss, tol)) refine(sol, r, c0 + k, b_scale, out);
+            if (facing(h.nodes[size_t(r)], sr, h.nodes[size_t(c0 + k)], ss, tol)) refine(sol, r, c0 + k, b_scale, false, out);
     } else {
         if (h.nodes[size_t(r)].child < 0) split(sol, r);
         const int c0 = h.nodes[size_t(r)].child;
         for (int k = 0; k < 4; ++k)
-            if (facing(h.nodes[size_t(c0 + k)], sr, h.nodes[size_t(s)], ss, tol)) refine(sol, c0 + k, s, b_scale, out);
+            if (facing(h.nodes[size_t(c0 + k)], sr, h.nodes[size_t(s)], ss, tol)) refine(sol, c0 + k, s, b_scale, false, out);
     }
 }
 
@@ -825,12 +838,13 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
             h.closed[e] = side_is_closed(scene, v, M.k, R, rays[size_t(t)]) ? 1 : 0;
         }))
         return false;
-    double b_scale = 0, emitted = 0;
+    double total_area = 0, emitted = 0;
     for (size_t e = 0; e < N; ++e) {
-        b_scale = std::max(b_scale, avg(sol.el[e].E));
         emitted += avg(sol.el[e].E) * M.patches[size_t(sol.el[e].patch)].area;
+        if (sol.el[e].side == 0) total_area += M.patches[size_t(sol.el[e].patch)].area;
     }
     sol.emitted = emitted;
+    const double b_scale = total_area > 0 ? emitted / total_area : 0.0;
     // Per node: B (radiosity), the reflected part split as the effect
     // classes need it; the oracle reads the current solution (Bd + Bi + E).
     std::vector<Vec3d> Rr, Rold, Hown, Hd;
@@ -839,7 +853,7 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
         return SideView{&x.g, sol.el[size_t(x.root)].side ? -1.0 : 1.0, &h.pts[x.g.first_point],
                         &h.nrm[x.g.first_point]};
     };
-    const int max_rounds = 6;
+    const int max_rounds = kMaxRounds;
     std::vector<HLink> next, fresh;
     for (int round = 0; round < max_rounds; ++round) {
         sol.Bd.resize(h.nodes.size());
@@ -858,13 +872,13 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
                     if (sol.el[r].patch == sol.el[s].patch) continue;
                     const double sr = sol.el[r].side ? -1.0 : 1.0, ss = sol.el[s].side ? -1.0 : 1.0;
                     const double tol = tol0 * std::sqrt(std::max(h.nodes[r].g.area, h.nodes[s].g.area));
-                    if (facing(h.nodes[r], sr, h.nodes[s], ss, tol)) refine(sol, int(r), int(s), b_scale, fresh);
+                    if (facing(h.nodes[r], sr, h.nodes[s], ss, tol)) refine(sol, int(r), int(s), b_scale, false, fresh);
                 }
             changed = 1;
         } else {
             for (const HLink& l : h.links) {
                 const size_t before = fresh.size();
-                refine(sol, l.r, l.s, b_scale, fresh);
+                refine(sol, l.r, l.s, b_scale, l.partial, fresh);
                 if (fresh.size() == before + 1 && fresh.back().r == l.r && fresh.back().s == l.s) {
                     fresh.pop_back();  // kept as it was: its factor is known
                     next.push_back(l);
@@ -879,8 +893,10 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
         //    uniform mesh), in parallel; each depends only on its own pair.
         if (!loop.parallel_for(fresh.size(), [&](size_t i, int t) {
                 HLink& l = fresh[i];
+                int blocked = 0;
                 l.F = receiver_factor(scene, view(l.s), view(l.r), M.k, size_t(l.r) + size_t(l.s), 1.0, R,
-                                      rays[size_t(t)]);
+                                      rays[size_t(t)], &blocked);
+                l.partial = blocked > 0 && l.F > 0;
             }))
             return false;
         for (const HLink& l : fresh)
@@ -1144,9 +1160,9 @@ RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions&
                            "hierarchical refinement (Hanrahan et al. 1991): a quadtree of elements over every "
                            "triangle patch, linked at the level the oracle asks for; display 'patch' shows its "
                            "leaves"),
-        ParamSpec::real("hr_epsilon", 1e-3,
-                        "hierarchical: link when rho_r B_s F / (the brightest emitted radiosity) is at most this "
-                        "(F estimated unoccluded both ways)")
+        ParamSpec::real("hr_epsilon", 0.05,
+                        "hierarchical: link when rho_r B_s F / (the emitted power per unit area of all surfaces) is at "
+                        "most this (F estimated unoccluded both ways)")
             .greater_than(0.0)
             .at_most(1.0),
         ParamSpec::real("min_area", 0.0,
@@ -1170,7 +1186,7 @@ RenderOutput RadiosityIntegrator::drive(const Scene& scene, const RenderOptions&
         c.hierarchical = p.get_bool("hierarchical");
         c.hr_epsilon = p.get_float("hr_epsilon");
         c.min_area = p.get_float("min_area");
-        if (!c.hierarchical && (c.hr_epsilon != double(float(1e-3)) || c.min_area != 0.0))
+        if (!c.hierarchical && (c.hr_epsilon != double(float(0.05)) || c.min_area != 0.0))
             p.fail(c.min_area != 0.0 ? "min_area" : "hr_epsilon",
                    "hr_epsilon and min_area only apply with hierarchical = true");
         if (c.hierarchical && c.display == "vertex")
