@@ -5,6 +5,14 @@ with the log-log slope; on the
 closed furnace, the error at every patch count (exact up to the residual).
 
     python -m radiometer.benchmarks.studies.radiosity_convergence [--patches 50,100,...] [--spp 4]
+    python -m radiometer.benchmarks.studies.radiosity_convergence --hierarchical [--spp 16]
+
+--hierarchical: instead, hierarchical refinement (Hanrahan et al. 1991)
+against the uniform mesh: error, elements (leaves), form factors (links;
+the uniform mesh's N (N - 1) / 2 pairs of its N elements) and solve seconds
+on the area-light scenes (exact images; patch display, max_depth 2) and on
+the Cornell box (patch and gather displays); writes
+benchmarks/results/radiosity_hierarchical.json.
 
 Error: relative L1, mean |image - reference| / mean reference, over the
 64 x 64 reference image (max_depth 8, the reference's) without the light
@@ -56,6 +64,73 @@ def error_maps(png, scene, ref, md, counts=(50, 400), spp=16):
     Image.fromarray((im * 255).astype(np.uint8)).resize((im.shape[1] * 4, im.shape[0] * 4), Image.NEAREST).save(png)
 
 
+def hierarchical_study(args):
+    """The --hierarchical table (see the module docstring)."""
+    import math
+
+    from radiometer.reference_scenes.area_lights import analytic as al
+
+    rows = []
+
+    def row(scene_name, kind, setting, l1, st, **extra):
+        n = st["elements"]
+        r = {"scene": scene_name, "kind": kind, "setting": setting, "rel_l1": l1,
+             "elements": int(st["hr_elements"] if kind == "hierarchical" else n),
+             "form_factors": int(st["hr_links"] if kind == "hierarchical" else n * (n - 1) // 2),
+             "solve_seconds": st["solve_seconds"], **extra}
+        rows.append(r)
+        print(f"{scene_name:<12}{kind:<14}{setting:<22}{l1:>9.4f}{r['elements']:>9}{r['form_factors']:>11}"
+              f"{r['solve_seconds']:>9.2f}" + "".join(f"  {k} {v:.4f}" for k, v in extra.items()), flush=True)
+
+    print(f"{'scene':<12}{'kind':<14}{'setting':<22}{'rel L1':>9}{'elements':>9}{'ff / links':>11}{'solve s':>9}")
+    # Area lights: the 6 x 6 floor (diagonal D) cut n x n per triangle, or
+    # one root per triangle refined to at most 5 levels (the 32 x 32 leaves).
+    D = 6 * math.sqrt(2)
+    for light in ("rect", "disk"):
+        xml = al.RECT_XML if light == "rect" else al.DISK_XML
+        scene = rm.load_file(xml, res=32)
+        ref, _ = al.reference(light, res=32)
+
+        def err(integ):
+            res = rm.render(scene, integrator={"type": "radiosity", "display": "patch", "max_depth": 2, **integ},
+                            spp=args.spp, seed=4)
+            img = res.image.astype(np.float64)
+            return float(np.abs(img - ref).mean() / ref.mean()), res.stats
+
+        for n in (8, 16, 32):
+            row(light, "uniform", f"n {n}", *err({"patch_size": D / n * (1 + 1e-6), "max_patches": 16000}))
+        for eps in (1.0, 0.3, 0.1, 0.03):
+            row(light, "hierarchical", f"eps {eps:g}", *err({"patch_size": D * 1.01, "max_patches": 100,
+                                                             "hierarchical": True, "hr_epsilon": eps,
+                                                             "min_area": 18 / 4**4 * 0.9}))
+    # The Cornell box (max_depth 8): uniform meshes, and 40 root patches
+    # refined down to min_area's default (1/256 of the largest triangle).
+    spec = registry.get("cornell_box")
+    params = dict(spec.fixed_params)
+    scene = rm.load_file(spec.xml, **params)
+    ref = references.reference("cornell_box", params).image.astype(np.float64)
+    md = int(params["max_depth"])
+    light = ref.max(axis=2) > 2.0
+    for _ in range(2):
+        light = light | np.roll(light, 1, 0) | np.roll(light, -1, 0) | np.roll(light, 1, 1) | np.roll(light, -1, 1)
+    keep = ~light
+
+    def cerr(integ, display):
+        res = rm.render(scene, integrator={"type": "radiosity", "display": display, "max_depth": md, **integ},
+                        spp=args.spp, seed=1)
+        return float(np.abs(res.image - ref)[keep].mean() / ref[keep].mean()), res.stats
+
+    settings = [("uniform", f"max_patches {n}", {"max_patches": n}) for n in (400, 800, 1500)]
+    settings += [("hierarchical", f"40 roots, eps {eps:g}", {"max_patches": 40, "hierarchical": True,
+                                                          "hr_epsilon": eps}) for eps in (0.1, 0.03, 0.01, 0.003)]
+    for kind, setting, integ in settings:
+        l1, st = cerr(integ, "patch")
+        row("cornell_box", kind, setting, l1, st, gather_rel_l1=cerr(integ, "gather")[0])
+    out = record.write("radiosity_hierarchical", record.params_of(args), {"rows": rows},
+                       out=str(record.default_path("radiosity_hierarchical")))
+    print(f"wrote {out}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--patches", default="50,100,200,400,800,1600,3200")
@@ -66,7 +141,12 @@ def main(argv=None):
     ap.add_argument("--out", default=str(record.default_path("radiosity_convergence")))
     ap.add_argument("--maps-only", action="store_true",
                     help="only write the error-map figure radiosity_convergence_maps.png beside --out")
+    ap.add_argument("--hierarchical", action="store_true",
+                    help="hierarchical refinement against the uniform mesh instead (radiosity_hierarchical.json)")
     args = ap.parse_args(argv)
+    if args.hierarchical:
+        hierarchical_study(args)
+        return
     counts = [int(c) for c in args.patches.split(",")]
     spec = registry.get("cornell_box")
     params = dict(spec.fixed_params)

@@ -65,6 +65,35 @@
 //    instead of their mean (vertex_values). The emission
 //    stays per element (constant on an emitter). The solution is the same;
 //    only what the camera reads of it changes.
+// 6. Hierarchical refinement (`hierarchical`, off by default; Hanrahan,
+//    Salzman and Aupperle 1991, "A Rapid Hierarchical Radiosity
+//    Algorithm"; Cohen and Wallace 1993, ch. 7): the patches of step 1 are
+//    the roots of quadtrees (a mesh triangle splits at its edge midpoints;
+//    sphere and disk cells are not split). Refine (their Refine): a pair of
+//    elements r (receiver) and s (sender) is linked when the estimated
+//    error of r's radiosity through it, rho_r B_s max(F_rs, F_sr) (their
+//    BF refinement; F unoccluded from each centre to the other's polygon by
+//    the closed form of step 2, B_s relative to the emitted power per unit
+//    area), is at most `hr_epsilon`, or neither is larger than `min_area`;
+//    otherwise the end that looks larger from the other is split and its
+//    children are refined against the other end. A link's form factor is
+//    the receiver-side estimate of step 2 (the same function). A link
+//    partly occluded (some rays blocked) is refined at 1/8 of the threshold
+//    in the next round (ours: the oracle cannot see shadows); rounds of
+//    refine and solve repeat (at most 8) while any link changes, the oracle
+//    reading the last solution. Solve (their SolveSystem): Jacobi steps of
+//    gather (H_r = sum over r's links of F_rs B_s), push (a leaf's
+//    irradiance is its own plus its ancestors'), B = E + rho H at the
+//    leaves, pull (a parent's B is its children's area-weighted mean),
+//    until the unshot power sum A (B_new - B_old) is at most `residual`,
+//    or max_depth - 1 iterations. Conservation: a closed leaf's gathered
+//    factors (its own links and its ancestors') are normalised to sum 1,
+//    an open leaf's capped at 1 (no symmetric balancing: the links are not
+//    reciprocal). Books per step: absorbed sum A (1 - rho) H, escaped
+//    sum A B_old - sum A H, unshot as above (an identity: emitted =
+//    absorbed + escaped + unshot). Displays "patch" and "gather" read the
+//    leaf under the hit; "vertex" is refused (the leaves share no mesh
+//    vertices).
 // Effect classes: emission (E seen directly), direct (one reflection of
 // the emission: the solution's first bounce, or light sampling under
 // "gather"), indirect (the rest). Bias: discretisation (patch size, the
@@ -139,16 +168,16 @@ struct Element {
 // Hierarchical Radiosity Algorithm"): a quadtree of elements over every
 // side of a patch (a mesh triangle splits at its edge midpoints into 4;
 // sphere and disk cells stay whole), links between elements at the level
-// the oracle asks for, gathering over the links and push-pull (sec. 4).
+// the oracle asks for, gathering over the links and push-pull.
 struct HNode {
-    Patch g;       // geometry; g.first_point indexes Hierarchy::pts / nrm
-    int root = 0;  // its patch side (element 2 p + side), the root node's index
+    Patch g;                      // geometry; g.first_point indexes Hierarchy::pts / nrm
+    int root = 0;                 // its patch side (element 2 p + side), the root node's index
     int parent = -1, child = -1;  // child: the first of 4 contiguous children; -1: a leaf
     bool splittable = false;      // a triangle larger than min_area
 };
 struct HLink {
-    int r = 0, s = 0;  // receiver, sender
-    double F = 0;      // form factor F_rs (receiver-side estimate)
+    int r = 0, s = 0;      // receiver, sender
+    double F = 0;          // form factor F_rs (receiver-side estimate)
     bool partial = false;  // some of its visibility rays blocked, some not
 };
 struct Hierarchy {
@@ -405,8 +434,8 @@ double RadiosityIntegrator::receiver_estimate(const Scene& scene, const Solution
                                               uint64_t& rays) const {
     const PatchMesh& M = sol.mesh;
     const Element &ei = sol.el[i], &ej = sol.el[j];
-    return receiver_factor(scene, side_view(M, ei), side_view(M, ej), M.k, i + j,
-                           M.patches[size_t(ej.patch)].area, scale, rays);
+    return receiver_factor(scene, side_view(M, ei), side_view(M, ej), M.k, i + j, M.patches[size_t(ej.patch)].area,
+                           scale, rays);
 }
 
 bool RadiosityIntegrator::form_factors(PassLoop& loop, Solution& sol, std::vector<uint64_t>& rays) const {
@@ -755,8 +784,8 @@ void RadiosityIntegrator::split(Solution& sol, int n) const {
     h.scale.resize(h.nodes.size(), 1.0);
 }
 
-// Hanrahan et al. 1991, fig. 3 (Refine), with the radiosity-weighted oracle
-// of their sec. 4.3 ("BF refinement"): the error of receiver r's radiosity
+// Hanrahan et al. 1991's Refine, with their radiosity-weighted ("BF")
+// oracle: the error of receiver r's radiosity
 // through the link is about rho_r B_s F, F estimated unoccluded both ways
 // by the point-to-polygon closed form from each centre to the other's
 // polygon (F_rs large: s looks large from r, split s; F_sr large: split r).
@@ -783,19 +812,22 @@ void RadiosityIntegrator::refine(Solution& sol, int r, int s, double b_scale, bo
         return;
     }
     if (out.size() > size_t(50'000'000))
-        throw std::invalid_argument("integrator 'radiosity': hierarchical refinement made more than 5e7 links; "
-                                    "raise hr_epsilon or min_area");
+        throw std::invalid_argument(
+            "integrator 'radiosity': hierarchical refinement made more than 5e7 links; "
+            "raise hr_epsilon or min_area");
     const double tol = 1e-9 * std::sqrt(std::max(nr.g.area, ns.g.area));
     if ((f_rs >= f_sr && split_s) || !split_r) {
         if (h.nodes[size_t(s)].child < 0) split(sol, s);
         const int c0 = h.nodes[size_t(s)].child;
         for (int k = 0; k < 4; ++k)
-            if (facing(h.nodes[size_t(r)], sr, h.nodes[size_t(c0 + k)], ss, tol)) refine(sol, r, c0 + k, b_scale, false, out);
+            if (facing(h.nodes[size_t(r)], sr, h.nodes[size_t(c0 + k)], ss, tol))
+                refine(sol, r, c0 + k, b_scale, false, out);
     } else {
         if (h.nodes[size_t(r)].child < 0) split(sol, r);
         const int c0 = h.nodes[size_t(r)].child;
         for (int k = 0; k < 4; ++k)
-            if (facing(h.nodes[size_t(c0 + k)], sr, h.nodes[size_t(s)], ss, tol)) refine(sol, c0 + k, s, b_scale, false, out);
+            if (facing(h.nodes[size_t(c0 + k)], sr, h.nodes[size_t(s)], ss, tol))
+                refine(sol, c0 + k, s, b_scale, false, out);
     }
 }
 
@@ -859,7 +891,7 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
         sol.Bd.resize(h.nodes.size());
         sol.Bi.resize(h.nodes.size());
         sol.Blast.resize(h.nodes.size());
-        // 1. Refine (Hanrahan et al. 1991, fig. 3): the first round from every
+        // 1. Refine (Hanrahan et al. 1991): the first round from every
         //    pair of root elements that face each other, later rounds every
         //    link again against the solution of the round before.
         next.clear();
@@ -903,9 +935,8 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
             if (l.F > 0) next.push_back(l);
         // Links in a fixed order (receiver, sender): the gather's sums do not
         // depend on how the rounds found them.
-        std::sort(next.begin(), next.end(), [](const HLink& a, const HLink& b) {
-            return a.r != b.r ? a.r < b.r : a.s < b.s;
-        });
+        std::sort(next.begin(), next.end(),
+                  [](const HLink& a, const HLink& b) { return a.r != b.r ? a.r < b.r : a.s < b.s; });
         h.links.swap(next);
         // 3. Conservation: a closed leaf's factors (its own links and its
         //    ancestors') sum to 1; an open leaf's at most 1.
@@ -921,7 +952,7 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
             const double f = fsum[n];
             h.scale[n] = (h.closed[size_t(x.root)] && f > 0) || f > 1.0 ? 1.0 / f : 1.0;
         }
-        // 4. Solve by Jacobi iteration (Hanrahan et al. 1991, sec. 4:
+        // 4. Solve by Jacobi iteration (Hanrahan et al. 1991:
         //    gather over links, push the gathered irradiance down to the
         //    leaves, B = E + rho H there, pull the area-weighted mean up).
         //    Iteration g holds the paths of g reflections: max_depth D takes
@@ -946,8 +977,7 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
                 const HNode& x = h.nodes[n];
                 if (x.child < 0) continue;
                 Vec3d acc;
-                for (int k = 0; k < 4; ++k)
-                    acc = acc + v[size_t(x.child + k)] * h.nodes[size_t(x.child + k)].g.area;
+                for (int k = 0; k < 4; ++k) acc = acc + v[size_t(x.child + k)] * h.nodes[size_t(x.child + k)].g.area;
                 v[n] = acc * (1.0 / x.g.area);
             }
         };
