@@ -864,10 +864,7 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
     // Closed roots (the escape test of the uniform mesh); their leaves inherit it.
     h.closed.assign(N, 0);
     if (!loop.parallel_for(N, [&](size_t e, int t) {
-            SideView v{&M.patches[size_t(sol.el[e].patch)], sol.el[e].side ? -1.0 : 1.0,
-                       &M.pts[M.patches[size_t(sol.el[e].patch)].first_point],
-                       &M.nrm[M.patches[size_t(sol.el[e].patch)].first_point]};
-            h.closed[e] = side_is_closed(scene, v, M.k, R, rays[size_t(t)]) ? 1 : 0;
+            h.closed[e] = side_is_closed(scene, side_view(M, sol.el[e]), M.k, R, rays[size_t(t)]) ? 1 : 0;
         }))
         return false;
     double total_area = 0, emitted = 0;
