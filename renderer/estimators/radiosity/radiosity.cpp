@@ -174,6 +174,7 @@ struct HNode {
     int root = 0;                 // its patch side (element 2 p + side), the root node's index
     int parent = -1, child = -1;  // child: the first of 4 contiguous children; -1: a leaf
     bool splittable = false;      // a triangle larger than min_area
+    bool curved = false;          // a sphere's or disk's cell (its centre's tangent plane is not its plane)
 };
 struct HLink {
     int r = 0, s = 0;      // receiver, sender
@@ -733,7 +734,8 @@ bool RadiosityIntegrator::solve(PassLoop& loop, Solution& sol) const {
 
 // Whether r and s can exchange light at all: some corner of each lies
 // strictly in front of the other's side (coplanar or back-to-back pieces
-// have no form factor).
+// have no form factor). A curved cell's side is not a plane: it may see
+// what lies behind its centre's tangent plane, so it is not tested.
 bool facing(const HNode& r, double sr, const HNode& s, double ss, double tol) {
     auto front = [&](const Patch& a, double sa, const Patch& b) {
         const Vec3d n = a.n * sa;
@@ -741,7 +743,7 @@ bool facing(const HNode& r, double sr, const HNode& s, double ss, double tol) {
             if (dot(b.v[i] - a.c, n) > tol) return true;
         return false;
     };
-    return front(r.g, sr, s.g) && front(s.g, ss, r.g);
+    return (r.curved || front(r.g, sr, s.g)) && (s.curved || front(s.g, ss, r.g));
 }
 
 // Splits triangle node n at its edge midpoints into 4 children, each with
@@ -854,6 +856,7 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
             h.nrm.push_back(M.nrm[p.first_point + uint32_t(t)]);
         }
         n.splittable = M.cuts[size_t(p.shape)].kind == 0 && p.nv == 3;
+        n.curved = M.cuts[size_t(p.shape)].kind != 0;
         if (n.splittable) largest = std::max(largest, p.area);
         h.nodes.push_back(n);
     }
@@ -918,13 +921,24 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
         }
         if (!changed) break;
         h.rounds = round + 1;
-        // 2. The new links' form factors (the receiver-side estimate of the
-        //    uniform mesh), in parallel; each depends only on its own pair.
+        // 2. The new links' form factors, in parallel (each depends only on
+        //    its own pair): as the uniform mesh, estimated at the points of
+        //    the smaller end, F_rs = A_s F_sr / A_r by reciprocity; but at a
+        //    sphere's or disk's cell (never split) whenever the other end is
+        //    a triangle, whose polygon is exact (a cell's chords are not: a
+        //    sphere of one band has lunes whose polygon is a segment).
         if (!loop.parallel_for(fresh.size(), [&](size_t i, int t) {
                 HLink& l = fresh[i];
                 int blocked = 0;
-                l.F = receiver_factor(scene, view(l.s), view(l.r), M.k, size_t(l.r) + size_t(l.s), 1.0, R,
-                                      rays[size_t(t)], &blocked);
+                const HNode &nr = h.nodes[size_t(l.r)], &ns = h.nodes[size_t(l.s)];
+                const double ar = nr.g.area, as = ns.g.area;
+                const bool cr = nr.curved, cs = ns.curved;
+                const size_t pair = size_t(l.r) + size_t(l.s);
+                if (cs != cr ? cs : as < ar * (1 - 1e-9))
+                    l.F =
+                        receiver_factor(scene, view(l.r), view(l.s), M.k, pair, as, R, rays[size_t(t)], &blocked) / ar;
+                else
+                    l.F = receiver_factor(scene, view(l.s), view(l.r), M.k, pair, 1.0, R, rays[size_t(t)], &blocked);
                 l.partial = blocked > 0 && l.F > 0;
             }))
             return false;
