@@ -77,7 +77,8 @@
 //    area), is at most `hr_epsilon`, or neither is larger than `min_area`;
 //    otherwise the end that looks larger from the other is split and its
 //    children are refined against the other end. A link's form factor is
-//    the receiver-side estimate of step 2 (the same function). A link
+//    the estimate of step 2 (the same function) at the smaller end's points
+//    (always a curved cell's against a triangle; reciprocity converts). A link
 //    partly occluded (some rays blocked) is refined at 1/8 of the threshold
 //    in the next round (ours: the oracle cannot see shadows); rounds of
 //    refine and solve repeat (at most 8) while any link changes, the oracle
