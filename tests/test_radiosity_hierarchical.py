@@ -115,13 +115,16 @@ def test_furnace_exact_constant_radiosity(max_depth, exact):
 
 def test_sphere_light_open_room_and_closed_box():
     """A sphere light (its cells are never split; a link to a triangle is
-    estimated at the cell's points: at a 1-band sphere's lunes the other way
-    round sees a degenerate polygon, and before that rule every watt
-    escaped). In the open room the escaped power agrees with the uniform
-    mesh at 400 patches to 1 % (measured +0.31 %; 3 % off rejected); inside
-    a closed two-sided cube (8039 leaves, 93547 links) at most 1e-3 of the
-    emission escapes (measured 1.35e-4: the links are not reciprocal, so not
-    zero), and the books balance."""
+    estimated at the cell's points). In the open room the escaped power
+    agrees with the uniform mesh at 400 patches to 1 % (3 % off rejected);
+    inside a closed two-sided cube the links are not reciprocal (each
+    receiver's factors are normalised alone), so the books show the
+    form-factor error as escaped power, here negative: measured 2026-12-04
+    at max_patches 100 / 400, sphere radius 0.1: -2.0 % / -0.94 % of the
+    emission (radius 0.3: -1.8 % / -0.58 %, at 1600 -0.20 %; the uniform
+    mesh, Sinkhorn-balanced, 1e-13). Bound 1.5 % at 400; the books
+    balance. (The 1.35e-4 measured first was a one-band sphere's, whose
+    cells were pole-to-pole lunes; spheres now have at least two bands.)"""
     from test_bdpt import _rgb, small_room
 
     d = small_room(AREA, res=8)
@@ -135,9 +138,9 @@ def test_sphere_light_open_room_and_closed_box():
         [[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 1.3], [0, 0, 0, 0]]),
         "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": _rgb(0.5)}}}
     scene = rm.load_dict(d)
-    sol = solve(scene, max_patches=100, residual=1e-4, **HR)
+    sol = solve(scene, max_patches=400, residual=1e-4, **HR)
     st = sol["stats"]
-    assert abs(st["escaped_power"]) <= 1e-3 * st["emitted_power"], st
+    assert abs(st["escaped_power"]) <= 1.5e-2 * st["emitted_power"], st
     assert _balance(st) <= 1e-9 * st["emitted_power"], st
     for k in ("emitted", "direct", "indirect"):
         assert np.all(np.isfinite(sol[k])) and np.all(sol[k] >= 0), k

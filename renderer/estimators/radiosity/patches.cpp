@@ -49,8 +49,13 @@ void load_tri(const Mesh& m, size_t f, Vec3d p[3]) {
 double tri_area(const Vec3d p[3]) { return 0.5 * length(cross(p[1] - p[0], p[2] - p[0])); }
 
 // Sphere cells: z bands (equal area) by phi sectors.
+// At least two bands: a single band's cells run pole to pole, and their
+// polygon (the chords of the two arcs, both collapsed to a pole) is a
+// segment, against which every point-to-polygon factor is 0, so a small
+// sphere light's emission all escaped when its cells were the larger end
+// of a pair.
 void sphere_cut(const Sphere& s, double size, int& nz, int& nphi) {
-    nz = cells(2.0 * s.r_, size);
+    nz = std::max(2, cells(2.0 * s.r_, size));
     nphi = std::max(3, cells(2.0 * kPiD * s.r_, size));
 }
 // Disk cells: equal-area rings (r^2 uniform) by phi sectors; R the radius of a disk of its area.

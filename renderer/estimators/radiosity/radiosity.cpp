@@ -926,8 +926,7 @@ bool RadiosityIntegrator::solve_hierarchical(PassLoop& loop, Solution& sol) cons
         //    its own pair): as the uniform mesh, estimated at the points of
         //    the smaller end, F_rs = A_s F_sr / A_r by reciprocity; but at a
         //    sphere's or disk's cell (never split) whenever the other end is
-        //    a triangle, whose polygon is exact (a cell's chords are not: a
-        //    sphere of one band has lunes whose polygon is a segment).
+        //    a triangle, whose polygon is exact (a cell's chords are not).
         if (!loop.parallel_for(fresh.size(), [&](size_t i, int t) {
                 HLink& l = fresh[i];
                 int blocked = 0;
