@@ -30,6 +30,11 @@
 //  twosided         nested: 1 BSDF used on both sides, or 2 (front, back). The
 //                   nested BSDFs must not transmit (as Mitsuba).
 //  null             none. Passes light unchanged (medium boundaries).
+// Textured colours (BsdfDesc::textures; scene/texture.h): reflectance
+// (diffuse), diffuse_reflectance (plastic, roughplastic) and
+// specular_reflectance (conductor, roughconductor), evaluated at the
+// BsdfContext's uv. A lobe-selection weight that Mitsuba computes from a
+// colour's mean uses the texture's mean(), as Mitsuba does.
 // Alphas below 1e-4 are clamped to 1e-4 (Mitsuba does the same); negative or
 // non-finite values of any parameter are rejected.
 #include "scene/bsdf.h"
@@ -44,6 +49,7 @@
 #include "core/warp.h"
 #include "scene/fresnel.h"
 #include "scene/microfacet.h"
+#include "scene/texture.h"
 
 namespace rm {
 
@@ -100,20 +106,23 @@ MicrofacetDistribution make_distribution(const BsdfDesc& d) {
 
 class DiffuseBsdf final : public Bsdf {
 public:
-    explicit DiffuseBsdf(const Color& reflectance) : reflectance_(reflectance) { flags_ = kDiffuseReflection; }
+    explicit DiffuseBsdf(TexturedColor reflectance) : reflectance_(std::move(reflectance)) {
+        flags_ = kDiffuseReflection;
+        textured_ = reflectance_.textured();
+    }
 
-    BsdfSample sample(const BsdfContext&, const Vec3& wi, float, Vec2 u2) const override {
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float, Vec2 u2) const override {
         BsdfSample bs;
         if (!(wi.z > 0.f)) return bs;
         bs.wo = warp::square_to_cosine_hemisphere(u2);
         bs.pdf_w = warp::square_to_cosine_hemisphere_pdf_w(bs.wo);
-        bs.weight = reflectance_;  // (rho / pi) cos / (cos / pi)
+        bs.weight = reflectance_.eval(ctx.uv);  // (rho / pi) cos / (cos / pi)
         bs.sampled_flags = kDiffuseReflection;
         return sanitize(bs);
     }
-    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
-        return reflectance_ * (wo.z * kInvPi);
+        return reflectance_.eval(ctx.uv) * (wo.z * kInvPi);
     }
     float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return 0.f;
@@ -121,7 +130,7 @@ public:
     }
 
 private:
-    Color reflectance_;
+    TexturedColor reflectance_;
 };
 
 // ---------------------------------------------------------------------------
@@ -130,25 +139,28 @@ private:
 
 class ConductorBsdf final : public Bsdf {
 public:
-    ConductorBsdf(const Color& eta, const Color& k, const Color& specular) : eta_(eta), k_(k), specular_(specular) {
+    ConductorBsdf(const Color& eta, const Color& k, TexturedColor specular)
+        : eta_(eta), k_(k), specular_(std::move(specular)) {
         flags_ = kDeltaReflection;
+        textured_ = specular_.textured();
     }
 
-    BsdfSample sample(const BsdfContext&, const Vec3& wi, float, Vec2) const override {
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float, Vec2) const override {
         BsdfSample bs;
         if (!(wi.z > 0.f)) return bs;
         bs.wo = reflect_local(wi);
         bs.pdf_w = 1.f;
         bs.is_delta = true;
         bs.sampled_flags = kDeltaReflection;
-        bs.weight = specular_ * fresnel_conductor(wi.z, eta_, k_);
+        bs.weight = specular_.eval(ctx.uv) * fresnel_conductor(wi.z, eta_, k_);
         return sanitize(bs);
     }
     Color eval(const BsdfContext&, const Vec3&, const Vec3&) const override { return Color(0.f); }
     float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
 
 private:
-    Color eta_, k_, specular_;
+    Color eta_, k_;
+    TexturedColor specular_;
 };
 
 // ---------------------------------------------------------------------------
@@ -160,12 +172,13 @@ private:
 
 class RoughConductorBsdf final : public Bsdf {
 public:
-    RoughConductorBsdf(const MicrofacetDistribution& distr, const Color& eta, const Color& k, const Color& specular)
-        : distr_(distr), eta_(eta), k_(k), specular_(specular) {
+    RoughConductorBsdf(const MicrofacetDistribution& distr, const Color& eta, const Color& k, TexturedColor specular)
+        : distr_(distr), eta_(eta), k_(k), specular_(std::move(specular)) {
         flags_ = kGlossyReflection;
+        textured_ = specular_.textured();
     }
 
-    BsdfSample sample(const BsdfContext&, const Vec3& wi, float, Vec2 u2) const override {
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float, Vec2 u2) const override {
         BsdfSample bs;
         if (!(wi.z > 0.f)) return bs;
         MicrofacetSample ms = distr_.sample(wi, u2);
@@ -183,11 +196,11 @@ public:
             w = distr_.G1(bs.wo, m);
         else
             w = distr_.G(wi, bs.wo, m) * dot(wi, m) / (wi.z * m.z);
-        bs.weight = specular_ * fresnel_conductor(dot(wi, m), eta_, k_) * w;
+        bs.weight = specular_.eval(ctx.uv) * fresnel_conductor(dot(wi, m), eta_, k_) * w;
         return sanitize(bs);
     }
 
-    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
         const Vec3 h = wi + wo;
         const float len = length(h);
@@ -197,7 +210,7 @@ public:
         if (D == 0.f) return Color(0.f);
         const float G = distr_.G(wi, wo, m);
         const float value = D * G / (4.f * wi.z);
-        return finite_or_zero(specular_ * fresnel_conductor(dot(wi, m), eta_, k_) * value);
+        return finite_or_zero(specular_.eval(ctx.uv) * fresnel_conductor(dot(wi, m), eta_, k_) * value);
     }
 
     float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
@@ -214,7 +227,8 @@ public:
 
 private:
     MicrofacetDistribution distr_;
-    Color eta_, k_, specular_;
+    Color eta_, k_;
+    TexturedColor specular_;
 };
 
 // ---------------------------------------------------------------------------
@@ -450,21 +464,18 @@ private:
 
 class PlasticBsdf final : public Bsdf {
 public:
-    PlasticBsdf(float eta, const Color& diffuse, const Color& specular, bool nonlinear)
-        : eta_(eta), specular_(specular) {
+    PlasticBsdf(float eta, TexturedColor diffuse, const Color& specular, bool nonlinear)
+        : eta_(eta), nonlinear_(nonlinear), specular_(specular), diffuse_(std::move(diffuse)) {
         flags_ = kDeltaReflection | kDiffuseReflection;
+        textured_ = diffuse_.textured();
         inv_eta2_ = 1.f / (eta * eta);
         fdr_int_ = fresnel_diffuse_reflectance(1.f / eta);
-        const float d_mean = average(diffuse), s_mean = average(specular);
+        const float d_mean = diffuse_.mean(), s_mean = average(specular);
         specular_sampling_weight_ = (d_mean + s_mean) > 0.f ? s_mean / (d_mean + s_mean) : 0.5f;
-        // The diffuse albedo including the internal-reflection normalisation.
-        const Color denom = nonlinear ? Color(1.f) - diffuse * fdr_int_ : Color(1.f - fdr_int_);
-        // Non-physical albedos (rho Fdr_int >= 1 with nonlinear) would make it
-        // infinite or negative: those become 0 rather than NaN/negative weights.
-        diffuse_norm_ = vmax(finite_or_zero(diffuse / denom), Color(0.f));
+        diffuse_norm_ = normalised(diffuse_.value);
     }
 
-    BsdfSample sample(const BsdfContext&, const Vec3& wi, float u1, Vec2 u2) const override {
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
         BsdfSample bs;
         if (!(wi.z > 0.f)) return bs;
         const float f_i = fresnel_dielectric(wi.z, eta_).F;
@@ -480,14 +491,14 @@ public:
             bs.pdf_w = p_diff * warp::square_to_cosine_hemisphere_pdf_w(bs.wo);
             bs.sampled_flags = kDiffuseReflection;
             const float f_o = fresnel_dielectric(bs.wo.z, eta_).F;
-            bs.weight = diffuse_norm_ * (inv_eta2_ * (1.f - f_i) * (1.f - f_o) / p_diff);
+            bs.weight = diffuse_norm(ctx.uv) * (inv_eta2_ * (1.f - f_i) * (1.f - f_o) / p_diff);
         }
         return sanitize(bs);
     }
-    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
         const float f_i = fresnel_dielectric(wi.z, eta_).F, f_o = fresnel_dielectric(wo.z, eta_).F;
-        return finite_or_zero(diffuse_norm_ * (wo.z * kInvPi * inv_eta2_ * (1.f - f_i) * (1.f - f_o)));
+        return finite_or_zero(diffuse_norm(ctx.uv) * (wo.z * kInvPi * inv_eta2_ * (1.f - f_i) * (1.f - f_o)));
     }
     float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return 0.f;
@@ -501,9 +512,22 @@ private:
         const float pd = (1.f - f_i) * (1.f - specular_sampling_weight_);
         return ps + pd > 0.f ? ps / (ps + pd) : 0.5f;
     }
+    // The diffuse albedo including the internal-reflection normalisation.
+    // Non-physical albedos (rho Fdr_int >= 1 with nonlinear) would make it
+    // infinite or negative: those become 0 rather than NaN/negative weights.
+    Color normalised(const Color& rho) const {
+        const Color denom = nonlinear_ ? Color(1.f) - rho * fdr_int_ : Color(1.f - fdr_int_);
+        return vmax(finite_or_zero(rho / denom), Color(0.f));
+    }
+    // Precomputed when untextured; per query from the texture otherwise.
+    Color diffuse_norm(Vec2 uv) const {
+        return diffuse_.textured() ? normalised(diffuse_.texture->eval(uv)) : diffuse_norm_;
+    }
 
     float eta_, inv_eta2_, fdr_int_, specular_sampling_weight_;
+    bool nonlinear_;
     Color specular_, diffuse_norm_;  // diffuse_norm_: rho / (1 - Fdr_int) or rho / (1 - rho Fdr_int)
+    TexturedColor diffuse_;
 };
 
 // ---------------------------------------------------------------------------
@@ -569,18 +593,16 @@ std::shared_ptr<const RoughPlasticTables> rough_plastic_tables(MicrofacetType ty
 
 class RoughPlasticBsdf final : public Bsdf {
 public:
-    RoughPlasticBsdf(const MicrofacetDistribution& distr, float eta, const Color& diffuse, const Color& specular,
+    RoughPlasticBsdf(const MicrofacetDistribution& distr, float eta, TexturedColor diffuse, const Color& specular,
                      bool nonlinear)
-        : distr_(distr), eta_(eta), specular_(specular) {
+        : distr_(distr), eta_(eta), nonlinear_(nonlinear), specular_(specular), diffuse_(std::move(diffuse)) {
         flags_ = kGlossyReflection | kDiffuseReflection;
+        textured_ = diffuse_.textured();
         inv_eta2_ = 1.f / (eta * eta);
         tables_ = rough_plastic_tables(distr.type(), distr.alpha_u(), eta);
-        const float d_mean = average(diffuse), s_mean = average(specular);
+        const float d_mean = diffuse_.mean(), s_mean = average(specular);
         specular_sampling_weight_ = (d_mean + s_mean) > 0.f ? s_mean / (d_mean + s_mean) : 0.5f;
-        const float r_int = tables_->internal_reflectance;
-        const Color denom = nonlinear ? Color(1.f) - diffuse * r_int : Color(1.f - r_int);
-        // As plastic: a non-physical nonlinear albedo (rho R_int >= 1) gives 0, not NaN.
-        diffuse_norm_ = vmax(finite_or_zero(diffuse / denom), Color(0.f));
+        diffuse_norm_ = normalised(diffuse_.value);
     }
 
     BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
@@ -602,7 +624,7 @@ public:
         return sanitize(bs);
     }
 
-    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
         Color value(0.f);
         const Vec3 h = wi + wo;
@@ -616,7 +638,7 @@ public:
             }
         }
         const float t = transmittance(wi.z) * transmittance(wo.z);
-        value += diffuse_norm_ * (kInvPi * inv_eta2_ * wo.z * t);
+        value += diffuse_norm(ctx.uv) * (kInvPi * inv_eta2_ * wo.z * t);
         return finite_or_zero(value);
     }
 
@@ -651,10 +673,22 @@ private:
         return ps + pd > 0.f ? ps / (ps + pd) : 0.5f;
     }
 
+    // As plastic's: a non-physical nonlinear albedo (rho R_int >= 1) gives 0, not NaN.
+    Color normalised(const Color& rho) const {
+        const float r_int = tables_->internal_reflectance;
+        const Color denom = nonlinear_ ? Color(1.f) - rho * r_int : Color(1.f - r_int);
+        return vmax(finite_or_zero(rho / denom), Color(0.f));
+    }
+    Color diffuse_norm(Vec2 uv) const {
+        return diffuse_.textured() ? normalised(diffuse_.texture->eval(uv)) : diffuse_norm_;
+    }
+
     MicrofacetDistribution distr_;
     std::shared_ptr<const RoughPlasticTables> tables_;
     float eta_, inv_eta2_, specular_sampling_weight_;
+    bool nonlinear_;
     Color specular_, diffuse_norm_;  // diffuse_norm_: rho / (1 - R_int) or rho / (1 - rho R_int)
+    TexturedColor diffuse_;
 };
 
 // ---------------------------------------------------------------------------
@@ -668,6 +702,7 @@ public:
     TwoSidedBsdf(std::unique_ptr<Bsdf> front, std::unique_ptr<Bsdf> back)
         : front_(std::move(front)), back_(std::move(back)) {
         flags_ = front_->flags() | (back_ ? back_->flags() : 0u);
+        textured_ = front_->textured() || (back_ && back_->textured());
     }
 
     BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
@@ -723,20 +758,47 @@ public:
     float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
 };
 
+// The parameter `name` of value `plain`, or its texture when BsdfDesc::textures has one.
+TexturedColor textured(const BsdfDesc& d, const char* name, const Color& plain) {
+    TexturedColor c(plain);
+    auto it = d.textures.find(name);
+    if (it == d.textures.end()) {
+        check_color(d, name, plain);
+        return c;
+    }
+    try {
+        c.texture = make_texture(it->second);
+    } catch (const std::invalid_argument& e) {
+        fail(d, name, std::string("has a bad texture: ") + e.what());
+    }
+    return c;
+}
+
+// Only the parameters listed in the file head take a texture.
+void check_textured_names(const BsdfDesc& d, std::initializer_list<const char*> allowed) {
+    for (const auto& [name, tex] : d.textures) {
+        bool ok = false;
+        for (const char* a : allowed) ok = ok || name == a;
+        if (!ok) fail(d, name, "cannot take a texture (texture type '" + tex.type + "')");
+    }
+}
+
 }  // namespace
 
 std::unique_ptr<Bsdf> make_bsdf(const BsdfDesc& d) {
     if (d.type == "diffuse") {
-        check_color(d, "reflectance", d.reflectance);
-        return std::make_unique<DiffuseBsdf>(d.reflectance);
+        check_textured_names(d, {"reflectance"});
+        return std::make_unique<DiffuseBsdf>(textured(d, "reflectance", d.reflectance));
     }
     if (d.type == "conductor" || d.type == "roughconductor") {
+        check_textured_names(d, {"specular_reflectance"});
         check_color(d, "eta", d.eta);
         check_color(d, "k", d.k);
-        check_color(d, "specular_reflectance", d.specular_reflectance);
-        if (d.type == "conductor") return std::make_unique<ConductorBsdf>(d.eta, d.k, d.specular_reflectance);
-        return std::make_unique<RoughConductorBsdf>(make_distribution(d), d.eta, d.k, d.specular_reflectance);
+        TexturedColor spec = textured(d, "specular_reflectance", d.specular_reflectance);
+        if (d.type == "conductor") return std::make_unique<ConductorBsdf>(d.eta, d.k, std::move(spec));
+        return std::make_unique<RoughConductorBsdf>(make_distribution(d), d.eta, d.k, std::move(spec));
     }
+    if (d.type != "plastic" && d.type != "roughplastic") check_textured_names(d, {});
     if (d.type == "dielectric" || d.type == "roughdielectric" || d.type == "thindielectric") {
         const float eta = relative_ior(d);
         check_color(d, "specular_reflectance", d.specular_reflectance);
@@ -752,19 +814,20 @@ std::unique_ptr<Bsdf> make_bsdf(const BsdfDesc& d) {
     }
     if (d.type == "plastic") {
         const float eta = relative_ior(d);
-        check_color(d, "diffuse_reflectance", d.diffuse_reflectance);
+        check_textured_names(d, {"diffuse_reflectance"});
         check_color(d, "specular_reflectance", d.specular_reflectance);
-        return std::make_unique<PlasticBsdf>(eta, d.diffuse_reflectance, d.specular_reflectance, d.nonlinear);
+        return std::make_unique<PlasticBsdf>(eta, textured(d, "diffuse_reflectance", d.diffuse_reflectance),
+                                             d.specular_reflectance, d.nonlinear);
     }
     if (d.type == "roughplastic") {
         const float eta = relative_ior(d);
         if (d.int_ior == d.ext_ior) fail(d, "int_ior", "must differ from ext_ior (as in Mitsuba's roughplastic)");
-        check_color(d, "diffuse_reflectance", d.diffuse_reflectance);
+        check_textured_names(d, {"diffuse_reflectance"});
         check_color(d, "specular_reflectance", d.specular_reflectance);
         const MicrofacetDistribution distr = make_distribution(d);
         if (d.alpha_u != d.alpha_v) fail(d, "alpha_u", "must equal alpha_v (roughplastic is isotropic, as in Mitsuba)");
-        return std::make_unique<RoughPlasticBsdf>(distr, eta, d.diffuse_reflectance, d.specular_reflectance,
-                                                  d.nonlinear);
+        return std::make_unique<RoughPlasticBsdf>(distr, eta, textured(d, "diffuse_reflectance", d.diffuse_reflectance),
+                                                  d.specular_reflectance, d.nonlinear);
     }
     if (d.type == "twosided") {
         if (d.nested.empty() || d.nested.size() > 2)

@@ -92,10 +92,11 @@ int Scene::add_mesh(const std::string& id, std::vector<float> positions, std::ve
     return add_shape(std::move(m), bsdf, flip_normals);
 }
 
-int Scene::add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals) {
+int Scene::add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals,
+                      const Matrix4& to_world) {
     if (!(radius > 0.f) || !std::isfinite(radius) || !is_finite(center))
         throw std::invalid_argument("shape '" + id + "': sphere needs a finite centre and a positive radius");
-    auto s = std::make_unique<Sphere>(center, radius);
+    auto s = std::make_unique<Sphere>(center, radius, to_world);
     s->id = id;
     return add_shape(std::move(s), bsdf, flip_normals);
 }

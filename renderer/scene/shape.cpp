@@ -244,7 +244,11 @@ void disk_occluded(const RTCOccludedFunctionNArguments* args) {
 }  // namespace
 
 // ---------------------------------------------------------------- sphere
-Sphere::Sphere(Vec3 center, float radius) : cx_(center.x), cy_(center.y), cz_(center.z), r_(radius) {}
+Sphere::Sphere(Vec3 center, float radius, const Matrix4& to_world)
+    : cx_(center.x), cy_(center.y), cz_(center.z), r_(radius) {
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) rot_[i][j] = to_world[size_t(4 * i + j)] / double(radius);
+}
 Vec3 Sphere::bbox_min() const {
     return Vec3(float(cx_ - r_), float(cy_ - r_), float(cz_ - r_)) -
            abs(Vec3(float(cx_), float(cy_), float(cz_))) * 1e-6f - Vec3(float(r_) * 1e-6f);
@@ -281,10 +285,16 @@ void Sphere::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Intera
     }
     it.p = Vec3(float(cx_ + r_ * px), float(cy_ + r_ * py), float(cz_ + r_ * pz));
     Vec3 n{float(px), float(py), float(pz)};
-    // Mitsuba's sphere uv: (phi / 2pi, theta / pi) in the local frame.
-    float phi = std::atan2(n.y, n.x);
-    if (phi < 0) phi += 2 * kPi;
-    it.uv = Vec2(phi * kInv2Pi, std::acos(clamp(n.z, -1.f, 1.f)) * kInvPi);
+    // Mitsuba 3's sphere uv (src/shapes/sphere.cpp, compute_surface_interaction):
+    // (phi / 2pi, theta / pi) of the hit in the object frame, i.e. after
+    // to_world's inverse; rot_ is orthogonal, so its inverse is its transpose.
+    const double lx = rot_[0][0] * px + rot_[1][0] * py + rot_[2][0] * pz;
+    const double ly = rot_[0][1] * px + rot_[1][1] * py + rot_[2][1] * pz;
+    const double lz = rot_[0][2] * px + rot_[1][2] * py + rot_[2][2] * pz;
+    double phi = std::atan2(ly, lx);
+    if (phi < 0) phi += 2 * 3.14159265358979323846;
+    it.uv = Vec2(float(phi / (2 * 3.14159265358979323846)),
+                 float(std::acos(std::min(1.0, std::max(-1.0, lz))) / 3.14159265358979323846));
     if (flip_normals) n = -n;
     it.n = n;
     it.sh = Frame(n);

@@ -84,7 +84,10 @@ private:
 
 class Sphere final : public Shape {
 public:
-    Sphere(Vec3 center, float radius);
+    // to_world: the unit sphere's object-to-world map (rotation, possibly a
+    // mirror, times the radius, then the centre); only its rotation is used,
+    // for the texture coordinates.
+    Sphere(Vec3 center, float radius, const Matrix4& to_world = identity4());
     RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) override;
     void fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const override;
     PositionSample sample_position(Vec2 u, float u_extra) const override;
@@ -94,6 +97,9 @@ public:
     Vec3 bbox_min() const override;
     Vec3 bbox_max() const override;
     double cx_, cy_, cz_, r_;
+
+private:
+    double rot_[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};  // to_world's linear part / radius (orthogonal)
 };
 
 class Disk final : public Shape {

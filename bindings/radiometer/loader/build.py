@@ -463,6 +463,7 @@ class _Builder:
             q, flip = -q, not flip
         r = float(sig.mean())
         s.type, s.flip_normals = "sphere", flip
+        s.object_to_world = full
         s.center = tuple(float(c) for c in full[:3, 3])
         s.radius = r
         s.to_world = np.eye(4)
