@@ -22,6 +22,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 import zlib
 
 import numpy as np
@@ -403,3 +404,49 @@ def test_constant_texture_equals_plain_value(bsdf, estimator):
     assert plain.tobytes() == render(scene(value, True)).tobytes()
     off = (float(np.nextafter(np.float32(value[0]), np.float32(1))),) + tuple(value[1:])
     assert plain.tobytes() != render(scene(off, False)).tobytes()
+
+
+# ---------------------------------------------------------------------------
+# 5. Mitsuba's own textured suite scenes, under Mitsuba's own protocol
+
+SUITE = Path(__file__).resolve().parents[1].parent / "shared" / "peers" / "mitsuba-data" / "tests" / "scenes"
+
+
+def _flip_bitmaps(d):
+    for s in d.shapes:
+        for t in (s.bsdf.textures.values() if s.bsdf is not None else ()):
+            if t.type == "bitmap":
+                t.data = np.ascontiguousarray(t.data[::-1])
+    return d
+
+
+def _swap_checkers(d):
+    for s in d.shapes:
+        for t in (s.bsdf.textures.values() if s.bsdf is not None else ()):
+            if t.type == "checkerboard":
+                t.color0, t.color1 = t.color1, t.color0
+    return d
+
+
+@pytest.mark.skipif(not SUITE.is_dir(), reason="../shared/peers/mitsuba-data absent")
+@pytest.mark.parametrize("scene,spoil", [
+    ("bsdf_spheres/test_textured_diffuse_path.xml", _flip_bitmaps),
+    ("texture_interp/test_texture_interp_direct.xml", _flip_bitmaps),
+    ("participating_media/test_surf_area_light_volpath.xml", _swap_checkers),
+])
+def test_suite_texture_scenes_pass_mitsubas_test(scene, spoil, monkeypatch):
+    """Mitsuba 3's own scenes with textures (a JPEG bitmap on an OBJ sphere;
+    a PNG bitmap in repeat, mirror and clamp mode with bilinear lookups;
+    a checkerboard on an OBJ floor) under Mitsuba's test protocol
+    (benchmarks/studies/mitsuba_suite.py: 2e6 samples, seed 0, XYZ, Sidak
+    0.01, at most 0.75 % of the pixel-channels rejected; measured: 0
+    rejected of 17.3, 122.9 and 17.3 allowed). Power: the same scene with
+    its bitmaps upside down, or its checkerboard's colours swapped, fails
+    the protocol."""
+    from radiometer.benchmarks.studies import mitsuba_suite as ms
+
+    r = ms.protocol(SUITE / scene, threads=2)
+    assert r["passes"], r
+    load = ms._load
+    monkeypatch.setattr(ms, "_load", lambda path: spoil(load(path)))
+    assert not ms.protocol(SUITE / scene, threads=2)["passes"]
