@@ -298,7 +298,7 @@ def _node(draw, category, name=None, depth=0, types=None):
         elif category == "bsdf" and t != "twosided" and draw(st.integers(0, 3)) == 0:
             # a texture on a colour parameter that takes one, or on one that does not
             child("texture", draw(st.sampled_from(["reflectance", "diffuse_reflectance", "specular_reflectance",
-                                                   "specular_transmittance", "eta"])))
+                                                   "specular_transmittance", "eta", "alpha", "alpha_u"])))
         elif category == "bsdf" and t == "twosided":
             for n in ("a", "b")[:draw(st.integers(0, 3))] + (("c",) if draw(st.integers(0, 9)) == 0 else ()):
                 child("bsdf", n)

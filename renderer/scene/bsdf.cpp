@@ -33,8 +33,10 @@
 // Textured colours (BsdfDesc::textures; scene/texture.h): reflectance
 // (diffuse), diffuse_reflectance (plastic, roughplastic) and
 // specular_reflectance (conductor, roughconductor), evaluated at the
-// BsdfContext's uv. A lobe-selection weight that Mitsuba computes from a
-// colour's mean uses the texture's mean(), as Mitsuba does.
+// BsdfContext's uv; and textured roughness alpha_u, alpha_v
+// (roughconductor), read as Texture::eval_1 (as Mitsuba reads them). A
+// lobe-selection weight that Mitsuba computes from a colour's mean uses the
+// texture's mean(), as Mitsuba does.
 // Alphas below 1e-4 are clamped to 1e-4 (Mitsuba does the same); negative or
 // non-finite values of any parameter are rejected.
 #include "scene/bsdf.h"
@@ -172,16 +174,25 @@ private:
 
 class RoughConductorBsdf final : public Bsdf {
 public:
-    RoughConductorBsdf(const MicrofacetDistribution& distr, const Color& eta, const Color& k, TexturedColor specular)
-        : distr_(distr), eta_(eta), k_(k), specular_(std::move(specular)) {
+    // alpha_u, alpha_v: textured roughness (null: distr's own alphas).
+    RoughConductorBsdf(const MicrofacetDistribution& distr, const Color& eta, const Color& k, TexturedColor specular,
+                       std::shared_ptr<const Texture> alpha_u = nullptr, std::shared_ptr<const Texture> alpha_v = nullptr)
+        : distr_(distr),
+          eta_(eta),
+          k_(k),
+          specular_(std::move(specular)),
+          alpha_u_(std::move(alpha_u)),
+          alpha_v_(std::move(alpha_v)) {
         flags_ = kGlossyReflection;
-        textured_ = specular_.textured();
+        textured_ = specular_.textured() || alpha_u_ || alpha_v_;
+        anisotropic_ = alpha_u_ || alpha_v_ || distr_.alpha_u() != distr_.alpha_v();
     }
 
     BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float, Vec2 u2) const override {
         BsdfSample bs;
         if (!(wi.z > 0.f)) return bs;
-        MicrofacetSample ms = distr_.sample(wi, u2);
+        const MicrofacetDistribution distr = distribution(ctx.uv);
+        MicrofacetSample ms = distr.sample(wi, u2);
         if (!(ms.pdf_w > 0.f)) return bs;
         const Vec3 m = ms.m;
         bs.wo = reflect(wi, m);
@@ -192,10 +203,10 @@ public:
         // eval / pdf: with visible normals D G1(wi) cancels, leaving G1(wo)
         // (Heitz & d'Eon 2014, sec. 5); otherwise Walter et al. 2007, eq. 41.
         float w;
-        if (distr_.sample_visible())
-            w = distr_.G1(bs.wo, m);
+        if (distr.sample_visible())
+            w = distr.G1(bs.wo, m);
         else
-            w = distr_.G(wi, bs.wo, m) * dot(wi, m) / (wi.z * m.z);
+            w = distr.G(wi, bs.wo, m) * dot(wi, m) / (wi.z * m.z);
         bs.weight = specular_.eval(ctx.uv) * fresnel_conductor(dot(wi, m), eta_, k_) * w;
         return sanitize(bs);
     }
@@ -206,15 +217,17 @@ public:
         const float len = length(h);
         if (!(len > 0.f)) return Color(0.f);
         const Vec3 m = h / len;
-        const float D = distr_.D(m);
+        const MicrofacetDistribution distr = distribution(ctx.uv);
+        const float D = distr.D(m);
         if (D == 0.f) return Color(0.f);
-        const float G = distr_.G(wi, wo, m);
+        const float G = distr.G(wi, wo, m);
         const float value = D * G / (4.f * wi.z);
         return finite_or_zero(specular_.eval(ctx.uv) * fresnel_conductor(dot(wi, m), eta_, k_) * value);
     }
 
-    float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+    float pdf_w(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return 0.f;
+        const MicrofacetDistribution distr = distribution(ctx.uv);
         const Vec3 h = wi + wo;
         const float len = length(h);
         if (!(len > 0.f)) return 0.f;
@@ -222,13 +235,24 @@ public:
         // The side checks G1 applies in sample() must hold here too.
         const float wo_m = dot(wo, m);
         if (!(dot(wi, m) > 0.f) || !(wo_m > 0.f)) return 0.f;
-        return finite_or_zero(distr_.pdf_w(wi, m) / (4.f * wo_m));
+        return finite_or_zero(distr.pdf_w(wi, m) / (4.f * wo_m));
     }
 
 private:
+    // The distribution at uv: the constructed one, or one with the textures'
+    // alphas (Mitsuba's roughconductor reads alpha_u / alpha_v with eval_1
+    // per query). A value, a few floats: no allocation.
+    MicrofacetDistribution distribution(Vec2 uv) const {
+        if (!alpha_u_ && !alpha_v_) return distr_;
+        const float au = alpha_u_ ? alpha_u_->eval_1(uv) : distr_.alpha_u();
+        const float av = alpha_v_ ? alpha_v_->eval_1(uv) : distr_.alpha_v();
+        return MicrofacetDistribution(distr_.type(), au, av, distr_.sample_visible());
+    }
+
     MicrofacetDistribution distr_;
     Color eta_, k_;
     TexturedColor specular_;
+    std::shared_ptr<const Texture> alpha_u_, alpha_v_;
 };
 
 // ---------------------------------------------------------------------------
@@ -286,6 +310,7 @@ public:
     RoughDielectricBsdf(const MicrofacetDistribution& distr, float eta, const Color& spec_r, const Color& spec_t)
         : distr_(distr), eta_(eta), spec_r_(spec_r), spec_t_(spec_t) {
         flags_ = kGlossyReflection | kGlossyTransmission;
+        anisotropic_ = distr_.alpha_u() != distr_.alpha_v();
     }
 
     BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
@@ -703,6 +728,7 @@ public:
         : front_(std::move(front)), back_(std::move(back)) {
         flags_ = front_->flags() | (back_ ? back_->flags() : 0u);
         textured_ = front_->textured() || (back_ && back_->textured());
+        anisotropic_ = front_->anisotropic() || (back_ && back_->anisotropic());
     }
 
     BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
@@ -774,6 +800,17 @@ TexturedColor textured(const BsdfDesc& d, const char* name, const Color& plain) 
     return c;
 }
 
+// A scalar parameter's texture (read with eval_1), or null when it has none.
+std::shared_ptr<const Texture> texture_of(const BsdfDesc& d, const char* name) {
+    auto it = d.textures.find(name);
+    if (it == d.textures.end()) return nullptr;
+    try {
+        return make_texture(it->second);
+    } catch (const std::invalid_argument& e) {
+        fail(d, name, std::string("has a bad texture: ") + e.what());
+    }
+}
+
 // Only the parameters listed in the file head take a texture.
 void check_textured_names(const BsdfDesc& d, std::initializer_list<const char*> allowed) {
     for (const auto& [name, tex] : d.textures) {
@@ -791,12 +828,16 @@ std::unique_ptr<Bsdf> make_bsdf(const BsdfDesc& d) {
         return std::make_unique<DiffuseBsdf>(textured(d, "reflectance", d.reflectance));
     }
     if (d.type == "conductor" || d.type == "roughconductor") {
-        check_textured_names(d, {"specular_reflectance"});
+        if (d.type == "conductor")
+            check_textured_names(d, {"specular_reflectance"});
+        else
+            check_textured_names(d, {"specular_reflectance", "alpha_u", "alpha_v"});
         check_color(d, "eta", d.eta);
         check_color(d, "k", d.k);
         TexturedColor spec = textured(d, "specular_reflectance", d.specular_reflectance);
         if (d.type == "conductor") return std::make_unique<ConductorBsdf>(d.eta, d.k, std::move(spec));
-        return std::make_unique<RoughConductorBsdf>(make_distribution(d), d.eta, d.k, std::move(spec));
+        return std::make_unique<RoughConductorBsdf>(make_distribution(d), d.eta, d.k, std::move(spec),
+                                                    texture_of(d, "alpha_u"), texture_of(d, "alpha_v"));
     }
     if (d.type != "plastic" && d.type != "roughplastic") check_textured_names(d, {});
     if (d.type == "dielectric" || d.type == "roughdielectric" || d.type == "thindielectric") {

@@ -64,10 +64,15 @@ public:
     bool is_pure_delta() const { return (flags_ & kSmooth) == 0; }
     // Some parameter is a texture: the value depends on BsdfContext::uv.
     bool textured() const { return textured_; }
+    // The value depends on the tangent direction (alpha_u != alpha_v, or
+    // textured alphas): the shading frame's tangent must then follow the
+    // surface's dp/du, as Mitsuba's does (Shape::uv_frame).
+    bool anisotropic() const { return anisotropic_; }
 
 protected:
     uint32_t flags_ = 0;
     bool textured_ = false;
+    bool anisotropic_ = false;
 };
 
 // Builds a BSDF from its description; throws std::invalid_argument naming the

@@ -58,6 +58,7 @@ int Scene::add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals) {
         throw std::invalid_argument("shape '" + s->id + "': bsdf index out of range");
     s->bsdf = bsdf;
     s->flip_normals = flip_normals;
+    s->uv_frame = bsdfs[size_t(bsdf)]->anisotropic();
     Vec3 lo = s->bbox_min(), hi = s->bbox_max();
     if (!is_finite(lo) || !is_finite(hi)) throw std::invalid_argument("shape '" + s->id + "': non-finite geometry");
     bbox_lo = vmin(bbox_lo, lo);

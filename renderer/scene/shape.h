@@ -29,6 +29,12 @@ public:
     bool flip_normals = false;
     int medium_interior = -1, medium_exterior = -1;  // indices into Scene::media; -1: none
     int dipole = -1;  // index into Scene::dipoles: a dipole BSSRDF replaces the BSDF (dipole.h)
+    // The shading frame's tangent follows dp/du (Mitsuba's
+    // SurfaceInteraction::initialize_sh_frame: s = dp/du made orthogonal to
+    // the shading normal, t = n x s) instead of the default frame about n.
+    // Set for shapes whose BSDF is anisotropic (Bsdf::anisotropic), so that
+    // every other shape keeps its frame, and its images their bytes.
+    bool uv_frame = false;
 
     virtual RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) = 0;
     // Fills the geometric part of `it` for a hit reported by Embree.

@@ -38,6 +38,11 @@ public:
         const bool mu = p.x - std::floor(p.x) > 0.5f, mv = p.y - std::floor(p.y) > 0.5f;
         return mu == mv ? c0_ : c1_;
     }
+    float eval_1(Vec2 uv) const override {
+        const Vec2 p = map_.apply(uv);
+        const bool mu = p.x - std::floor(p.x) > 0.5f, mv = p.y - std::floor(p.y) > 0.5f;
+        return mu != mv ? average(c0_) : average(c1_);
+    }
     float mean() const override { return 0.5f * (average(c0_) + average(c1_)); }
 
 private:
@@ -83,6 +88,10 @@ public:
         const Color f0 = texel(xa, ya) * w0x + texel(xb, ya) * w1x;
         const Color f1 = texel(xa, yb) * w0x + texel(xb, yb) * w1x;
         return f0 * w0y + f1 * w1y;
+    }
+    float eval_1(Vec2 uv) const override {
+        const Color c = eval(uv);
+        return ch_ == 1 ? c.x : luminance(c);
     }
     float mean() const override { return mean_; }
 

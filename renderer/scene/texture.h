@@ -14,6 +14,12 @@
 //                dr::Texture lookup: bilinear reads the four texels around
 //                uv * res - 1/2; nearest the texel floor(uv * res); each
 //                index wrapped on its own. A 1-channel image is grey.
+// eval_1() is a texture read as one number (Mitsuba's Texture::eval_1, which
+// roughness parameters use): a bitmap's single channel, or the luminance
+// (Rec. 709 weights) of its three; for a checkerboard, the channel mean of
+// a colour, with the squares the other way round (Mitsuba 3.9.1's
+// checkerboard keeps its "legacy scalar convention" there: color0 where
+// (frac(u') > 1/2) != (frac(v') > 1/2); measured with mitsuba.load_dict).
 // mean() is what Mitsuba's Texture::mean() gives (the BSDFs that pick a
 // lobe by albedo use it): the channel average of a constant colour, the
 // average of the two colours' means for a checkerboard, the mean luminance
@@ -45,6 +51,7 @@ class Texture {
 public:
     virtual ~Texture() = default;
     virtual Color eval(Vec2 uv) const = 0;
+    virtual float eval_1(Vec2 uv) const = 0;
     virtual float mean() const = 0;
 };
 

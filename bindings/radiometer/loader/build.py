@@ -182,18 +182,35 @@ class _Builder:
             b.nested = [self.bsdf(k) for k in kids]
         if t in ("roughconductor", "roughdielectric", "roughplastic"):
             b.distribution = p.string("distribution", "beckmann", ("beckmann", "ggx"))
-            if p.has("alpha") and (p.has("alpha_u") or p.has("alpha_v")):
+            # roughconductor's alphas may be textures (read as one number, Texture::eval_1).
+            textured = {n: p.named_child("texture", n) if t == "roughconductor" else None
+                        for n in ("alpha", "alpha_u", "alpha_v")}
+
+            def given(n):
+                return p.has(n) or textured[n] is not None
+
+            def alpha(n, default=None):
+                if textured[n] is None:
+                    return p.float(n, default, check="positive")
+                if p.has(n):
+                    raise p.error(f"parameter '{n}' given both as a value and as a texture", textured[n].place)
+                tex = self.texture(textured[n])
+                for name in (("alpha_u", "alpha_v") if n == "alpha" else (n,)):
+                    b.textures[name] = tex
+                return float(np.mean(tex.mean_rgb()))
+
+            if given("alpha") and (given("alpha_u") or given("alpha_v")):
                 raise p.error("give either alpha or alpha_u/alpha_v")
-            if p.has("alpha_u") != p.has("alpha_v"):
+            if given("alpha_u") != given("alpha_v"):
                 raise p.error("give both alpha_u and alpha_v")
-            if p.has("alpha_u"):
-                b.alpha_u = p.float("alpha_u", check="positive")
-                b.alpha_v = p.float("alpha_v", check="positive")
+            if given("alpha_u"):
+                b.alpha_u = alpha("alpha_u")
+                b.alpha_v = alpha("alpha_v")
                 if t == "roughplastic" and b.alpha_u != b.alpha_v:  # as Mitsuba
                     raise p.error("parameters 'alpha_u' and 'alpha_v' differ: roughplastic supports only "
                                   "isotropic roughness", node.props["alpha_v"].place)
             else:
-                b.alpha_u = b.alpha_v = p.float("alpha", 0.1, check="positive")
+                b.alpha_u = b.alpha_v = alpha("alpha", 0.1)
             b.sample_visible = p.bool("sample_visible", True)
         if t == "roughplastic" and b.int_ior == b.ext_ior:  # as Mitsuba
             raise p.error("parameters 'int_ior' and 'ext_ior' must differ")

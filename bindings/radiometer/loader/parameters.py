@@ -76,7 +76,7 @@ TEXTURED = {
     "plastic": ("diffuse_reflectance",),
     "roughplastic": ("diffuse_reflectance",),
     "conductor": ("specular_reflectance",),
-    "roughconductor": ("specular_reflectance",),
+    "roughconductor": ("specular_reflectance", "alpha", "alpha_u", "alpha_v"),
 }
 _TEXTURED_TEXT = "; ".join(f"{t}.{', '.join(n)}" for t, n in TEXTURED.items())
 
