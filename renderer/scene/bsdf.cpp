@@ -176,7 +176,8 @@ class RoughConductorBsdf final : public Bsdf {
 public:
     // alpha_u, alpha_v: textured roughness (null: distr's own alphas).
     RoughConductorBsdf(const MicrofacetDistribution& distr, const Color& eta, const Color& k, TexturedColor specular,
-                       std::shared_ptr<const Texture> alpha_u = nullptr, std::shared_ptr<const Texture> alpha_v = nullptr)
+                       std::shared_ptr<const Texture> alpha_u = nullptr,
+                       std::shared_ptr<const Texture> alpha_v = nullptr)
         : distr_(distr),
           eta_(eta),
           k_(k),
