@@ -72,14 +72,19 @@ texture    checkerboard: color0 [0.4], color1 [0.2] (colours, not nested
            A texture is nested under the parameter's name or referenced
            (<ref name=".." id=".."/>; top-level textures are declarations).
            It takes the place of diffuse.reflectance,
-           plastic/roughplastic.diffuse_reflectance and
-           conductor/roughconductor.specular_reflectance (parameters.TEXTURED);
+           plastic/roughplastic.diffuse_reflectance,
+           conductor/roughconductor.specular_reflectance and
+           roughconductor.alpha / alpha_u / alpha_v (read as one number,
+           Mitsuba's eval_1: a checkerboard's squares swap there, as in
+           Mitsuba 3.9.1) (parameters.TEXTURED);
            on any other parameter it is a SceneError naming the plugin, the
            parameter and the place. Evaluated at the hit's uv: OBJ/PLY
            vertex uvs (OBJ's v flipped unless flip_tex_coords is false),
            the rectangle's ((x+1)/2, (y+1)/2), the cube's per-face uvs, the
            disk's (r, phi / 2 pi) and the sphere's (phi / 2 pi, theta / pi)
-           in its object frame, all as Mitsuba 3 defines them.
+           in its object frame, all as Mitsuba 3 defines them. A shape
+           whose bsdf is anisotropic (alpha_u != alpha_v, or textured
+           alphas) gets Mitsuba's shading tangent, dp/du; others keep theirs.
 colours   rgb, float, or spectrum: wavelength:value pairs or an .spd file,
            converted as Mitsuba 3's RGB variants do (spectra.py); a uniform
            spectrum is its value, except on an emitter, where it is XYZ
