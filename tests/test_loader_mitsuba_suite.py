@@ -322,7 +322,15 @@ def test_suite_scenes_get_past_the_format():
     # ten participating_media scenes, which stopped at their checkerboard
     # floor (benchmarks/results/mitsuba_suite.json: 16 of the 20 pass
     # Mitsuba's protocol; the four that fail are media scenes, dark inside
-    # their nested medium spheres, not on the textured floor).
+    # their medium spheres, and as dark with the checkerboard replaced by
+    # its mean against a fresh Mitsuba render, so not the texture. Three of
+    # them have thindielectric medium boundaries: volpath counts the
+    # straight-through (null-lobe) transmission towards max_depth, Mitsuba's
+    # volpath does not (a lone thindielectric medium sphere, max_depth 8:
+    # 0.984 of Mitsuba; 1.0006 at max_depth 64); not counting it cut their
+    # rejections from 265 / 1024 / 1444 to 30 / 45 / 228 in a trial, so more
+    # remains (the break at max_depth before the lobe is known). Left to the
+    # media work; hetero_sigmat_albedo's 49 rejected are another matter).
     assert len(loads) >= 20, sorted(loads)
     assert {"bsdf_spheres/test_roughplastic_linear_path.xml",
             "bsdf_spheres/test_roughplastic_nonlinear_path.xml",
