@@ -104,7 +104,8 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("env_height", &EmitterDesc::env_height)
         .def_property(
             "env_data", [](const EmitterDesc& d) { return d.env_data; },
-            [](EmitterDesc& d, py::object v) { d.env_data = flat<float>(v, 1, "environment map data"); });
+            [](EmitterDesc& d, py::object v) { d.env_data = flat<float>(v, 1, "environment map data"); })
+        .def_readwrite("textures", &EmitterDesc::textures);
 
     py::class_<SensorDesc>(m, "SensorDesc")
         .def(py::init<>())

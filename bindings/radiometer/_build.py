@@ -50,6 +50,7 @@ def _emitter(e) -> "_core.EmitterDesc":
     c.to_world = np.asarray(e.to_world, dtype=np.float64)
     c.cutoff_angle = float(e.cutoff_angle)
     c.beam_width = float(e.beam_width)
+    c.textures = {name: _texture(t) for name, t in e.textures.items()}
     if e.env is not None:
         c.env_height, c.env_width = int(e.env.shape[0]), int(e.env.shape[1])
         c.env_data = np.ascontiguousarray(e.env, np.float32).reshape(-1, 1)

@@ -88,6 +88,7 @@ class EmitterDesc:
     # to_world above maps its local frame (Mitsuba's latitude-longitude
     # convention, +y up) to the world.
     env: Optional[np.ndarray] = None
+    textures: dict = field(default_factory=dict)  # spot: {"texture": TextureDesc}, projected along the beam
 
 
 @dataclass

@@ -52,6 +52,9 @@ struct EmitterDesc {
     // to_world maps its local frame to the world.
     int env_width = 0, env_height = 0;
     std::vector<float> env_data;
+    // Textures by parameter name: spot "texture" (projected along the beam,
+    // multiplying the intensity; Mitsuba 3's spot).
+    std::map<std::string, TextureDesc> textures;
 };
 
 struct SensorDesc {

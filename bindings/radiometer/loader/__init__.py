@@ -92,7 +92,9 @@ colours   rgb, float, or spectrum: wavelength:value pairs or an .spd file,
 emitter    area (nested in a shape): radiance [1]
            point: intensity [1], position or to_world
            spot: intensity [1], cutoff_angle [20], beam_width [3/4 cutoff],
-               to_world (shines along +z)
+               to_world (shines along +z), texture (a nested texture
+               projected along the beam, at Mitsuba's uv 1/2 + (x, y) /
+               (2 z tan cutoff), multiplying the intensity)
            directional: irradiance [1], direction or to_world
            constant: radiance [1]
            envmap: filename (a latitude-longitude image: .exr through the

@@ -349,6 +349,10 @@ class _Builder:
                 raise p.error(f"cutoff_angle {e.cutoff_angle} exceeds 180 degrees")
             # Mitsuba keeps a beam_width beyond the cutoff: the falloff is then a hard edge.
             e.beam_width = p.float("beam_width", 0.75 * e.cutoff_angle, check="positive")
+            # Mitsuba 3's spot: an optional texture projected along the beam.
+            tex = p.named_child("texture", "texture")
+            if tex is not None:
+                e.textures["texture"] = self.texture(tex)
             m = p.transform("to_world")
             e.to_world = np.eye(4) if m is None else m
         elif t == "directional":

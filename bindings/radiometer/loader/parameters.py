@@ -77,6 +77,7 @@ TEXTURED = {
     "roughplastic": ("diffuse_reflectance",),
     "conductor": ("specular_reflectance",),
     "roughconductor": ("specular_reflectance", "alpha", "alpha_u", "alpha_v"),
+    "spot": ("texture",),
 }
 _TEXTURED_TEXT = "; ".join(f"{t}.{', '.join(n)}" for t, n in TEXTURED.items())
 
