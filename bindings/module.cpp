@@ -49,6 +49,22 @@ py::array_t<double> map_channel(int ch, const DoubleArray& x, F f) {
 PYBIND11_MODULE(_core, m) {
     m.doc() = "radiometer's C++ renderer core";
 
+    py::class_<TextureDesc>(m, "TextureDesc")
+        .def(py::init<>())
+        .def_readwrite("type", &TextureDesc::type)
+        .def_readwrite("id", &TextureDesc::id)
+        .def_property("color0", color_get(&TextureDesc::color0), color_set(&TextureDesc::color0))
+        .def_property("color1", color_get(&TextureDesc::color1), color_set(&TextureDesc::color1))
+        .def_readwrite("to_uv", &TextureDesc::to_uv)
+        .def_readwrite("width", &TextureDesc::width)
+        .def_readwrite("height", &TextureDesc::height)
+        .def_readwrite("channels", &TextureDesc::channels)
+        .def_property(
+            "data", [](const TextureDesc& d) { return d.data; },
+            [](TextureDesc& d, py::object v) { d.data = flat<float>(v, 1, "texture data"); })
+        .def_readwrite("filter_type", &TextureDesc::filter_type)
+        .def_readwrite("wrap_mode", &TextureDesc::wrap_mode);
+
     py::class_<BsdfDesc>(m, "BsdfDesc")
         .def(py::init<>())
         .def_readwrite("type", &BsdfDesc::type)
@@ -69,7 +85,8 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("distribution", &BsdfDesc::distribution)
         .def_readwrite("sample_visible", &BsdfDesc::sample_visible)
         .def_readwrite("nonlinear", &BsdfDesc::nonlinear)
-        .def_readwrite("nested", &BsdfDesc::nested);
+        .def_readwrite("nested", &BsdfDesc::nested)
+        .def_readwrite("textures", &BsdfDesc::textures);
 
     py::class_<EmitterDesc>(m, "EmitterDesc")
         .def(py::init<>())
@@ -87,7 +104,8 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("env_height", &EmitterDesc::env_height)
         .def_property(
             "env_data", [](const EmitterDesc& d) { return d.env_data; },
-            [](EmitterDesc& d, py::object v) { d.env_data = flat<float>(v, 1, "environment map data"); });
+            [](EmitterDesc& d, py::object v) { d.env_data = flat<float>(v, 1, "environment map data"); })
+        .def_readwrite("textures", &EmitterDesc::textures);
 
     py::class_<SensorDesc>(m, "SensorDesc")
         .def(py::init<>())
@@ -211,11 +229,12 @@ PYBIND11_MODULE(_core, m) {
             py::arg("uvs") = py::none(), py::arg("bsdf"), py::arg("flip_normals") = false)
         .def(
             "add_sphere",
-            [](Scene& s, const std::string& id, py::object c, float r, int bsdf, bool flip) {
+            [](Scene& s, const std::string& id, py::object c, float r, int bsdf, bool flip, py::object m4) {
                 Color cc = to_color(c);
-                return s.add_sphere(id, cc, r, bsdf, flip);
+                return s.add_sphere(id, cc, r, bsdf, flip, m4.is_none() ? identity4() : to_matrix(m4));
             },
-            py::arg("id"), py::arg("center"), py::arg("radius"), py::arg("bsdf"), py::arg("flip_normals") = false)
+            py::arg("id"), py::arg("center"), py::arg("radius"), py::arg("bsdf"), py::arg("flip_normals") = false,
+            py::arg("to_world") = py::none())
         .def(
             "add_disk",
             [](Scene& s, const std::string& id, py::object m4, int bsdf, bool flip) {

@@ -13,6 +13,7 @@
 #include "render/memory.h"
 #include "render/registry.h"
 #include "scene/scene.h"
+#include "scene/texture.h"
 #include "transport/common.h"
 
 namespace rm::bind {
@@ -42,7 +43,65 @@ py::array_t<float> per_point(const PointArray& pts, F f) {
 }  // namespace
 
 void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
+    // A texture evaluated at (N, 2) uvs (tests/test_textures.py): eval (N, 3),
+    // eval_1 (N,) and mean().
+    m.def(
+        "texture_eval",
+        [](const TextureDesc& d, py::object uv) {
+            auto u = flat<float>(uv, 2, "uv");
+            std::shared_ptr<const Texture> t = make_texture(d);
+            size_t n = u.size() / 2;
+            std::vector<float> out(3 * n), one(n);
+            for (size_t i = 0; i < n; ++i) {
+                Color c = t->eval(Vec2(u[2 * i], u[2 * i + 1]));
+                for (int k = 0; k < 3; ++k) out[3 * i + size_t(k)] = c[k];
+                one[i] = t->eval_1(Vec2(u[2 * i], u[2 * i + 1]));
+            }
+            return py::make_tuple(to_numpy(std::move(out), {py::ssize_t(n), 3}),
+                                  to_numpy(std::move(one), {py::ssize_t(n)}), t->mean());
+        },
+        py::arg("desc"), py::arg("uv"));
     scene
+        // The closest hits of N rays (origins and directions (N, 3)), as the
+        // estimators see them (tests/test_textures.py compares the uv with
+        // Mitsuba's): t (inf: miss), p, n, uv, the shading frame's tangent s,
+        // shape index (-1: miss).
+        .def(
+            "intersect_rays",
+            [](const Scene& s, py::object o, py::object d) {
+                if (!s.committed()) throw py::value_error("scene is not committed");
+                auto oo = flat<float>(o, 3, "o"), dd = flat<float>(d, 3, "d");
+                if (oo.size() != dd.size()) throw py::value_error("o and d differ in length");
+                size_t n = oo.size() / 3;
+                std::vector<float> t(n, kInf), p(3 * n, 0.f), nn(3 * n, 0.f), ss(3 * n, 0.f), uv(2 * n, 0.f),
+                    shape(n, -1.f);
+                for (size_t i = 0; i < n; ++i) {
+                    Ray ray;
+                    ray.o = Vec3(oo[3 * i], oo[3 * i + 1], oo[3 * i + 2]);
+                    ray.d = Vec3(dd[3 * i], dd[3 * i + 1], dd[3 * i + 2]);
+                    Interaction it;
+                    if (!s.intersect(ray, it)) continue;
+                    t[i] = it.t;
+                    for (int k = 0; k < 3; ++k) {
+                        p[3 * i + size_t(k)] = it.p[k];
+                        nn[3 * i + size_t(k)] = it.n[k];
+                        ss[3 * i + size_t(k)] = it.sh.s[k];
+                    }
+                    uv[2 * i] = it.uv.x;
+                    uv[2 * i + 1] = it.uv.y;
+                    shape[i] = float(it.shape);
+                }
+                py::ssize_t N = py::ssize_t(n);
+                py::dict out;
+                out["t"] = to_numpy(std::move(t), {N});
+                out["p"] = to_numpy(std::move(p), {N, 3});
+                out["n"] = to_numpy(std::move(nn), {N, 3});
+                out["uv"] = to_numpy(std::move(uv), {N, 2});
+                out["s"] = to_numpy(std::move(ss), {N, 3});
+                out["shape"] = to_numpy(std::move(shape), {N});
+                return out;
+            },
+            py::arg("o"), py::arg("d"))
         // Tests of the majorant grid (tests/test_majorant_grid.py): sigma_t
         // and the local majorant at N x 3 world points, N x 3 arrays.
         .def("medium_sigma_t",

@@ -180,9 +180,11 @@ XML = [
     ("unknown_sampler", '<sensor type="perspective"><sampler type="orthogonal"/></sensor>' + MARK,
      ["sampler type 'orthogonal'"]),
     ("unknown_rfilter", _film('<rfilter type="lanczos"/>'), ["rfilter type 'lanczos'"]),
-    ("texture", '<texture type="bitmap"/>' + MARK, ["texture type 'bitmap' is not supported"]),
-    ("texture_param", '<shape type="sphere"><bsdf type="diffuse">\n<texture name="reflectance" type="checkerboard"/>'
-     + MARK + "\n</bsdf></shape>", ["bsdf 'diffuse'", "parameter 'reflectance'", "texture type 'checkerboard'"]),
+    ("texture", '<texture type="wood"/>' + MARK, ["texture type 'wood' is not supported"]),
+    ("texture_no_file", '<texture type="bitmap"/>' + MARK, ["texture 'bitmap'", "missing parameter 'filename'"]),
+    ("texture_param", '<shape type="sphere"><bsdf type="dielectric">\n<texture name="specular_transmittance" '
+     'type="checkerboard"/>' + MARK + "\n</bsdf></shape>",
+     ["bsdf 'dielectric'", "parameter 'specular_transmittance' cannot take a texture", "texture 'checkerboard'"]),
     ("include_missing", '<include filename="other.xml"/>' + MARK, ["<include>", "file 'other.xml' not found"]),
     ("include_nested_path", '<shape type="sphere">\n<path value="."/>' + MARK + "\n</shape>",
      ["<path> is allowed only at the top level"]),

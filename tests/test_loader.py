@@ -851,8 +851,8 @@ BAD_XML = [
 </shape>
 </scene>""", 3, ["non-finite"]),
     ("""<scene version="3.0.0">
-<texture type="bitmap"/>
-</scene>""", 2, ["texture type 'bitmap' is not supported"]),
+<texture type="wood"/>
+</scene>""", 2, ["texture type 'wood' is not supported"]),
     ("""<scene version="2.1">
 </scene>""", 1, ["cannot parse version '2.1'"]),
     ("""<scene version="3.0.0">

@@ -93,6 +93,9 @@ PARAMS = {
                               "filter_type": "filter_type", "wrap_mode": "wrap_mode", "raw": "bool",
                               "accel": "bool"},
                "constvolume": {"value": "rgb"}},
+    "texture": {"checkerboard": {"color0": "rgb", "color1": "rgb", "to_uv": "transform"},
+                "bitmap": {"filename": "img_file", "filter_type": "tex_filter", "wrap_mode": "tex_wrap",
+                           "raw": "bool", "to_uv": "transform", "format": "tex_format", "accel": "bool"}},
     "subsurface": {"dipole": {"sigma_a": "rgb", "sigma_s": "rgb", "sigma_t": "rgb", "albedo": "rgb",
                               "scale": "float", "g": "g", "int_ior": "ior", "ext_ior": "ior"}},
     # The estimators' declarations in the core's registry, Mitsuba 0.6 names included.
@@ -103,7 +106,17 @@ PARAMS = {
 assert {c: set(t) for c, t in PARAMS.items()} == {c: set(t) for c, t in PLUGINS.items()}, \
     "the fuzzer's schema must cover the loader's plugin table"
 
-# Files the scenes may name: valid and broken meshes and volumes.
+def _png(mode, shape):
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.arange(int(np.prod(shape)), dtype=np.uint8).reshape(shape), mode).save(buf, "PNG")
+    return buf.getvalue()
+
+
+# Files the scenes may name: valid and broken meshes, volumes and images.
 _TRI_OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\nf 1/1/1 2/2/1 3/3/1\nf 2 4 3\n"
 FILES = {
     "tri.obj": b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3 1\n",
@@ -119,12 +132,16 @@ FILES = {
     "rgb.vol": (b"VOL\x03" + struct.pack("<5i", 1, 1, 1, 2, 3) + struct.pack("<6f", 0, 0, 0, 1, 1, 1)
                 + np.full(6, 0.5, dtype="<f4").tobytes()),
     "bad.vol": b"VOL\x03" + bytes(20),
+    "rgb.png": _png("RGB", (3, 4, 3)),
+    "grey.png": _png("L", (1, 5)),
+    "bad.png": b"\x89PNG\r\n\x1a\n" + bytes(30),
 }
 _OBJ_NAMES = ["tri.obj", "uv.obj", "degenerate.obj", "nan.obj", "bad.obj", "absent.obj", "tri.ply",
               "../outside.obj", "link.obj", "sub/../tri.obj", "", "."]
 _PLY_NAMES = ["tri.ply", "bad.ply", "absent.ply", "tri.obj"]
 _VOL_NAMES = ["ok.vol", "rgb.vol", "bad.vol", "absent.vol", "../outside.vol", "link.vol"]
-_FILE_NAMES = set(_OBJ_NAMES + _PLY_NAMES + _VOL_NAMES)
+_IMG_NAMES = ["rgb.png", "grey.png", "bad.png", "absent.png", "tri.obj", "ok.vol"]
+_FILE_NAMES = set(_OBJ_NAMES + _PLY_NAMES + _VOL_NAMES + _IMG_NAMES)
 
 # -- values ---------------------------------------------------------------------
 
@@ -141,6 +158,8 @@ _STRINGS = {
     "pixel_format": ["rgb", "rgba", "xyz"], "component_format": ["float16", "float32", "uint8"],
     "filter_type": ["trilinear", "nearest"], "wrap_mode": ["clamp", "repeat"],
     "string": ["power", "balance", "uniform", "x"],
+    "tex_filter": ["bilinear", "nearest", "trilinear"], "tex_wrap": ["repeat", "mirror", "clamp", "wrap"],
+    "tex_format": ["auto", "variant", "fp16", "uint8"],
 }
 
 
@@ -204,6 +223,7 @@ def _good_table():
         "obj_file": st.sampled_from(_OBJ_NAMES).map(lambda s: ("string", s)),
         "ply_file": st.sampled_from(_PLY_NAMES).map(lambda s: ("string", s)),
         "vol_file": st.sampled_from(_VOL_NAMES).map(lambda s: ("string", s)),
+        "img_file": st.sampled_from(_IMG_NAMES).map(lambda s: ("string", s)),
     }
     table.update({k: st.sampled_from(v).map(lambda s: ("string", s)) for k, v in _STRINGS.items()})
     return table
@@ -237,7 +257,7 @@ def _value(draw, kind):
 
 
 # Parameters a plugin cannot do without, drawn nearly always.
-_REQUIRED = {"obj": "filename", "ply": "filename", "gridvolume": "filename"}
+_REQUIRED = {"obj": "filename", "ply": "filename", "gridvolume": "filename", "bitmap": "filename"}
 # Plugin types that stand only nested, rarely drawn elsewhere.
 _NESTED_ONLY = {"emitter": ["area"], "sensor": ["irradiancemeter"]}
 
@@ -275,6 +295,10 @@ def _node(draw, category, name=None, depth=0, types=None):
                 child("subsurface", "subsurface")
             if draw(st.integers(0, 19)) == 0:
                 child("sensor", "sensor", types=["irradiancemeter"])
+        elif category == "bsdf" and t != "twosided" and draw(st.integers(0, 3)) == 0:
+            # a texture on a colour parameter that takes one, or on one that does not
+            child("texture", draw(st.sampled_from(["reflectance", "diffuse_reflectance", "specular_reflectance",
+                                                   "specular_transmittance", "eta", "alpha", "alpha_u"])))
         elif category == "bsdf" and t == "twosided":
             for n in ("a", "b")[:draw(st.integers(0, 3))] + (("c",) if draw(st.integers(0, 9)) == 0 else ()):
                 child("bsdf", n)
@@ -299,7 +323,7 @@ def _node(draw, category, name=None, depth=0, types=None):
 def scenes(draw):
     top = []
     for category, chance in (("shape", 1), ("shape", 2), ("emitter", 2), ("sensor", 1), ("integrator", 2),
-                             ("bsdf", 6), ("medium", 6), ("film", 20), ("subsurface", 20)):
+                             ("bsdf", 6), ("medium", 6), ("film", 20), ("subsurface", 20), ("texture", 12)):
         if draw(st.integers(0, chance)) == 0:
             top.append(draw(_node(category)))
     if top and draw(st.integers(0, 7)) == 0:  # a ref: to a node declared on top, or to nothing

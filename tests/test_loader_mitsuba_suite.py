@@ -316,8 +316,31 @@ def test_suite_scenes_get_past_the_format():
                                                   "integrator type 'moment'")), r
     loads = {r["scene"] for r in rows if r["status"] == "loads"}
     # Measured 2026-12-04: 7 of 41 load; roughplastic brought the two
-    # bsdf_spheres/test_roughplastic_* scenes (its other three users, in
-    # participating_media, stop first at a checkerboard texture).
-    assert len(loads) >= 7, sorted(loads)
+    # bsdf_spheres/test_roughplastic_* scenes. Textures (checkerboard,
+    # bitmap, textured roughconductor alphas, the spot's projected texture)
+    # then brought 14 more, 21 of 41: the four textured bsdf_spheres /
+    # texture_interp / spot_light scenes below and ten participating_media
+    # scenes, which stopped at their checkerboard floor
+    # (benchmarks/results/mitsuba_suite.json: 17 of the 21 pass
+    # Mitsuba's protocol; the four that fail are media scenes, dark inside
+    # their medium spheres, and as dark with the checkerboard replaced by
+    # its mean against a fresh Mitsuba render, so not the texture. Three of
+    # them have thindielectric medium boundaries: volpath counts the
+    # straight-through (null-lobe) transmission towards max_depth, Mitsuba's
+    # volpath does not (a lone thindielectric medium sphere, max_depth 8:
+    # 0.984 of Mitsuba; 1.0006 at max_depth 64); not counting it cut their
+    # rejections from 265 / 1024 / 1444 to 30 / 45 / 228 in a trial, so more
+    # remains (the break at max_depth before the lobe is known). Left to the
+    # media work; hetero_sigmat_albedo's 49 rejected are another matter).
+    assert len(loads) >= 21, sorted(loads)
     assert {"bsdf_spheres/test_roughplastic_linear_path.xml",
-            "bsdf_spheres/test_roughplastic_nonlinear_path.xml"} <= loads
+            "bsdf_spheres/test_roughplastic_nonlinear_path.xml",
+            "bsdf_spheres/test_textured_diffuse_path.xml",
+            "bsdf_spheres/test_textured_roughconductor_path.xml",
+            "texture_interp/test_texture_interp_direct.xml",
+            "spot_light/test_spot_direct.xml",
+            "participating_media/test_surf_area_light_volpath.xml"} <= loads
+    # What stops the mesh_attribute scenes: that texture type, named.
+    status = {r["scene"]: r["status"] for r in rows}
+    assert "texture type 'mesh_attribute' is not supported" in status[
+        "mesh_attributes/test_mesh_attributes_1_face_direct.xml"]

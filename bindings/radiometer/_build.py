@@ -21,6 +21,22 @@ def _bsdf(d: BsdfDesc) -> "_core.BsdfDesc":
     c.sample_visible = bool(d.sample_visible)
     c.nonlinear = bool(d.nonlinear)
     c.nested = [_bsdf(n) for n in d.nested]
+    c.textures = {name: _texture(t) for name, t in d.textures.items()}
+    return c
+
+
+def _texture(t) -> "_core.TextureDesc":
+    c = _core.TextureDesc()
+    c.type = t.type
+    c.id = t.id
+    c.color0 = tuple(float(x) for x in t.color0)
+    c.color1 = tuple(float(x) for x in t.color1)
+    c.to_uv = [float(x) for x in np.asarray(t.to_uv, np.float64).reshape(9)]
+    c.filter_type = t.filter_type
+    c.wrap_mode = t.wrap_mode
+    if t.data is not None:
+        c.height, c.width, c.channels = (int(v) for v in t.data.shape)
+        c.data = np.ascontiguousarray(t.data, np.float32).reshape(-1, 1)
     return c
 
 
@@ -34,6 +50,7 @@ def _emitter(e) -> "_core.EmitterDesc":
     c.to_world = np.asarray(e.to_world, dtype=np.float64)
     c.cutoff_angle = float(e.cutoff_angle)
     c.beam_width = float(e.beam_width)
+    c.textures = {name: _texture(t) for name, t in e.textures.items()}
     if e.env is not None:
         c.env_height, c.env_width = int(e.env.shape[0]), int(e.env.shape[1])
         c.env_data = np.ascontiguousarray(e.env, np.float32).reshape(-1, 1)
@@ -99,7 +116,9 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
                                      None if s.uvs is None else np.asarray(s.uvs, np.float32), b, bool(s.flip_normals))
             elif s.type == "sphere":
                 idx = scene.add_sphere(where, tuple(float(x) for x in s.center), float(s.radius), b,
-                                       bool(s.flip_normals))
+                                       bool(s.flip_normals),
+                                       None if s.object_to_world is None else np.asarray(s.object_to_world,
+                                                                                         np.float64))
             elif s.type == "disk":
                 idx = scene.add_disk(where, np.asarray(s.to_world, np.float64), b, bool(s.flip_normals))
             else:

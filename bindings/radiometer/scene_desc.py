@@ -28,6 +28,28 @@ class SceneError(ValueError):
 
 
 @dataclass
+class TextureDesc:
+    """A texture (renderer/scene/texture.h): `checkerboard` (color0, color1)
+    or `bitmap` (data: (rows, columns, 1 or 3) float32, linear, row 0 at
+    v = 0); to_uv maps uv (3x3, affine)."""
+    type: str = "checkerboard"
+    id: str = ""  # the place it came from, for error messages
+    color0: tuple = field(default_factory=lambda: _rgb(0.4))
+    color1: tuple = field(default_factory=lambda: _rgb(0.2))
+    to_uv: np.ndarray = field(default_factory=lambda: np.eye(3, dtype=np.float64))
+    data: Optional[np.ndarray] = None
+    filter_type: str = "bilinear"
+    wrap_mode: str = "repeat"
+
+    def mean_rgb(self):
+        """The channel-wise mean colour (what a plain value in its place would be)."""
+        if self.type == "bitmap":
+            m = np.asarray(self.data, np.float64).reshape(-1, self.data.shape[-1]).mean(axis=0)
+            return tuple(float(x) for x in (m if m.size == 3 else np.repeat(m, 3)))
+        return tuple(0.5 * (a + b) for a, b in zip(self.color0, self.color1))
+
+
+@dataclass
 class BsdfDesc:
     type: str = "diffuse"  # diffuse conductor roughconductor dielectric roughdielectric
     #                        thindielectric plastic twosided null
@@ -46,6 +68,10 @@ class BsdfDesc:
     sample_visible: bool = True
     nonlinear: bool = False
     nested: list = field(default_factory=list)  # twosided: [bsdf] or [front, back]
+    # Textured colour parameters: name -> TextureDesc, replacing the plain
+    # value of that name (reflectance, diffuse_reflectance,
+    # specular_reflectance), which then holds the texture's mean colour.
+    textures: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -62,6 +88,7 @@ class EmitterDesc:
     # to_world above maps its local frame (Mitsuba's latitude-longitude
     # convention, +y up) to the world.
     env: Optional[np.ndarray] = None
+    textures: dict = field(default_factory=dict)  # spot: {"texture": TextureDesc}, projected along the beam
 
 
 @dataclass
@@ -107,6 +134,9 @@ class ShapeDesc:
     normals: Optional[np.ndarray] = None  # (N, 3) float32 world space, or None (face normals)
     uvs: Optional[np.ndarray] = None  # (N, 2) float32 or None
     to_world: np.ndarray = field(default_factory=_eye)  # sphere, disk
+    # sphere: Mitsuba's own object-to-world map of the unit sphere (a mirror
+    # kept, unlike to_world), which fixes its texture coordinates.
+    object_to_world: Optional[np.ndarray] = None
     center: tuple = (0.0, 0.0, 0.0)  # sphere, world space
     radius: float = 1.0  # sphere, world space
     flip_normals: bool = False

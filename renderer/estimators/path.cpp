@@ -118,6 +118,7 @@ public:
             if (!pc.can_reach(mask, scene.features.has_dipole)) break;
             const Bsdf* bsdf = scene.bsdfs[shape.bsdf].get();
             Vec3 wi = it.to_local(it.wi);
+            ctx.uv = it.uv;
             BsdfSample bs;
             bool sampled = false;
 

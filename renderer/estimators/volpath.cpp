@@ -152,6 +152,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         if (prm.max_depth >= 0 && depth + 1 >= prm.max_depth) break;
         if (!pc.can_reach(mask, true)) break;
         Vec3 wi = it.to_local(it.wi);
+        ctx.uv = it.uv;
         const Bsdf* bsdf_at = &bsdf;
         BsdfSample bs;
         bool sampled = false;

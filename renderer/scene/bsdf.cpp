@@ -30,6 +30,13 @@
 //  twosided         nested: 1 BSDF used on both sides, or 2 (front, back). The
 //                   nested BSDFs must not transmit (as Mitsuba).
 //  null             none. Passes light unchanged (medium boundaries).
+// Textured colours (BsdfDesc::textures; scene/texture.h): reflectance
+// (diffuse), diffuse_reflectance (plastic, roughplastic) and
+// specular_reflectance (conductor, roughconductor), evaluated at the
+// BsdfContext's uv; and textured roughness alpha_u, alpha_v
+// (roughconductor), read as Texture::eval_1 (as Mitsuba reads them). A
+// lobe-selection weight that Mitsuba computes from a colour's mean uses the
+// texture's mean(), as Mitsuba does.
 // Alphas below 1e-4 are clamped to 1e-4 (Mitsuba does the same); negative or
 // non-finite values of any parameter are rejected.
 #include "scene/bsdf.h"
@@ -44,6 +51,7 @@
 #include "core/warp.h"
 #include "scene/fresnel.h"
 #include "scene/microfacet.h"
+#include "scene/texture.h"
 
 namespace rm {
 
@@ -100,20 +108,23 @@ MicrofacetDistribution make_distribution(const BsdfDesc& d) {
 
 class DiffuseBsdf final : public Bsdf {
 public:
-    explicit DiffuseBsdf(const Color& reflectance) : reflectance_(reflectance) { flags_ = kDiffuseReflection; }
+    explicit DiffuseBsdf(TexturedColor reflectance) : reflectance_(std::move(reflectance)) {
+        flags_ = kDiffuseReflection;
+        textured_ = reflectance_.textured();
+    }
 
-    BsdfSample sample(const BsdfContext&, const Vec3& wi, float, Vec2 u2) const override {
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float, Vec2 u2) const override {
         BsdfSample bs;
         if (!(wi.z > 0.f)) return bs;
         bs.wo = warp::square_to_cosine_hemisphere(u2);
         bs.pdf_w = warp::square_to_cosine_hemisphere_pdf_w(bs.wo);
-        bs.weight = reflectance_;  // (rho / pi) cos / (cos / pi)
+        bs.weight = reflectance_.eval(ctx.uv);  // (rho / pi) cos / (cos / pi)
         bs.sampled_flags = kDiffuseReflection;
         return sanitize(bs);
     }
-    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
-        return reflectance_ * (wo.z * kInvPi);
+        return reflectance_.eval(ctx.uv) * (wo.z * kInvPi);
     }
     float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return 0.f;
@@ -121,7 +132,7 @@ public:
     }
 
 private:
-    Color reflectance_;
+    TexturedColor reflectance_;
 };
 
 // ---------------------------------------------------------------------------
@@ -130,25 +141,28 @@ private:
 
 class ConductorBsdf final : public Bsdf {
 public:
-    ConductorBsdf(const Color& eta, const Color& k, const Color& specular) : eta_(eta), k_(k), specular_(specular) {
+    ConductorBsdf(const Color& eta, const Color& k, TexturedColor specular)
+        : eta_(eta), k_(k), specular_(std::move(specular)) {
         flags_ = kDeltaReflection;
+        textured_ = specular_.textured();
     }
 
-    BsdfSample sample(const BsdfContext&, const Vec3& wi, float, Vec2) const override {
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float, Vec2) const override {
         BsdfSample bs;
         if (!(wi.z > 0.f)) return bs;
         bs.wo = reflect_local(wi);
         bs.pdf_w = 1.f;
         bs.is_delta = true;
         bs.sampled_flags = kDeltaReflection;
-        bs.weight = specular_ * fresnel_conductor(wi.z, eta_, k_);
+        bs.weight = specular_.eval(ctx.uv) * fresnel_conductor(wi.z, eta_, k_);
         return sanitize(bs);
     }
     Color eval(const BsdfContext&, const Vec3&, const Vec3&) const override { return Color(0.f); }
     float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
 
 private:
-    Color eta_, k_, specular_;
+    Color eta_, k_;
+    TexturedColor specular_;
 };
 
 // ---------------------------------------------------------------------------
@@ -160,15 +174,26 @@ private:
 
 class RoughConductorBsdf final : public Bsdf {
 public:
-    RoughConductorBsdf(const MicrofacetDistribution& distr, const Color& eta, const Color& k, const Color& specular)
-        : distr_(distr), eta_(eta), k_(k), specular_(specular) {
+    // alpha_u, alpha_v: textured roughness (null: distr's own alphas).
+    RoughConductorBsdf(const MicrofacetDistribution& distr, const Color& eta, const Color& k, TexturedColor specular,
+                       std::shared_ptr<const Texture> alpha_u = nullptr,
+                       std::shared_ptr<const Texture> alpha_v = nullptr)
+        : distr_(distr),
+          eta_(eta),
+          k_(k),
+          specular_(std::move(specular)),
+          alpha_u_(std::move(alpha_u)),
+          alpha_v_(std::move(alpha_v)) {
         flags_ = kGlossyReflection;
+        textured_ = specular_.textured() || alpha_u_ || alpha_v_;
+        anisotropic_ = alpha_u_ || alpha_v_ || distr_.alpha_u() != distr_.alpha_v();
     }
 
-    BsdfSample sample(const BsdfContext&, const Vec3& wi, float, Vec2 u2) const override {
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float, Vec2 u2) const override {
         BsdfSample bs;
         if (!(wi.z > 0.f)) return bs;
-        MicrofacetSample ms = distr_.sample(wi, u2);
+        const MicrofacetDistribution distr = distribution(ctx.uv);
+        MicrofacetSample ms = distr.sample(wi, u2);
         if (!(ms.pdf_w > 0.f)) return bs;
         const Vec3 m = ms.m;
         bs.wo = reflect(wi, m);
@@ -179,29 +204,31 @@ public:
         // eval / pdf: with visible normals D G1(wi) cancels, leaving G1(wo)
         // (Heitz & d'Eon 2014, sec. 5); otherwise Walter et al. 2007, eq. 41.
         float w;
-        if (distr_.sample_visible())
-            w = distr_.G1(bs.wo, m);
+        if (distr.sample_visible())
+            w = distr.G1(bs.wo, m);
         else
-            w = distr_.G(wi, bs.wo, m) * dot(wi, m) / (wi.z * m.z);
-        bs.weight = specular_ * fresnel_conductor(dot(wi, m), eta_, k_) * w;
+            w = distr.G(wi, bs.wo, m) * dot(wi, m) / (wi.z * m.z);
+        bs.weight = specular_.eval(ctx.uv) * fresnel_conductor(dot(wi, m), eta_, k_) * w;
         return sanitize(bs);
     }
 
-    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
         const Vec3 h = wi + wo;
         const float len = length(h);
         if (!(len > 0.f)) return Color(0.f);
         const Vec3 m = h / len;
-        const float D = distr_.D(m);
+        const MicrofacetDistribution distr = distribution(ctx.uv);
+        const float D = distr.D(m);
         if (D == 0.f) return Color(0.f);
-        const float G = distr_.G(wi, wo, m);
+        const float G = distr.G(wi, wo, m);
         const float value = D * G / (4.f * wi.z);
-        return finite_or_zero(specular_ * fresnel_conductor(dot(wi, m), eta_, k_) * value);
+        return finite_or_zero(specular_.eval(ctx.uv) * fresnel_conductor(dot(wi, m), eta_, k_) * value);
     }
 
-    float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+    float pdf_w(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return 0.f;
+        const MicrofacetDistribution distr = distribution(ctx.uv);
         const Vec3 h = wi + wo;
         const float len = length(h);
         if (!(len > 0.f)) return 0.f;
@@ -209,12 +236,24 @@ public:
         // The side checks G1 applies in sample() must hold here too.
         const float wo_m = dot(wo, m);
         if (!(dot(wi, m) > 0.f) || !(wo_m > 0.f)) return 0.f;
-        return finite_or_zero(distr_.pdf_w(wi, m) / (4.f * wo_m));
+        return finite_or_zero(distr.pdf_w(wi, m) / (4.f * wo_m));
     }
 
 private:
+    // The distribution at uv: the constructed one, or one with the textures'
+    // alphas (Mitsuba's roughconductor reads alpha_u / alpha_v with eval_1
+    // per query). A value, a few floats: no allocation.
+    MicrofacetDistribution distribution(Vec2 uv) const {
+        if (!alpha_u_ && !alpha_v_) return distr_;
+        const float au = alpha_u_ ? alpha_u_->eval_1(uv) : distr_.alpha_u();
+        const float av = alpha_v_ ? alpha_v_->eval_1(uv) : distr_.alpha_v();
+        return MicrofacetDistribution(distr_.type(), au, av, distr_.sample_visible());
+    }
+
     MicrofacetDistribution distr_;
-    Color eta_, k_, specular_;
+    Color eta_, k_;
+    TexturedColor specular_;
+    std::shared_ptr<const Texture> alpha_u_, alpha_v_;
 };
 
 // ---------------------------------------------------------------------------
@@ -272,6 +311,7 @@ public:
     RoughDielectricBsdf(const MicrofacetDistribution& distr, float eta, const Color& spec_r, const Color& spec_t)
         : distr_(distr), eta_(eta), spec_r_(spec_r), spec_t_(spec_t) {
         flags_ = kGlossyReflection | kGlossyTransmission;
+        anisotropic_ = distr_.alpha_u() != distr_.alpha_v();
     }
 
     BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
@@ -450,21 +490,18 @@ private:
 
 class PlasticBsdf final : public Bsdf {
 public:
-    PlasticBsdf(float eta, const Color& diffuse, const Color& specular, bool nonlinear)
-        : eta_(eta), specular_(specular) {
+    PlasticBsdf(float eta, TexturedColor diffuse, const Color& specular, bool nonlinear)
+        : eta_(eta), nonlinear_(nonlinear), specular_(specular), diffuse_(std::move(diffuse)) {
         flags_ = kDeltaReflection | kDiffuseReflection;
+        textured_ = diffuse_.textured();
         inv_eta2_ = 1.f / (eta * eta);
         fdr_int_ = fresnel_diffuse_reflectance(1.f / eta);
-        const float d_mean = average(diffuse), s_mean = average(specular);
+        const float d_mean = diffuse_.mean(), s_mean = average(specular);
         specular_sampling_weight_ = (d_mean + s_mean) > 0.f ? s_mean / (d_mean + s_mean) : 0.5f;
-        // The diffuse albedo including the internal-reflection normalisation.
-        const Color denom = nonlinear ? Color(1.f) - diffuse * fdr_int_ : Color(1.f - fdr_int_);
-        // Non-physical albedos (rho Fdr_int >= 1 with nonlinear) would make it
-        // infinite or negative: those become 0 rather than NaN/negative weights.
-        diffuse_norm_ = vmax(finite_or_zero(diffuse / denom), Color(0.f));
+        diffuse_norm_ = normalised(diffuse_.value);
     }
 
-    BsdfSample sample(const BsdfContext&, const Vec3& wi, float u1, Vec2 u2) const override {
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
         BsdfSample bs;
         if (!(wi.z > 0.f)) return bs;
         const float f_i = fresnel_dielectric(wi.z, eta_).F;
@@ -480,14 +517,14 @@ public:
             bs.pdf_w = p_diff * warp::square_to_cosine_hemisphere_pdf_w(bs.wo);
             bs.sampled_flags = kDiffuseReflection;
             const float f_o = fresnel_dielectric(bs.wo.z, eta_).F;
-            bs.weight = diffuse_norm_ * (inv_eta2_ * (1.f - f_i) * (1.f - f_o) / p_diff);
+            bs.weight = diffuse_norm(ctx.uv) * (inv_eta2_ * (1.f - f_i) * (1.f - f_o) / p_diff);
         }
         return sanitize(bs);
     }
-    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
         const float f_i = fresnel_dielectric(wi.z, eta_).F, f_o = fresnel_dielectric(wo.z, eta_).F;
-        return finite_or_zero(diffuse_norm_ * (wo.z * kInvPi * inv_eta2_ * (1.f - f_i) * (1.f - f_o)));
+        return finite_or_zero(diffuse_norm(ctx.uv) * (wo.z * kInvPi * inv_eta2_ * (1.f - f_i) * (1.f - f_o)));
     }
     float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return 0.f;
@@ -501,9 +538,22 @@ private:
         const float pd = (1.f - f_i) * (1.f - specular_sampling_weight_);
         return ps + pd > 0.f ? ps / (ps + pd) : 0.5f;
     }
+    // The diffuse albedo including the internal-reflection normalisation.
+    // Non-physical albedos (rho Fdr_int >= 1 with nonlinear) would make it
+    // infinite or negative: those become 0 rather than NaN/negative weights.
+    Color normalised(const Color& rho) const {
+        const Color denom = nonlinear_ ? Color(1.f) - rho * fdr_int_ : Color(1.f - fdr_int_);
+        return vmax(finite_or_zero(rho / denom), Color(0.f));
+    }
+    // Precomputed when untextured; per query from the texture otherwise.
+    Color diffuse_norm(Vec2 uv) const {
+        return diffuse_.textured() ? normalised(diffuse_.texture->eval(uv)) : diffuse_norm_;
+    }
 
     float eta_, inv_eta2_, fdr_int_, specular_sampling_weight_;
+    bool nonlinear_;
     Color specular_, diffuse_norm_;  // diffuse_norm_: rho / (1 - Fdr_int) or rho / (1 - rho Fdr_int)
+    TexturedColor diffuse_;
 };
 
 // ---------------------------------------------------------------------------
@@ -569,18 +619,16 @@ std::shared_ptr<const RoughPlasticTables> rough_plastic_tables(MicrofacetType ty
 
 class RoughPlasticBsdf final : public Bsdf {
 public:
-    RoughPlasticBsdf(const MicrofacetDistribution& distr, float eta, const Color& diffuse, const Color& specular,
+    RoughPlasticBsdf(const MicrofacetDistribution& distr, float eta, TexturedColor diffuse, const Color& specular,
                      bool nonlinear)
-        : distr_(distr), eta_(eta), specular_(specular) {
+        : distr_(distr), eta_(eta), nonlinear_(nonlinear), specular_(specular), diffuse_(std::move(diffuse)) {
         flags_ = kGlossyReflection | kDiffuseReflection;
+        textured_ = diffuse_.textured();
         inv_eta2_ = 1.f / (eta * eta);
         tables_ = rough_plastic_tables(distr.type(), distr.alpha_u(), eta);
-        const float d_mean = average(diffuse), s_mean = average(specular);
+        const float d_mean = diffuse_.mean(), s_mean = average(specular);
         specular_sampling_weight_ = (d_mean + s_mean) > 0.f ? s_mean / (d_mean + s_mean) : 0.5f;
-        const float r_int = tables_->internal_reflectance;
-        const Color denom = nonlinear ? Color(1.f) - diffuse * r_int : Color(1.f - r_int);
-        // As plastic: a non-physical nonlinear albedo (rho R_int >= 1) gives 0, not NaN.
-        diffuse_norm_ = vmax(finite_or_zero(diffuse / denom), Color(0.f));
+        diffuse_norm_ = normalised(diffuse_.value);
     }
 
     BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
@@ -602,7 +650,7 @@ public:
         return sanitize(bs);
     }
 
-    Color eval(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
         Color value(0.f);
         const Vec3 h = wi + wo;
@@ -616,7 +664,7 @@ public:
             }
         }
         const float t = transmittance(wi.z) * transmittance(wo.z);
-        value += diffuse_norm_ * (kInvPi * inv_eta2_ * wo.z * t);
+        value += diffuse_norm(ctx.uv) * (kInvPi * inv_eta2_ * wo.z * t);
         return finite_or_zero(value);
     }
 
@@ -651,10 +699,22 @@ private:
         return ps + pd > 0.f ? ps / (ps + pd) : 0.5f;
     }
 
+    // As plastic's: a non-physical nonlinear albedo (rho R_int >= 1) gives 0, not NaN.
+    Color normalised(const Color& rho) const {
+        const float r_int = tables_->internal_reflectance;
+        const Color denom = nonlinear_ ? Color(1.f) - rho * r_int : Color(1.f - r_int);
+        return vmax(finite_or_zero(rho / denom), Color(0.f));
+    }
+    Color diffuse_norm(Vec2 uv) const {
+        return diffuse_.textured() ? normalised(diffuse_.texture->eval(uv)) : diffuse_norm_;
+    }
+
     MicrofacetDistribution distr_;
     std::shared_ptr<const RoughPlasticTables> tables_;
     float eta_, inv_eta2_, specular_sampling_weight_;
+    bool nonlinear_;
     Color specular_, diffuse_norm_;  // diffuse_norm_: rho / (1 - R_int) or rho / (1 - rho R_int)
+    TexturedColor diffuse_;
 };
 
 // ---------------------------------------------------------------------------
@@ -668,6 +728,8 @@ public:
     TwoSidedBsdf(std::unique_ptr<Bsdf> front, std::unique_ptr<Bsdf> back)
         : front_(std::move(front)), back_(std::move(back)) {
         flags_ = front_->flags() | (back_ ? back_->flags() : 0u);
+        textured_ = front_->textured() || (back_ && back_->textured());
+        anisotropic_ = front_->anisotropic() || (back_ && back_->anisotropic());
     }
 
     BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
@@ -723,20 +785,62 @@ public:
     float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
 };
 
+// The parameter `name` of value `plain`, or its texture when BsdfDesc::textures has one.
+TexturedColor textured(const BsdfDesc& d, const char* name, const Color& plain) {
+    TexturedColor c(plain);
+    auto it = d.textures.find(name);
+    if (it == d.textures.end()) {
+        check_color(d, name, plain);
+        return c;
+    }
+    try {
+        c.texture = make_texture(it->second);
+    } catch (const std::invalid_argument& e) {
+        fail(d, name, std::string("has a bad texture: ") + e.what());
+    }
+    return c;
+}
+
+// A scalar parameter's texture (read with eval_1), or null when it has none.
+std::shared_ptr<const Texture> texture_of(const BsdfDesc& d, const char* name) {
+    auto it = d.textures.find(name);
+    if (it == d.textures.end()) return nullptr;
+    try {
+        return make_texture(it->second);
+    } catch (const std::invalid_argument& e) {
+        fail(d, name, std::string("has a bad texture: ") + e.what());
+    }
+}
+
+// Only the parameters listed in the file head take a texture.
+void check_textured_names(const BsdfDesc& d, std::initializer_list<const char*> allowed) {
+    for (const auto& [name, tex] : d.textures) {
+        bool ok = false;
+        for (const char* a : allowed) ok = ok || name == a;
+        if (!ok) fail(d, name, "cannot take a texture (texture type '" + tex.type + "')");
+    }
+}
+
 }  // namespace
 
 std::unique_ptr<Bsdf> make_bsdf(const BsdfDesc& d) {
     if (d.type == "diffuse") {
-        check_color(d, "reflectance", d.reflectance);
-        return std::make_unique<DiffuseBsdf>(d.reflectance);
+        check_textured_names(d, {"reflectance"});
+        return std::make_unique<DiffuseBsdf>(textured(d, "reflectance", d.reflectance));
     }
     if (d.type == "conductor" || d.type == "roughconductor") {
+        if (d.type == "conductor")
+            check_textured_names(d, {"specular_reflectance"});
+        else
+            check_textured_names(d, {"specular_reflectance", "alpha_u", "alpha_v"});
         check_color(d, "eta", d.eta);
         check_color(d, "k", d.k);
-        check_color(d, "specular_reflectance", d.specular_reflectance);
-        if (d.type == "conductor") return std::make_unique<ConductorBsdf>(d.eta, d.k, d.specular_reflectance);
-        return std::make_unique<RoughConductorBsdf>(make_distribution(d), d.eta, d.k, d.specular_reflectance);
+        TexturedColor spec = textured(d, "specular_reflectance", d.specular_reflectance);
+        if (d.type == "conductor") return std::make_unique<ConductorBsdf>(d.eta, d.k, std::move(spec));
+        return std::make_unique<RoughConductorBsdf>(make_distribution(d), d.eta, d.k, std::move(spec),
+                                                    texture_of(d, "alpha_u"), texture_of(d, "alpha_v"));
     }
+    if (d.type != "plastic" && d.type != "roughplastic") check_textured_names(d, {});
     if (d.type == "dielectric" || d.type == "roughdielectric" || d.type == "thindielectric") {
         const float eta = relative_ior(d);
         check_color(d, "specular_reflectance", d.specular_reflectance);
@@ -752,19 +856,20 @@ std::unique_ptr<Bsdf> make_bsdf(const BsdfDesc& d) {
     }
     if (d.type == "plastic") {
         const float eta = relative_ior(d);
-        check_color(d, "diffuse_reflectance", d.diffuse_reflectance);
+        check_textured_names(d, {"diffuse_reflectance"});
         check_color(d, "specular_reflectance", d.specular_reflectance);
-        return std::make_unique<PlasticBsdf>(eta, d.diffuse_reflectance, d.specular_reflectance, d.nonlinear);
+        return std::make_unique<PlasticBsdf>(eta, textured(d, "diffuse_reflectance", d.diffuse_reflectance),
+                                             d.specular_reflectance, d.nonlinear);
     }
     if (d.type == "roughplastic") {
         const float eta = relative_ior(d);
         if (d.int_ior == d.ext_ior) fail(d, "int_ior", "must differ from ext_ior (as in Mitsuba's roughplastic)");
-        check_color(d, "diffuse_reflectance", d.diffuse_reflectance);
+        check_textured_names(d, {"diffuse_reflectance"});
         check_color(d, "specular_reflectance", d.specular_reflectance);
         const MicrofacetDistribution distr = make_distribution(d);
         if (d.alpha_u != d.alpha_v) fail(d, "alpha_u", "must equal alpha_v (roughplastic is isotropic, as in Mitsuba)");
-        return std::make_unique<RoughPlasticBsdf>(distr, eta, d.diffuse_reflectance, d.specular_reflectance,
-                                                  d.nonlinear);
+        return std::make_unique<RoughPlasticBsdf>(distr, eta, textured(d, "diffuse_reflectance", d.diffuse_reflectance),
+                                                  d.specular_reflectance, d.nonlinear);
     }
     if (d.type == "twosided") {
         if (d.nested.empty() || d.nested.size() > 2)

@@ -30,8 +30,15 @@ enum BsdfFlags : uint32_t {
 // (light paths); non-symmetric BSDFs (refraction) differ by (eta)^2.
 enum class TransportMode : uint8_t { Radiance, Importance };
 
+// What a query needs to know besides the directions: the transport mode,
+// and the hit's texture coordinates for textured parameters (texture.h).
+// The uv travels here, not in the BSDF object, so that one BSDF serves every
+// hit without a per-hit copy or allocation; every caller that queries the
+// BSDF of a surface hit sets it from Interaction::uv (untextured BSDFs never
+// read it).
 struct BsdfContext {
     TransportMode mode = TransportMode::Radiance;
+    Vec2 uv{};
 };
 
 struct BsdfSample {
@@ -55,9 +62,17 @@ public:
     uint32_t flags() const { return flags_; }
     bool has_smooth() const { return (flags_ & kSmooth) != 0; }
     bool is_pure_delta() const { return (flags_ & kSmooth) == 0; }
+    // Some parameter is a texture: the value depends on BsdfContext::uv.
+    bool textured() const { return textured_; }
+    // The value depends on the tangent direction (alpha_u != alpha_v, or
+    // textured alphas): the shading frame's tangent must then follow the
+    // surface's dp/du, as Mitsuba's does (Shape::uv_frame).
+    bool anisotropic() const { return anisotropic_; }
 
 protected:
     uint32_t flags_ = 0;
+    bool textured_ = false;
+    bool anisotropic_ = false;
 };
 
 // Builds a BSDF from its description; throws std::invalid_argument naming the

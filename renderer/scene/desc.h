@@ -3,11 +3,13 @@
 // turned into renderer objects by Scene. Everything here is in world space.
 #pragma once
 #include <array>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "core/params.h"
 #include "core/spectrum.h"
+#include "scene/texture.h"
 
 namespace rm {
 
@@ -29,6 +31,11 @@ struct BsdfDesc {
     bool sample_visible = true;
     bool nonlinear = false;        // plastic
     std::vector<BsdfDesc> nested;  // twosided: 1 (both sides) or 2 (front, back)
+    // Textured colour parameters: parameter name -> its texture, which then
+    // replaces the plain value above (reflectance of diffuse,
+    // diffuse_reflectance of plastic and roughplastic, specular_reflectance
+    // of conductor and roughconductor).
+    std::map<std::string, TextureDesc> textures;
 };
 
 struct EmitterDesc {
@@ -45,6 +52,9 @@ struct EmitterDesc {
     // to_world maps its local frame to the world.
     int env_width = 0, env_height = 0;
     std::vector<float> env_data;
+    // Textures by parameter name: spot "texture" (projected along the beam,
+    // multiplying the intensity; Mitsuba 3's spot).
+    std::map<std::string, TextureDesc> textures;
 };
 
 struct SensorDesc {

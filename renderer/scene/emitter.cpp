@@ -7,6 +7,7 @@
 
 #include "core/warp.h"
 #include "scene/shape.h"
+#include "scene/texture.h"
 
 namespace rm {
 
@@ -155,12 +156,22 @@ class SpotEmitter final : public Emitter {
 public:
     explicit SpotEmitter(const EmitterDesc& d) : intensity_(d.intensity) {
         check_color(intensity_, d.id, "intensity");
+        for (const auto& [name, tex] : d.textures) {
+            if (name != "texture")
+                throw std::invalid_argument("emitter '" + d.id + "': parameter '" + name + "' cannot take a texture");
+            try {
+                texture_ = make_texture(tex);
+            } catch (const std::invalid_argument& e) {
+                throw std::invalid_argument("emitter '" + d.id + "': parameter 'texture': " + e.what());
+            }
+        }
         if (!xf_.set(d.to_world.data())) throw std::invalid_argument("emitter '" + d.id + "': singular to_world");
         if (!(d.cutoff_angle > 0.f && d.cutoff_angle <= 180.f))
             throw std::invalid_argument("emitter '" + d.id + "': cutoff_angle must be in (0, 180] degrees");
         float beam = d.beam_width < 0.f ? 0.75f * d.cutoff_angle : d.beam_width;
         cutoff_ = d.cutoff_angle * kPi / 180.f;
         beam_ = std::min(beam * kPi / 180.f, cutoff_);
+        uv_factor_ = std::tan(cutoff_);
         pos_ = xf_.point(Vec3(0.f));
         delta_ = true;
     }
@@ -173,6 +184,14 @@ public:
         if (theta <= beam_ || cutoff_ <= beam_) return 1.f;
         return (cutoff_ - theta) / (cutoff_ - beam_);
     }
+    // The intensity towards the local direction `local` where the falloff
+    // f is not 0: times the projected texture, if any, at Mitsuba 3's
+    // direction_to_uv (src/emitters/spot.cpp): 1/2 + (x, y) / (2 z tan(cutoff)).
+    Color intensity_towards(const Vec3& local, float f) const {
+        if (!texture_ || !(f > 0.f)) return intensity_;
+        const float s = 0.5f / (local.z * uv_factor_);
+        return intensity_ * texture_->eval(Vec2(0.5f + local.x * s, 0.5f + local.y * s));
+    }
     DirectSample sample_direct(const Vec3& ref, Vec2, float) const override {
         DirectSample ds;
         Vec3 v = pos_ - ref;
@@ -184,7 +203,8 @@ public:
         ds.pdf_w = 1.f;
         ds.is_delta = true;
         Vec3 local = normalize(xf_.inv_vector(-ds.d));
-        ds.radiance = intensity_ * (falloff(local) / d2);
+        const float f = falloff(local);
+        ds.radiance = intensity_towards(local, f) * (f / d2);
         return ds;
     }
     // Direction uniform in the cone of the cutoff angle (as Mitsuba 3's spot),
@@ -201,11 +221,14 @@ public:
         es.d = normalize(xf_.vector(local));
         es.pdf_a = 1.f;
         es.pdf_w = 1.f / (2.f * kPi * omc_max);
-        es.weight = intensity_ * (falloff(local) * 2.f * kPi * omc_max);
+        const float f = falloff(local);
+        es.weight = intensity_towards(local, f) * (f * 2.f * kPi * omc_max);
         return es;
     }
     Color emitted_towards(const EmissionSample&, const Vec3& w) const override {
-        return intensity_ * falloff(normalize(xf_.inv_vector(w)));
+        const Vec3 local = normalize(xf_.inv_vector(w));
+        const float f = falloff(local);
+        return intensity_towards(local, f) * f;
     }
     float pdf_emission_w(const Vec3&, const Vec3& w) const override {
         Vec3 local = normalize(xf_.inv_vector(w));
@@ -215,7 +238,10 @@ public:
     // I 2 pi ((1 - cos beam) + (cos beam - cos cutoff) / 2), as pbrt-v4's SpotLight::Phi.
     float power(float) const override {
         float cb = std::cos(beam_), cc = std::cos(cutoff_);
-        return luminance(intensity_) * 2.f * kPi * ((1.f - cb) + (cb - cc) / 2.f);
+        // A projected texture scales it by its mean (an estimate: the light
+        // selection's weight, not a value anything renders).
+        const float t = texture_ ? texture_->mean() : 1.f;
+        return t * luminance(intensity_) * 2.f * kPi * ((1.f - cb) + (cb - cc) / 2.f);
     }
     // Full intensity within the beam, falling off to 0 at the cutoff: the
     // spread beyond the beam widened by 1e-3 rad, so rounding never drops
@@ -230,6 +256,8 @@ public:
 
 private:
     Color intensity_;
+    std::shared_ptr<const Texture> texture_;  // spot "texture"; null: none
+    float uv_factor_ = 1.f;                   // tan(cutoff)
     Transform xf_;
     Vec3 pos_;
     float cutoff_, beam_;
@@ -509,12 +537,18 @@ private:
 }  // namespace
 
 std::unique_ptr<Emitter> make_area_emitter(const EmitterDesc& desc, const Shape* shape) {
+    if (!desc.textures.empty())
+        throw std::invalid_argument("emitter '" + desc.id + "': parameter '" + desc.textures.begin()->first +
+                                    "' cannot take a texture");
     auto e = std::make_unique<AreaEmitter>(desc, shape);
     e->id = desc.id;
     return e;
 }
 
 std::unique_ptr<Emitter> make_emitter(const EmitterDesc& desc) {
+    if (desc.type != "spot" && !desc.textures.empty())
+        throw std::invalid_argument("emitter '" + desc.id + "': parameter '" + desc.textures.begin()->first +
+                                    "' cannot take a texture");
     std::unique_ptr<Emitter> e;
     if (desc.type == "point")
         e = std::make_unique<PointEmitter>(desc);

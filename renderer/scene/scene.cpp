@@ -58,6 +58,7 @@ int Scene::add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals) {
         throw std::invalid_argument("shape '" + s->id + "': bsdf index out of range");
     s->bsdf = bsdf;
     s->flip_normals = flip_normals;
+    s->uv_frame = bsdfs[size_t(bsdf)]->anisotropic();
     Vec3 lo = s->bbox_min(), hi = s->bbox_max();
     if (!is_finite(lo) || !is_finite(hi)) throw std::invalid_argument("shape '" + s->id + "': non-finite geometry");
     bbox_lo = vmin(bbox_lo, lo);
@@ -92,10 +93,11 @@ int Scene::add_mesh(const std::string& id, std::vector<float> positions, std::ve
     return add_shape(std::move(m), bsdf, flip_normals);
 }
 
-int Scene::add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals) {
+int Scene::add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals,
+                      const Matrix4& to_world) {
     if (!(radius > 0.f) || !std::isfinite(radius) || !is_finite(center))
         throw std::invalid_argument("shape '" + id + "': sphere needs a finite centre and a positive radius");
-    auto s = std::make_unique<Sphere>(center, radius);
+    auto s = std::make_unique<Sphere>(center, radius, to_world);
     s->id = id;
     return add_shape(std::move(s), bsdf, flip_normals);
 }

@@ -43,7 +43,11 @@ public:
     // positions (3N), indices (3M), normals (3N or empty), uvs (2N or empty); world space.
     int add_mesh(const std::string& id, std::vector<float> positions, std::vector<uint32_t> indices,
                  std::vector<float> normals, std::vector<float> uvs, int bsdf, bool flip_normals);
-    int add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals);
+    // to_world: the unit sphere's object-to-world map (Mitsuba's to_world
+    // with translate(center) scale(radius) applied), for the texture
+    // coordinates; identity: the sphere's frame is the world's.
+    int add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals,
+                   const Matrix4& to_world = identity4());
     int add_disk(const std::string& id, const Matrix4& to_world, int bsdf, bool flip_normals);
     void add_area_emitter(int shape, const EmitterDesc& desc);
     void add_emitter(const EmitterDesc& desc);

@@ -7,6 +7,22 @@
 
 namespace rm {
 
+namespace {
+// The shading frame about n whose tangent is dp/du made orthogonal to n
+// (Mitsuba 3's SurfaceInteraction::initialize_sh_frame); the default frame
+// about n where dp/du is zero, parallel to n or not finite.
+Frame tangent_frame(const Vec3& n, const Vec3& dp_du) {
+    Vec3 s = dp_du - n * dot(n, dp_du);
+    float l = length(s);
+    if (!(l > 0.f) || !std::isfinite(l)) return Frame(n);
+    Frame f;
+    f.n = n;
+    f.s = s / l;
+    f.t = cross(n, f.s);
+    return f;
+}
+}  // namespace
+
 // ---------------------------------------------------------------- mesh
 Mesh::Mesh(std::vector<float> positions, std::vector<uint32_t> indices, std::vector<float> normals,
            std::vector<float> uvs)
@@ -105,6 +121,14 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     if (!uvs_.empty()) {
         auto uv = [&](uint32_t i) { return Vec2(uvs_[2 * i], uvs_[2 * i + 1]); };
         it.uv = uv(i0) * b0 + uv(i1) * b1 + uv(i2) * b2;
+        if (uv_frame) {
+            // dp/du of the triangle's uv parametrisation (Mitsuba 3
+            // src/render/mesh.cpp, compute_surface_interaction): solve
+            // [dp0 dp1] = [dp/du dp/dv] [duv0 duv1] for dp/du.
+            const Vec2 duv0 = uv(i1) - uv(i0), duv1 = uv(i2) - uv(i0);
+            const float det = duv0.x * duv1.y - duv0.y * duv1.x;
+            if (det != 0.f) it.sh = tangent_frame(ns, ((p1 - p0) * duv1.y - (p2 - p0) * duv0.y) * (1.f / det));
+        }
     } else {
         it.uv = Vec2(b1, b2);
     }
@@ -244,7 +268,11 @@ void disk_occluded(const RTCOccludedFunctionNArguments* args) {
 }  // namespace
 
 // ---------------------------------------------------------------- sphere
-Sphere::Sphere(Vec3 center, float radius) : cx_(center.x), cy_(center.y), cz_(center.z), r_(radius) {}
+Sphere::Sphere(Vec3 center, float radius, const Matrix4& to_world)
+    : cx_(center.x), cy_(center.y), cz_(center.z), r_(radius) {
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) rot_[i][j] = to_world[size_t(4 * i + j)] / double(radius);
+}
 Vec3 Sphere::bbox_min() const {
     return Vec3(float(cx_ - r_), float(cy_ - r_), float(cz_ - r_)) -
            abs(Vec3(float(cx_), float(cy_), float(cz_))) * 1e-6f - Vec3(float(r_) * 1e-6f);
@@ -281,13 +309,25 @@ void Sphere::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Intera
     }
     it.p = Vec3(float(cx_ + r_ * px), float(cy_ + r_ * py), float(cz_ + r_ * pz));
     Vec3 n{float(px), float(py), float(pz)};
-    // Mitsuba's sphere uv: (phi / 2pi, theta / pi) in the local frame.
-    float phi = std::atan2(n.y, n.x);
-    if (phi < 0) phi += 2 * kPi;
-    it.uv = Vec2(phi * kInv2Pi, std::acos(clamp(n.z, -1.f, 1.f)) * kInvPi);
+    // Mitsuba 3's sphere uv (src/shapes/sphere.cpp, compute_surface_interaction):
+    // (phi / 2pi, theta / pi) of the hit in the object frame, i.e. after
+    // to_world's inverse; rot_ is orthogonal, so its inverse is its transpose.
+    const double lx = rot_[0][0] * px + rot_[1][0] * py + rot_[2][0] * pz;
+    const double ly = rot_[0][1] * px + rot_[1][1] * py + rot_[2][1] * pz;
+    const double lz = rot_[0][2] * px + rot_[1][2] * py + rot_[2][2] * pz;
+    double phi = std::atan2(ly, lx);
+    if (phi < 0) phi += 2 * 3.14159265358979323846;
+    it.uv = Vec2(float(phi / (2 * 3.14159265358979323846)),
+                 float(std::acos(std::min(1.0, std::max(-1.0, lz))) / 3.14159265358979323846));
     if (flip_normals) n = -n;
     it.n = n;
     it.sh = Frame(n);
+    if (uv_frame) {
+        // Mitsuba's sphere: dp/du = to_world (-y, x, 0) of the local point, times 2 pi.
+        const Vec3 du(float(-rot_[0][0] * ly + rot_[0][1] * lx), float(-rot_[1][0] * ly + rot_[1][1] * lx),
+                      float(-rot_[2][0] * ly + rot_[2][1] * lx));
+        it.sh = tangent_frame(n, du);
+    }
     // Reprojected in double: the error is the rounding of p to float, plus
     // the sphere's own size for the Embree-side float bounds.
     it.eps = hit_epsilon(it.p, float(r_));
@@ -397,6 +437,8 @@ void Disk::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     it.n = n;
     it.sh = Frame(n);
     float r = std::sqrt(hit.u * hit.u + hit.v * hit.v);
+    // Mitsuba's disk: dp/du = to_world (cos phi, sin phi, 0), radial.
+    if (uv_frame && r > 0.f) it.sh = tangent_frame(n, xf_.vector(Vec3(hit.u / r, hit.v / r, 0.f)));
     float phi = std::atan2(hit.v, hit.u);
     if (phi < 0) phi += 2 * kPi;
     it.uv = Vec2(r, phi * kInv2Pi);

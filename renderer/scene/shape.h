@@ -29,6 +29,12 @@ public:
     bool flip_normals = false;
     int medium_interior = -1, medium_exterior = -1;  // indices into Scene::media; -1: none
     int dipole = -1;  // index into Scene::dipoles: a dipole BSSRDF replaces the BSDF (dipole.h)
+    // The shading frame's tangent follows dp/du (Mitsuba's
+    // SurfaceInteraction::initialize_sh_frame: s = dp/du made orthogonal to
+    // the shading normal, t = n x s) instead of the default frame about n.
+    // Set for shapes whose BSDF is anisotropic (Bsdf::anisotropic), so that
+    // every other shape keeps its frame, and its images their bytes.
+    bool uv_frame = false;
 
     virtual RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) = 0;
     // Fills the geometric part of `it` for a hit reported by Embree.
@@ -84,7 +90,10 @@ private:
 
 class Sphere final : public Shape {
 public:
-    Sphere(Vec3 center, float radius);
+    // to_world: the unit sphere's object-to-world map (rotation, possibly a
+    // mirror, times the radius, then the centre); only its rotation is used,
+    // for the texture coordinates.
+    Sphere(Vec3 center, float radius, const Matrix4& to_world = identity4());
     RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) override;
     void fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const override;
     PositionSample sample_position(Vec2 u, float u_extra) const override;
@@ -94,6 +103,9 @@ public:
     Vec3 bbox_min() const override;
     Vec3 bbox_max() const override;
     double cx_, cy_, cz_, r_;
+
+private:
+    double rot_[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};  // to_world's linear part / radius (orthogonal)
 };
 
 class Disk final : public Shape {

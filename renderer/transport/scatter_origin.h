@@ -27,11 +27,13 @@ struct ScatterOrigin {
     Vec3 p;                      // the vertex itself, not the ray's offset origin
     Frame sh;                    // its shading frame
     Vec3 wi;                     // the direction towards its predecessor, in that frame
+    Vec2 uv;                     // its texture coordinates
     const Bsdf* bsdf = nullptr;  // null: a medium vertex (its ray leaves p itself) or the camera
 
     void set(const Interaction& it, const Vec3& wi_local, const Bsdf* b) {
         p = it.p;
         sh = it.sh;
+        uv = it.uv;
         wi = wi_local;
         bsdf = b;
     }
@@ -43,6 +45,7 @@ struct ScatterOrigin {
         float d2 = length_sq(v);
         if (!(d2 > 0.f)) return sampled;
         BsdfContext ctx;
+        ctx.uv = uv;
         return bsdf->pdf_w(ctx, wi, sh.to_local(v / std::sqrt(d2)));
     }
 };

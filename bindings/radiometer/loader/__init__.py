@@ -60,6 +60,31 @@ bsdf       diffuse: reflectance [0.5]
            An IOR is a float or one of the names in NAMED_IOR (any case).
            A shape without a bsdf gets Mitsuba 3's default: diffuse 0.5, or
            diffuse 0 (black) when it carries an area emitter.
+texture    checkerboard: color0 [0.4], color1 [0.2] (colours, not nested
+               textures), to_uv (a transform; Mitsuba's 3x3 uv map from its
+               rows and columns x, y and translation).
+           bitmap: filename (.png/.jpg through Pillow, decoded from sRGB to
+               linear unless raw [false]; .exr through the OpenEXR package, as
+               stored; grey images keep one channel, alpha is dropped),
+               filter_type ['bilinear'|'nearest'], wrap_mode ['repeat'|
+               'mirror'|'clamp'], to_uv, format, accel (accepted: storage
+               and GPU hints).
+           A texture is nested under the parameter's name or referenced
+           (<ref name=".." id=".."/>; top-level textures are declarations).
+           It takes the place of diffuse.reflectance,
+           plastic/roughplastic.diffuse_reflectance,
+           conductor/roughconductor.specular_reflectance and
+           roughconductor.alpha / alpha_u / alpha_v (read as one number,
+           Mitsuba's eval_1: a checkerboard's squares swap there, as in
+           Mitsuba 3.9.1) (parameters.TEXTURED);
+           on any other parameter it is a SceneError naming the plugin, the
+           parameter and the place. Evaluated at the hit's uv: OBJ/PLY
+           vertex uvs (OBJ's v flipped unless flip_tex_coords is false),
+           the rectangle's ((x+1)/2, (y+1)/2), the cube's per-face uvs, the
+           disk's (r, phi / 2 pi) and the sphere's (phi / 2 pi, theta / pi)
+           in its object frame, all as Mitsuba 3 defines them. A shape
+           whose bsdf is anisotropic (alpha_u != alpha_v, or textured
+           alphas) gets Mitsuba's shading tangent, dp/du; others keep theirs.
 colours   rgb, float, or spectrum: wavelength:value pairs or an .spd file,
            converted as Mitsuba 3's RGB variants do (spectra.py); a uniform
            spectrum is its value, except on an emitter, where it is XYZ
@@ -67,7 +92,9 @@ colours   rgb, float, or spectrum: wavelength:value pairs or an .spd file,
 emitter    area (nested in a shape): radiance [1]
            point: intensity [1], position or to_world
            spot: intensity [1], cutoff_angle [20], beam_width [3/4 cutoff],
-               to_world (shines along +z)
+               to_world (shines along +z), texture (a nested texture
+               projected along the beam, at Mitsuba's uv 1/2 + (x, y) /
+               (2 z tan cutoff), multiplying the intensity)
            directional: irradiance [1], direction or to_world
            constant: radiance [1]
            envmap: filename (a latitude-longitude image: .exr through the

@@ -21,10 +21,11 @@ from ..scene_desc import (
     SceneError,
     SensorDesc,
     ShapeDesc,
+    TextureDesc,
 )
 from ..samplers import ALIASES as SAMPLER_ALIASES
 from ..samplers import SAMPLER_PARAMS
-from .images import read_rgb
+from .images import read_rgb, read_texture
 from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _rectangle_mesh
 from .nodes import _Node, _Prop, _Ref
 from .parameters import INT32_RANGE, _Params, _parse_float
@@ -84,6 +85,54 @@ class _Builder:
             raise p.error(f"{what} file not found: '{filename}' (looked for {path})", place)
         return path
 
+    # -- textures ------------------------------------------------------------
+
+    def texture(self, node):
+        return self.cached(node, self._texture)
+
+    def _texture(self, node):
+        """checkerboard and bitmap, with Mitsuba 3's parameters and defaults
+        (src/textures/checkerboard.cpp, bitmap.cpp)."""
+        p, t = _Params(node), node.type
+        tex = TextureDesc(type=t, id=node.id or node.place)
+        m = p.transform("to_uv")
+        if m is not None:
+            # Mitsuba 3.9.1 takes the 3x3 uv map from a 4x4 transform as its
+            # rows and columns 0, 1 and 3 (x, y and the translation; z terms
+            # dropped), so that <translate>, <scale> and <rotate> about z act
+            # on uv (checked against mitsuba.load_dict in tests/test_textures.py).
+            tex.to_uv = m[np.ix_([0, 1, 3], [0, 1, 3])]
+        if t == "checkerboard":
+            for name, default in (("color0", 0.4), ("color1", 0.2)):
+                if p.named_child("texture", name) is not None:
+                    raise p.error(f"parameter '{name}': a nested texture is not supported here (give a colour)",
+                                  node.place)
+                setattr(tex, name, p.rgb(name, default))
+        elif t == "bitmap":
+            path = self.file(p, "texture image")
+            raw = p.bool("raw", False)
+            tex.data = read_texture(path, f"{node.place}: {node.label()}: '{p.string('filename')}'", raw,
+                                    quote=not self.confine)
+            tex.filter_type = p.string("filter_type", "bilinear", ("bilinear", "nearest"))
+            tex.wrap_mode = p.string("wrap_mode", "repeat", ("repeat", "mirror", "clamp"))
+            p.string("format", "auto", ("auto", "variant", "fp16"))  # storage precision; see read_texture
+            p.bool("accel", True)  # CUDA hardware interpolation in Mitsuba; no effect on the CPU
+        p.done()
+        return tex
+
+    def colour(self, p, b, name, default):
+        """A colour parameter that takes a texture (parameters.TEXTURED): a
+        nested or referenced texture of that name goes into b.textures and
+        the plain field gets the texture's mean colour; otherwise p.rgb."""
+        node = p.named_child("texture", name)
+        if node is None:
+            return p.rgb(name, default)
+        if p.has(name):
+            raise p.error(f"parameter '{name}' given both as a value and as a texture", node.place)
+        tex = self.texture(node)
+        b.textures[name] = tex
+        return tex.mean_rgb()
+
     # -- BSDFs ---------------------------------------------------------------
 
     def bsdf(self, node):
@@ -93,7 +142,7 @@ class _Builder:
         p, t = _Params(node), node.type
         b = BsdfDesc(type=t, id=node.place)
         if t == "diffuse":
-            b.reflectance = p.rgb("reflectance", 0.5)
+            b.reflectance = self.colour(p, b, "reflectance", 0.5)
         elif t in ("conductor", "roughconductor"):
             material = p.string("material", "none") if p.has("material") else None
             if material is not None and (p.has("eta") or p.has("k")):
@@ -108,14 +157,14 @@ class _Builder:
             else:  # Mitsuba's material 'none': eta 0, k 1, a perfect mirror
                 b.eta = p.rgb("eta", 0.0, spectrum="unbounded")
                 b.k = p.rgb("k", 1.0, spectrum="unbounded")
-            b.specular_reflectance = p.rgb("specular_reflectance", 1.0)
+            b.specular_reflectance = self.colour(p, b, "specular_reflectance", 1.0)
         elif t in ("dielectric", "roughdielectric", "thindielectric"):
             b.int_ior = p.ior("int_ior", "bk7")
             b.ext_ior = p.ior("ext_ior", "air")
             b.specular_reflectance = p.rgb("specular_reflectance", 1.0)
             b.specular_transmittance = p.rgb("specular_transmittance", 1.0)
         elif t in ("plastic", "roughplastic"):
-            b.diffuse_reflectance = p.rgb("diffuse_reflectance", 0.5)
+            b.diffuse_reflectance = self.colour(p, b, "diffuse_reflectance", 0.5)
             b.specular_reflectance = p.rgb("specular_reflectance", 1.0)
             b.int_ior = p.ior("int_ior", "polypropylene")
             b.ext_ior = p.ior("ext_ior", "air")
@@ -133,18 +182,35 @@ class _Builder:
             b.nested = [self.bsdf(k) for k in kids]
         if t in ("roughconductor", "roughdielectric", "roughplastic"):
             b.distribution = p.string("distribution", "beckmann", ("beckmann", "ggx"))
-            if p.has("alpha") and (p.has("alpha_u") or p.has("alpha_v")):
+            # roughconductor's alphas may be textures (read as one number, Texture::eval_1).
+            textured = {n: p.named_child("texture", n) if t == "roughconductor" else None
+                        for n in ("alpha", "alpha_u", "alpha_v")}
+
+            def given(n):
+                return p.has(n) or textured[n] is not None
+
+            def alpha(n, default=None):
+                if textured[n] is None:
+                    return p.float(n, default, check="positive")
+                if p.has(n):
+                    raise p.error(f"parameter '{n}' given both as a value and as a texture", textured[n].place)
+                tex = self.texture(textured[n])
+                for name in (("alpha_u", "alpha_v") if n == "alpha" else (n,)):
+                    b.textures[name] = tex
+                return float(np.mean(tex.mean_rgb()))
+
+            if given("alpha") and (given("alpha_u") or given("alpha_v")):
                 raise p.error("give either alpha or alpha_u/alpha_v")
-            if p.has("alpha_u") != p.has("alpha_v"):
+            if given("alpha_u") != given("alpha_v"):
                 raise p.error("give both alpha_u and alpha_v")
-            if p.has("alpha_u"):
-                b.alpha_u = p.float("alpha_u", check="positive")
-                b.alpha_v = p.float("alpha_v", check="positive")
+            if given("alpha_u"):
+                b.alpha_u = alpha("alpha_u")
+                b.alpha_v = alpha("alpha_v")
                 if t == "roughplastic" and b.alpha_u != b.alpha_v:  # as Mitsuba
                     raise p.error("parameters 'alpha_u' and 'alpha_v' differ: roughplastic supports only "
                                   "isotropic roughness", node.props["alpha_v"].place)
             else:
-                b.alpha_u = b.alpha_v = p.float("alpha", 0.1, check="positive")
+                b.alpha_u = b.alpha_v = alpha("alpha", 0.1)
             b.sample_visible = p.bool("sample_visible", True)
         if t == "roughplastic" and b.int_ior == b.ext_ior:  # as Mitsuba
             raise p.error("parameters 'int_ior' and 'ext_ior' must differ")
@@ -283,6 +349,10 @@ class _Builder:
                 raise p.error(f"cutoff_angle {e.cutoff_angle} exceeds 180 degrees")
             # Mitsuba keeps a beam_width beyond the cutoff: the falloff is then a hard edge.
             e.beam_width = p.float("beam_width", 0.75 * e.cutoff_angle, check="positive")
+            # Mitsuba 3's spot: an optional texture projected along the beam.
+            tex = p.named_child("texture", "texture")
+            if tex is not None:
+                e.textures["texture"] = self.texture(tex)
             m = p.transform("to_world")
             e.to_world = np.eye(4) if m is None else m
         elif t == "directional":
@@ -463,6 +533,7 @@ class _Builder:
             q, flip = -q, not flip
         r = float(sig.mean())
         s.type, s.flip_normals = "sphere", flip
+        s.object_to_world = full
         s.center = tuple(float(c) for c in full[:3, 3])
         s.radius = r
         s.to_world = np.eye(4)
@@ -721,6 +792,8 @@ def _assemble(nodes, ids, source, base_dir, confine=False, resolve=None):
             b.bsdf(node)  # a declaration for refs; validate it even if unused
         elif cat == "medium":
             b.medium(node)  # a declaration for refs; validate it even if unused
+        elif cat == "texture":
+            b.texture(node)  # a declaration for refs; validate it even if unused
         elif cat == "integrator":
             integrators.append((b.integrator(node), node.place))
         elif cat == "subsurface":

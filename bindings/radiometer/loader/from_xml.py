@@ -18,7 +18,7 @@ from .spectra import Sampled, parse_pairs, read_spd
 from .transforms import _look_at, _rotate, _translate
 
 # XML tags of Mitsuba 3 that are outside the subset, for a precise message.
-_UNSUPPORTED_TAGS = ("texture", "alias", "spectrum_file")
+_UNSUPPORTED_TAGS = ("alias", "spectrum_file")
 # <include> levels (Mitsuba 3: MI_XML_INCLUDE_MAX_RECURSION) and included
 # files in all (a file included twice by a file included twice ... grows
 # exponentially without a cycle).
@@ -129,8 +129,9 @@ def _upgrade(elem, parent=None):
     """Mitsuba 3 reads a file of version < 2.0.0 after rewriting it in memory
     (upgrade_tree, src/core/xml.cpp): parameter names to underscore_case
     (but not <default> names), <lookAt> to <lookat>, a diffuse bsdf's
-    diffuse_reflectance to reflectance. The rule for uoffset/vscale (moved
-    into a texture's to_uv) concerns textures, which the loader refuses."""
+    diffuse_reflectance to reflectance. (Its rule for a texture's
+    uoffset/vscale, moved into to_uv, is not applied: such a file gets the
+    unknown-parameter error naming them.)"""
     if elem.tag == "lookAt":
         elem.tag = "lookat"
     if "name" in elem.attrib and elem.tag != "default":
@@ -331,10 +332,6 @@ class _XmlReader:
             if "id" in a:
                 _register(self.ids, a["id"], node)
             for c in elem.children:
-                if c.tag == "texture":  # a parameter given as a texture
-                    raise SceneError(f"{self.place(c)}: {node.label()}: parameter '{c.attrib.get('name', '?')}': "
-                                     f"texture type '{c.attrib.get('type', '?')}' is not supported (textures are "
-                                     f"not implemented yet)")
                 item = self.element(c, node)
                 if isinstance(item, _Node):
                     node.children.append((c.attrib.get("name", c.tag), item))
@@ -353,9 +350,6 @@ class _XmlReader:
             return (a.get("name", "ref"), _Ref(a["id"], place))
         if tag in _PROPERTY_TAGS:
             return self.prop(elem, owner)
-        if tag == "texture":
-            raise SceneError(f"{place}: texture type '{elem.attrib.get('type', '?')}' is not supported (textures "
-                             f"are not implemented yet)")
         if tag in _UNSUPPORTED_TAGS or tag == "default":
             where = " (only at the top level)" if tag == "default" else ""
             raise SceneError(f"{place}: <{tag}> is not supported{where}")

@@ -70,6 +70,17 @@ def _parse_int(text):
     return int(text)
 
 
+# The parameters that take a texture, by plugin type (the rest refuse one by name).
+TEXTURED = {
+    "diffuse": ("reflectance",),
+    "plastic": ("diffuse_reflectance",),
+    "roughplastic": ("diffuse_reflectance",),
+    "conductor": ("specular_reflectance",),
+    "roughconductor": ("specular_reflectance", "alpha", "alpha_u", "alpha_v"),
+    "spot": ("texture",),
+}
+_TEXTURED_TEXT = "; ".join(f"{t}.{', '.join(n)}" for t, n in TEXTURED.items())
+
 _KIND_WORDS = {
     "float": "a float", "integer": "an integer", "boolean": "a boolean",
     "string": "a string", "rgb": "an rgb colour", "spectrum": "a spectrum",
@@ -255,6 +266,12 @@ class _Params:
                 raise self.error(f"unknown parameter '{name}'", prop.place)
         for i, (_, child) in enumerate(self.node.children):
             if i not in self.used_children:
+                if child.category == "texture":
+                    name = self.node.children[i][0]
+                    via = f" (the reference to {child.place})" if i in self.node.ref_places else ""
+                    raise self.error(f"parameter '{name}' cannot take a texture (got texture '{child.type}'{via}); "
+                                     f"textured here: {_TEXTURED_TEXT}",
+                                     self.node.ref_places.get(i, child.place))
                 if i in self.node.ref_places:  # a ref: name where it stands and what it refers to
                     raise self.error(f"unexpected nested {child.label()} (the reference to {child.place})",
                                      self.node.ref_places[i])

@@ -20,5 +20,6 @@ PLUGINS = {
     "phase": ("isotropic", "hg"),
     "volume": ("gridvolume", "constvolume"),
     "subsurface": ("dipole",),
+    "texture": ("checkerboard", "bitmap"),
 }
 _CATEGORY_OF = {t: c for c, types in PLUGINS.items() for t in types}

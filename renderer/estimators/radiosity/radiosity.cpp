@@ -261,6 +261,10 @@ public:
                 throw std::invalid_argument("integrator 'radiosity' cannot render shape '" + s->id +
                                             "': its BSDF is not diffuse (radiosity solves diffuse reflection "
                                             "only; use 'path' or 'bdpt')");
+            if (b.textured())
+                throw std::invalid_argument("integrator 'radiosity' cannot render shape '" + s->id +
+                                            "': its BSDF is textured (a patch has one reflectance; use 'path' "
+                                            "or 'bdpt')");
         }
         for (const auto& e : scene.emitters)
             if (e->is_delta() || e->is_infinite() || e->is_environment())
@@ -1133,6 +1137,7 @@ void RadiosityIntegrator::shade(const Scene& scene, const Solution& sol, Sampler
     if (mask[kDirect]) out.add(kDirect, direct / float(c_.direct_samples));
     if (!(c_.max_depth < 0 || c_.max_depth >= 3)) return;
     BsdfContext ctx;
+    ctx.uv = it.uv;
     Color acc(0.f);
     for (int g = 0; g < c_.gather_rays; ++g) {
         float u1 = sampler.next_1d();

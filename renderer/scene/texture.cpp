@@ -1,0 +1,146 @@
+#include "scene/texture.h"
+
+#include <stdexcept>
+
+namespace rm {
+
+namespace {
+
+[[noreturn]] void fail(const TextureDesc& d, const std::string& param, const std::string& why) {
+    throw std::invalid_argument("texture '" + d.id + "' (type '" + d.type + "'): parameter '" + param + "' " + why);
+}
+
+// The 2D affine map to_uv, in float as Mitsuba applies it (ScalarTransform3f).
+struct UvMap {
+    float m[6] = {1, 0, 0, 0, 1, 0};
+    bool identity = true;
+    explicit UvMap(const std::array<double, 9>& a) {
+        for (int i = 0; i < 6; ++i) m[i] = float(a[size_t(i)]);
+        identity = a == std::array<double, 9>{1, 0, 0, 0, 1, 0, 0, 0, 1};
+    }
+    Vec2 apply(Vec2 uv) const {
+        if (identity) return uv;
+        return Vec2(m[0] * uv.x + m[1] * uv.y + m[2], m[3] * uv.x + m[4] * uv.y + m[5]);
+    }
+};
+
+void check_to_uv(const TextureDesc& d) {
+    for (double x : d.to_uv)
+        if (!std::isfinite(x)) fail(d, "to_uv", "must be finite");
+    if (d.to_uv[6] != 0 || d.to_uv[7] != 0 || d.to_uv[8] != 1) fail(d, "to_uv", "must be affine (last row 0 0 1)");
+}
+
+class CheckerboardTexture final : public Texture {
+public:
+    CheckerboardTexture(const Color& c0, const Color& c1, const UvMap& map) : c0_(c0), c1_(c1), map_(map) {}
+    Color eval(Vec2 uv) const override {
+        const Vec2 p = map_.apply(uv);
+        const bool mu = p.x - std::floor(p.x) > 0.5f, mv = p.y - std::floor(p.y) > 0.5f;
+        return mu == mv ? c0_ : c1_;
+    }
+    float eval_1(Vec2 uv) const override {
+        const Vec2 p = map_.apply(uv);
+        const bool mu = p.x - std::floor(p.x) > 0.5f, mv = p.y - std::floor(p.y) > 0.5f;
+        return mu != mv ? average(c0_) : average(c1_);
+    }
+    float mean() const override { return 0.5f * (average(c0_) + average(c1_)); }
+
+private:
+    Color c0_, c1_;
+    UvMap map_;
+};
+
+enum class Wrap { Repeat, Mirror, Clamp };
+
+// Dr.Jit's dr::Texture::wrap(), one index: repeat is the index modulo n;
+// mirror reflects at every edge (period 2n: 0..n-1, then n-1..0); clamp stops
+// at the edges.
+inline int wrap_index(int i, int n, Wrap w) {
+    if (w == Wrap::Clamp) return std::min(std::max(i, 0), n - 1);
+    if (w == Wrap::Repeat) return ((i % n) + n) % n;
+    const int m = ((i % (2 * n)) + 2 * n) % (2 * n);
+    return m < n ? m : 2 * n - 1 - m;
+}
+
+class BitmapTexture final : public Texture {
+public:
+    BitmapTexture(const TextureDesc& d, const UvMap& map, Wrap wrap, bool bilinear)
+        : w_(d.width), h_(d.height), ch_(d.channels), data_(d.data), map_(map), wrap_(wrap), bilinear_(bilinear) {
+        double sum = 0;
+        for (int i = 0; i < w_ * h_; ++i) sum += double(luminance(texel_at(i)));
+        mean_ = float(sum / double(w_ * h_));
+    }
+
+    Color eval(Vec2 uv) const override {
+        const Vec2 p = map_.apply(uv);
+        if (!bilinear_) {
+            const int x = wrap_index(int(std::floor(p.x * float(w_))), w_, wrap_);
+            const int y = wrap_index(int(std::floor(p.y * float(h_))), h_, wrap_);
+            return texel(x, y);
+        }
+        // Texel centres at (i + 1/2) / res: the four around p and their weights.
+        const float fx = p.x * float(w_) - 0.5f, fy = p.y * float(h_) - 0.5f;
+        const float x0f = std::floor(fx), y0f = std::floor(fy);
+        const float w1x = fx - x0f, w1y = fy - y0f, w0x = 1.f - w1x, w0y = 1.f - w1y;
+        const int x0 = int(x0f), y0 = int(y0f);
+        const int xa = wrap_index(x0, w_, wrap_), xb = wrap_index(x0 + 1, w_, wrap_);
+        const int ya = wrap_index(y0, h_, wrap_), yb = wrap_index(y0 + 1, h_, wrap_);
+        const Color f0 = texel(xa, ya) * w0x + texel(xb, ya) * w1x;
+        const Color f1 = texel(xa, yb) * w0x + texel(xb, yb) * w1x;
+        return f0 * w0y + f1 * w1y;
+    }
+    float eval_1(Vec2 uv) const override {
+        const Color c = eval(uv);
+        return ch_ == 1 ? c.x : luminance(c);
+    }
+    float mean() const override { return mean_; }
+
+private:
+    Color texel_at(int i) const {
+        const float* v = &data_[size_t(i) * size_t(ch_)];
+        return ch_ == 1 ? Color(v[0]) : Color(v[0], v[1], v[2]);
+    }
+    Color texel(int x, int y) const { return texel_at(y * w_ + x); }
+
+    int w_, h_, ch_;
+    std::vector<float> data_;
+    UvMap map_;
+    Wrap wrap_;
+    bool bilinear_;
+    float mean_ = 0.f;
+};
+
+}  // namespace
+
+std::shared_ptr<const Texture> make_texture(const TextureDesc& d) {
+    check_to_uv(d);
+    const UvMap map(d.to_uv);
+    if (d.type == "checkerboard") {
+        for (const auto& [name, c] : {std::pair<const char*, Color>{"color0", d.color0}, {"color1", d.color1}})
+            if (!is_finite(c) || min_component(c) < 0.f) fail(d, name, "must be finite and non-negative");
+        return std::make_shared<CheckerboardTexture>(d.color0, d.color1, map);
+    }
+    if (d.type == "bitmap") {
+        if (d.channels != 1 && d.channels != 3) fail(d, "data", "must have 1 or 3 channels");
+        if (d.width < 1 || d.height < 1) fail(d, "data", "must hold at least one pixel");
+        if (d.data.size() != size_t(d.width) * size_t(d.height) * size_t(d.channels))
+            fail(d, "data", "holds " + std::to_string(d.data.size()) + " floats, not width x height x channels");
+        for (float v : d.data)
+            if (!std::isfinite(v) || v < 0.f) fail(d, "data", "must be finite and non-negative");
+        Wrap wrap;
+        if (d.wrap_mode == "repeat")
+            wrap = Wrap::Repeat;
+        else if (d.wrap_mode == "mirror")
+            wrap = Wrap::Mirror;
+        else if (d.wrap_mode == "clamp")
+            wrap = Wrap::Clamp;
+        else
+            fail(d, "wrap_mode", "must be \"repeat\", \"mirror\" or \"clamp\", got \"" + d.wrap_mode + "\"");
+        if (d.filter_type != "bilinear" && d.filter_type != "nearest")
+            fail(d, "filter_type", "must be \"bilinear\" or \"nearest\", got \"" + d.filter_type + "\"");
+        return std::make_shared<BitmapTexture>(d, map, wrap, d.filter_type == "bilinear");
+    }
+    throw std::invalid_argument("texture '" + d.id + "': unknown type '" + d.type + "'");
+}
+
+}  // namespace rm
