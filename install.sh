@@ -58,6 +58,6 @@ echo "==> building radiometer (C++ core through scikit-build-core)"
 #    per-effect error table and the HTML report's path. Results accumulate in
 #    out/results/bench.sqlite.
 if [ "$RUN_MAIN" = "1" ]; then
-  echo "==> main job: radiometer bench (default matrix, about 25 minutes on 2 cores the first time)"
+  echo "==> main job: radiometer bench (default matrix, about 30 minutes on 2 cores the first time)"
   .venv/bin/radiometer bench
 fi
