@@ -480,6 +480,50 @@ private:
 };
 
 // ---------------------------------------------------------------------------
+// The Lambertian base under a dielectric coat, shared by plastic and
+// roughplastic (Weidlich & Wilkie 2007; Mitsuba's plastic.cpp and
+// roughplastic.cpp): the base's albedo rho normalised by the coat's
+// internal reflectance R_int, rho / (1 - R_int) or, nonlinear,
+// rho / (1 - rho R_int); and the probability of sampling the coat's lobe,
+// r s / (r s + t (1 - s)) with r and t the coat's reflected and transmitted
+// fractions at wi and s = mean(spec) / (mean(diffuse) + mean(spec)).
+class CoatedBase {
+public:
+    CoatedBase(TexturedColor diffuse, const Color& specular, float eta, float internal_reflectance, bool nonlinear)
+        : diffuse_(std::move(diffuse)),
+          specular_(specular),
+          inv_eta2_(1.f / (eta * eta)),
+          r_int_(internal_reflectance),
+          nonlinear_(nonlinear) {
+        const float d_mean = diffuse_.mean(), s_mean = average(specular);
+        weight_ = (d_mean + s_mean) > 0.f ? s_mean / (d_mean + s_mean) : 0.5f;
+        norm_ = normalised(diffuse_.value);
+    }
+    float prob_coat(float reflected, float transmitted) const {
+        const float ps = reflected * weight_;
+        const float pd = transmitted * (1.f - weight_);
+        return ps + pd > 0.f ? ps / (ps + pd) : 0.5f;
+    }
+    // Precomputed when untextured; per query from the texture otherwise.
+    Color diffuse_norm(Vec2 uv) const { return diffuse_.textured() ? normalised(diffuse_.texture->eval(uv)) : norm_; }
+    bool textured() const { return diffuse_.textured(); }
+    const Color& specular() const { return specular_; }
+    float inv_eta2() const { return inv_eta2_; }
+
+private:
+    // Non-physical albedos (rho R_int >= 1 with nonlinear) would make it
+    // infinite or negative: those become 0 rather than NaN/negative weights.
+    Color normalised(const Color& rho) const {
+        const Color denom = nonlinear_ ? Color(1.f) - rho * r_int_ : Color(1.f - r_int_);
+        return vmax(finite_or_zero(rho / denom), Color(0.f));
+    }
+    TexturedColor diffuse_;
+    Color specular_, norm_;
+    float inv_eta2_, r_int_, weight_ = 0.5f;
+    bool nonlinear_;
+};
+
+// ---------------------------------------------------------------------------
 // plastic: smooth dielectric coating over a Lambertian base, with the coating's
 // internal reflections summed in closed form (Weidlich & Wilkie 2007,
 // "Arbitrarily Layered Micro-Facet Surfaces"; Mitsuba src/bsdfs/plastic.cpp):
@@ -491,14 +535,9 @@ private:
 class PlasticBsdf final : public Bsdf {
 public:
     PlasticBsdf(float eta, TexturedColor diffuse, const Color& specular, bool nonlinear)
-        : eta_(eta), nonlinear_(nonlinear), specular_(specular), diffuse_(std::move(diffuse)) {
+        : eta_(eta), coat_(std::move(diffuse), specular, eta, fresnel_diffuse_reflectance(1.f / eta), nonlinear) {
         flags_ = kDeltaReflection | kDiffuseReflection;
-        textured_ = diffuse_.textured();
-        inv_eta2_ = 1.f / (eta * eta);
-        fdr_int_ = fresnel_diffuse_reflectance(1.f / eta);
-        const float d_mean = diffuse_.mean(), s_mean = average(specular);
-        specular_sampling_weight_ = (d_mean + s_mean) > 0.f ? s_mean / (d_mean + s_mean) : 0.5f;
-        diffuse_norm_ = normalised(diffuse_.value);
+        textured_ = coat_.textured();
     }
 
     BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
@@ -511,20 +550,21 @@ public:
             bs.pdf_w = p_spec;
             bs.is_delta = true;
             bs.sampled_flags = kDeltaReflection;
-            bs.weight = specular_ * (f_i / p_spec);
+            bs.weight = coat_.specular() * (f_i / p_spec);
         } else {
             bs.wo = warp::square_to_cosine_hemisphere(u2);
             bs.pdf_w = p_diff * warp::square_to_cosine_hemisphere_pdf_w(bs.wo);
             bs.sampled_flags = kDiffuseReflection;
             const float f_o = fresnel_dielectric(bs.wo.z, eta_).F;
-            bs.weight = diffuse_norm(ctx.uv) * (inv_eta2_ * (1.f - f_i) * (1.f - f_o) / p_diff);
+            bs.weight = coat_.diffuse_norm(ctx.uv) * (coat_.inv_eta2() * (1.f - f_i) * (1.f - f_o) / p_diff);
         }
         return sanitize(bs);
     }
     Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return Color(0.f);
         const float f_i = fresnel_dielectric(wi.z, eta_).F, f_o = fresnel_dielectric(wo.z, eta_).F;
-        return finite_or_zero(diffuse_norm(ctx.uv) * (wo.z * kInvPi * inv_eta2_ * (1.f - f_i) * (1.f - f_o)));
+        return finite_or_zero(coat_.diffuse_norm(ctx.uv) *
+                              (wo.z * kInvPi * coat_.inv_eta2() * (1.f - f_i) * (1.f - f_o)));
     }
     float pdf_w(const BsdfContext&, const Vec3& wi, const Vec3& wo) const override {
         if (!(wi.z > 0.f) || !(wo.z > 0.f)) return 0.f;
@@ -533,27 +573,10 @@ public:
     }
 
 private:
-    float prob_specular(float f_i) const {
-        const float ps = f_i * specular_sampling_weight_;
-        const float pd = (1.f - f_i) * (1.f - specular_sampling_weight_);
-        return ps + pd > 0.f ? ps / (ps + pd) : 0.5f;
-    }
-    // The diffuse albedo including the internal-reflection normalisation.
-    // Non-physical albedos (rho Fdr_int >= 1 with nonlinear) would make it
-    // infinite or negative: those become 0 rather than NaN/negative weights.
-    Color normalised(const Color& rho) const {
-        const Color denom = nonlinear_ ? Color(1.f) - rho * fdr_int_ : Color(1.f - fdr_int_);
-        return vmax(finite_or_zero(rho / denom), Color(0.f));
-    }
-    // Precomputed when untextured; per query from the texture otherwise.
-    Color diffuse_norm(Vec2 uv) const {
-        return diffuse_.textured() ? normalised(diffuse_.texture->eval(uv)) : diffuse_norm_;
-    }
+    float prob_specular(float f_i) const { return coat_.prob_coat(f_i, 1.f - f_i); }
 
-    float eta_, inv_eta2_, fdr_int_, specular_sampling_weight_;
-    bool nonlinear_;
-    Color specular_, diffuse_norm_;  // diffuse_norm_: rho / (1 - Fdr_int) or rho / (1 - rho Fdr_int)
-    TexturedColor diffuse_;
+    float eta_;
+    CoatedBase coat_;  // R_int = Fdr_int, the smooth coat's diffuse Fresnel reflectance from inside
 };
 
 // ---------------------------------------------------------------------------
@@ -621,14 +644,12 @@ class RoughPlasticBsdf final : public Bsdf {
 public:
     RoughPlasticBsdf(const MicrofacetDistribution& distr, float eta, TexturedColor diffuse, const Color& specular,
                      bool nonlinear)
-        : distr_(distr), eta_(eta), nonlinear_(nonlinear), specular_(specular), diffuse_(std::move(diffuse)) {
+        : distr_(distr),
+          tables_(rough_plastic_tables(distr.type(), distr.alpha_u(), eta)),
+          eta_(eta),
+          coat_(std::move(diffuse), specular, eta, tables_->internal_reflectance, nonlinear) {
         flags_ = kGlossyReflection | kDiffuseReflection;
-        textured_ = diffuse_.textured();
-        inv_eta2_ = 1.f / (eta * eta);
-        tables_ = rough_plastic_tables(distr.type(), distr.alpha_u(), eta);
-        const float d_mean = diffuse_.mean(), s_mean = average(specular);
-        specular_sampling_weight_ = (d_mean + s_mean) > 0.f ? s_mean / (d_mean + s_mean) : 0.5f;
-        diffuse_norm_ = normalised(diffuse_.value);
+        textured_ = coat_.textured();
     }
 
     BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
@@ -660,11 +681,11 @@ public:
             const float D = distr_.D(m);
             if (D > 0.f) {
                 const float F = fresnel_dielectric(dot(wi, m), eta_).F;
-                value = specular_ * (F * D * distr_.G(wi, wo, m) / (4.f * wi.z));  // eq. 20 times cos_o
+                value = coat_.specular() * (F * D * distr_.G(wi, wo, m) / (4.f * wi.z));  // eq. 20 times cos_o
             }
         }
         const float t = transmittance(wi.z) * transmittance(wo.z);
-        value += diffuse_norm(ctx.uv) * (kInvPi * inv_eta2_ * wo.z * t);
+        value += coat_.diffuse_norm(ctx.uv) * (kInvPi * coat_.inv_eta2() * wo.z * t);
         return finite_or_zero(value);
     }
 
@@ -694,27 +715,13 @@ private:
     }
     float prob_specular(float cos_i) const {
         const float t_i = transmittance(cos_i);
-        const float ps = (1.f - t_i) * specular_sampling_weight_;
-        const float pd = t_i * (1.f - specular_sampling_weight_);
-        return ps + pd > 0.f ? ps / (ps + pd) : 0.5f;
-    }
-
-    // As plastic's: a non-physical nonlinear albedo (rho R_int >= 1) gives 0, not NaN.
-    Color normalised(const Color& rho) const {
-        const float r_int = tables_->internal_reflectance;
-        const Color denom = nonlinear_ ? Color(1.f) - rho * r_int : Color(1.f - r_int);
-        return vmax(finite_or_zero(rho / denom), Color(0.f));
-    }
-    Color diffuse_norm(Vec2 uv) const {
-        return diffuse_.textured() ? normalised(diffuse_.texture->eval(uv)) : diffuse_norm_;
+        return coat_.prob_coat(1.f - t_i, t_i);
     }
 
     MicrofacetDistribution distr_;
-    std::shared_ptr<const RoughPlasticTables> tables_;
-    float eta_, inv_eta2_, specular_sampling_weight_;
-    bool nonlinear_;
-    Color specular_, diffuse_norm_;  // diffuse_norm_: rho / (1 - R_int) or rho / (1 - rho R_int)
-    TexturedColor diffuse_;
+    std::shared_ptr<const RoughPlasticTables> tables_;  // before coat_, which reads its R_int
+    float eta_;
+    CoatedBase coat_;
 };
 
 // ---------------------------------------------------------------------------
