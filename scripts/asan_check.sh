@@ -34,6 +34,7 @@ export ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:halt_on_error=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 "$B/venv/bin/python" -c "import radiometer, sys; p = radiometer.__file__; print('instrumented radiometer:', p); sys.exit(0 if '/out/asan/' in p else 1)"
 if [ "$#" -eq 0 ]; then
-  set -- tests/test_loader.py tests/test_stress.py tests/test_render.py tests/test_float_range.py tests/test_effects.py
+  set -- tests/test_loader.py tests/test_stress.py tests/test_render.py tests/test_float_range.py tests/test_effects.py \
+    tests/test_textures.py tests/test_roughplastic.py tests/test_radiosity.py tests/test_radiosity_hierarchical.py
 fi
 "$B/venv/bin/python" -m pytest -q -p no:cacheprovider "$@"
