@@ -4,7 +4,13 @@
 // Parameters are `path`'s (max_depth, rr_depth, hide_emitters), with
 // Mitsuba 3 volpath's meaning: a medium scattering event and a surface
 // scattering event each count as one vertex towards max_depth;
-// index-matched (null BSDF) boundaries are not vertices and do not count.
+// index-matched (null BSDF) boundaries are not vertices and do not count,
+// nor is a thindielectric's straight-through sample (its kNull lobe): as in
+// Mitsuba 3's volpath (src/integrators/volpath.cpp, non_null_bsdf) it is a
+// null event that leaves depth, the MIS reference vertex and the path's
+// class alone, and shadow rays pass such a surface with its
+// null_transmission (Scene::transmittance). bdpt and ptracer keep it a
+// vertex, each consistently within itself.
 //
 // The estimator, after the seed and pbrt-v4's VolPathIntegrator::Li:
 // 1. Free flight: in a medium, a distance t is sampled with density
@@ -104,7 +110,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                         Color ld = direct_through_media(
                             scene, mi, medium, sampler, stats,
                             [&](const Vec3& wo) { return Color(phase.eval(mi.wi, wo)); },
-                            [&](const Vec3& wo) { return phase.pdf_w(mi.wi, wo); });
+                            [&](const Vec3& wo) { return phase.pdf_w(mi.wi, wo); }, true);
                         out.add(ncls, beta * ld);
                     } else {
                         sampler.next_1d();
@@ -147,15 +153,30 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
             ray = it.spawn(ray.d);
             continue;
         }
-
-        // 7. Stop at max_depth, or when no requested class is reachable.
-        if (prm.max_depth >= 0 && depth + 1 >= prm.max_depth) break;
-        if (!pc.can_reach(mask, true)) break;
         Vec3 wi = it.to_local(it.wi);
         ctx.uv = it.uv;
         const Bsdf* bsdf_at = &bsdf;
         BsdfSample bs;
         bool sampled = false;
+
+        // 6b. A BSDF with a null lobe (thindielectric) is sampled first: its
+        //     straight-through sample is a null event, as at 6 but weighted;
+        //     any other sample is this vertex's (no NEE: no smooth lobe).
+        if ((bsdf.flags() & kNull) && shape.dipole < 0) {
+            bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
+            if (bs.sampled_flags == kNull) {
+                if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
+                beta *= bs.weight;
+                mt.cross(it, ray.d, true);
+                ray = it.spawn(ray.d);
+                continue;
+            }
+            sampled = true;
+        }
+
+        // 7. Stop at max_depth, or when no requested class is reachable.
+        if (prm.max_depth >= 0 && depth + 1 >= prm.max_depth) break;
+        if (!pc.can_reach(mask, true)) break;
 
         // 7a. A dipole BSSRDF (dipole_step.h), as in path.cpp: specular
         //     reflection, or the exit point xi (a B vertex) with the exit
@@ -175,7 +196,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                     Color ld = direct_through_media(
                         scene, it, medium, sampler, stats,
                         [&](const Vec3& wo) { return bsdf_at->eval(ctx, wi, it.to_local(wo)); },
-                        [&](const Vec3& wo) { return bsdf_at->pdf_w(ctx, wi, it.to_local(wo)); });
+                        [&](const Vec3& wo) { return bsdf_at->pdf_w(ctx, wi, it.to_local(wo)); }, true);
                     out.add(ncls, beta * ld);
                 } else {
                     sampler.next_1d();

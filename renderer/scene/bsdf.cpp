@@ -454,8 +454,7 @@ public:
     }
 
     BsdfSample sample(const BsdfContext&, const Vec3& wi, float u1, Vec2) const override {
-        float R = fresnel_dielectric(std::fabs(wi.z), eta_).F;
-        R = 2.f * R / (1.f + R);
+        const float R = slab_reflectance(wi.z);
         BsdfSample bs;
         bs.is_delta = true;
         if (u1 < R) {
@@ -474,7 +473,14 @@ public:
     Color eval(const BsdfContext&, const Vec3&, const Vec3&) const override { return Color(0.f); }
     float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
 
+    Color null_transmission(float cos_theta) const override { return spec_t_ * (1.f - slab_reflectance(cos_theta)); }
+
 private:
+    // R' = 2R / (1 + R) at incidence |cos theta|.
+    float slab_reflectance(float cos_theta) const {
+        const float R = fresnel_dielectric(std::fabs(cos_theta), eta_).F;
+        return 2.f * R / (1.f + R);
+    }
     float eta_;
     Color spec_r_, spec_t_;
 };

@@ -59,6 +59,13 @@ public:
     virtual Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const = 0;
     // Non-delta lobes only, solid angle; consistent with sample() (including lobe selection).
     virtual float pdf_w(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const = 0;
+    // A kNull lobe's straight-through fraction at incidence |cos theta|
+    // (Mitsuba 3's eval_null_transmission): what a shadow ray keeps when it
+    // passes the surface. 0 for BSDFs without such a lobe.
+    virtual Color null_transmission(float cos_theta) const {
+        (void)cos_theta;
+        return Color(0.f);
+    }
     uint32_t flags() const { return flags_; }
     bool has_smooth() const { return (flags_ & kSmooth) != 0; }
     bool is_pure_delta() const { return (flags_ & kSmooth) == 0; }

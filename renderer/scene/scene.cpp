@@ -376,7 +376,7 @@ bool Scene::visible(const Interaction& from, const DirectSample& ds) const {
 }
 
 Color Scene::transmittance(const Interaction& from, const DirectSample& ds, int medium, uint64_t& rays,
-                           Sampler& sampler) const {
+                           Sampler& sampler, bool through_null_lobes) const {
     Ray r;
     if (from.kind == VertexKind::Medium) {
         r.o = from.p;
@@ -411,7 +411,11 @@ Color Scene::transmittance(const Interaction& from, const DirectSample& ds, int 
             if (medium >= 0) tr *= media[medium]->segment_transmittance(r.o, r.d, remaining, sampler);
             return tr;
         }
-        if (bsdfs[shapes[it.shape]->bsdf]->flags() != kNull) return Color(0.f);
+        const Bsdf& b = *bsdfs[shapes[it.shape]->bsdf];
+        if (b.flags() != kNull) {
+            if (!through_null_lobes || !(b.flags() & kNull)) return Color(0.f);
+            tr *= b.null_transmission(dot(r.d, it.n));
+        }
         if (medium >= 0) tr *= media[medium]->segment_transmittance(r.o, r.d, it.t, sampler);
         if (is_black(tr)) return tr;
         medium = medium_after(it, r.d, medium);

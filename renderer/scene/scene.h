@@ -75,13 +75,15 @@ public:
     // surface point, or a medium point when from.kind == Medium) to the
     // sample `ds`, starting in `medium` and tracking it across medium
     // boundaries; index-matched (null BSDF) surfaces pass light, any other
-    // surface blocks it (returns 0). Beer-Lambert exp(-sigma_t d) per
+    // surface blocks it (returns 0), except with `through_null_lobes` a BSDF
+    // with a kNull lobe (thindielectric), passed with its null_transmission
+    // as Mitsuba 3's volpath passes it. Beer-Lambert exp(-sigma_t d) per
     // segment, exact for homogeneous media (no sampling noise). `rays`
     // counts the intersection queries.
     // Heterogeneous media estimate their segments by ratio tracking with
     // `sampler`'s random numbers.
-    Color transmittance(const Interaction& from, const DirectSample& ds, int medium, uint64_t& rays,
-                        Sampler& sampler) const;
+    Color transmittance(const Interaction& from, const DirectSample& ds, int medium, uint64_t& rays, Sampler& sampler,
+                        bool through_null_lobes = false) const;
     // The medium on the side of `it` that direction d points to: its shape's
     // interior or exterior when the shape is a medium boundary, else `current`.
     static int medium_after(const Interaction& it, const Vec3& d, int current) {

@@ -115,17 +115,18 @@ Color transmittance_from_infinity(const Scene& scene, int medium);
 // the phase function, `pdf_of(wo)` the density of the direction sampling
 // it competes with, weighted by the power heuristic (Veach 1997, eq. 9.13).
 // pdf_of = nullptr: light samples only, no MIS weight (photonmapper, where
-// nothing else finds the emitters from `it`).
+// nothing else finds the emitters from `it`). through_null_lobes: shadow
+// rays pass thindielectric surfaces (volpath's null events, Scene::transmittance).
 template <typename EvalF, typename PdfF>
 Color direct_through_media(const Scene& scene, const Interaction& it, int medium, Sampler& sampler, ThreadStats& stats,
-                           EvalF f_of, PdfF pdf_of) {
+                           EvalF f_of, PdfF pdf_of, bool through_null_lobes = false) {
     DirectSample ds;
     if (!sample_light(scene, light_context(it), sampler, ds)) return Color(0.f);
     Color f = f_of(ds.d);
     if (is_black(f)) return Color(0.f);
     ++stats.shadow_rays;
     int m = it.kind == VertexKind::Medium ? medium : Scene::medium_after(it, ds.d, medium);
-    Color tr = scene.transmittance(it, ds, m, stats.rays, sampler);
+    Color tr = scene.transmittance(it, ds, m, stats.rays, sampler, through_null_lobes);
     if (is_black(tr)) return Color(0.f);
     float light_pdf = ds.pdf_w * ds.pick;
     float w = 1.f;
