@@ -50,10 +50,7 @@ Scene::Scene() {
     if (!device_) throw std::runtime_error("could not create an Embree device");
     rtcSetDeviceErrorFunction(device_, embree_error, nullptr);
     scene_ = rtcNewScene(device_);
-    // Robust traversal and intersection: no rays slipping through shared
-    // edges and vertices (light leaks would bias every estimator). Costs
-    // ~15% of the trace time, measured on the Cornell box with callgrind.
-    rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+    // Robust mode is decided at commit(), by the scene's geometry.
     rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
 }
 
@@ -200,6 +197,18 @@ void Scene::commit() {
     if (!sensor) throw std::invalid_argument("scene has no sensor");
     if (sensor_desc.medium < -1 || sensor_desc.medium >= int(media.size()))
         throw std::invalid_argument("sensor: medium index out of range");
+    // Embree's robust mode where the scene needs it: where triangles share
+    // edges (every mesh, rectangles and cubes included), rays through those
+    // edges slip between the triangles without it (tests/test_rays.py: 0.4 %
+    // of rays aimed at a cube's edges with one direction component 0; none
+    // robust). It costs 38 % of Embree's instructions, 13 % of `path`'s
+    // (docs/performance.md), so scenes of analytic shapes alone (our own
+    // double-precision sphere and disk tests, no shared edges) go without.
+    // Any other kind of shape (a new one, or one that holds meshes) keeps it.
+    robust_ = !std::all_of(shapes.begin(), shapes.end(), [](const std::unique_ptr<Shape>& s) {
+        return dynamic_cast<const Sphere*>(s.get()) || dynamic_cast<const Disk*>(s.get());
+    });
+    rtcSetSceneFlags(scene_, robust_ ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
     rtcCommitScene(scene_);
     check_embree();
     // Refuse what float32 ray tracing cannot represent (check_ray below) before
@@ -419,7 +428,12 @@ bool Scene::occluded(const Ray& ray) const {
 void Scene::set_robust(bool on) {
     robust_ = on;
     rtcSetSceneFlags(scene_, on ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
-    if (committed_) rtcCommitScene(scene_);
+    if (committed_) {
+        // Embree rebuilds a committed scene only when a geometry changed,
+        // not for new flags alone: mark every geometry changed.
+        for (unsigned id = 0; id < unsigned(shapes.size()); ++id) rtcCommitGeometry(rtcGetGeometry(scene_, id));
+        rtcCommitScene(scene_);
+    }
     check_embree();
 }
 

@@ -92,8 +92,9 @@ public:
     // limit); else through intersect() / occluded() (our ray set-up, range
     // check and hit record).
     double replay(const RayLog& log, bool bare, int repeats) const;
-    // Embree's robust mode (RTC_SCENE_FLAG_ROBUST) on or off; rebuilds the
-    // BVH of a committed scene. On by default (see commit()).
+    // Embree's robust mode (RTC_SCENE_FLAG_ROBUST) on or off, for tests and
+    // benchmarks; rebuilds the BVH of a committed scene. commit() turns it
+    // on for scenes with meshes, off for analytic shapes alone.
     void set_robust(bool on);
     bool robust() const { return robust_; }
     // Shadow ray from `from` to the point p (or to infinity along d).
