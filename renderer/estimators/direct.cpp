@@ -47,15 +47,30 @@ public:
 
     void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
                 ThreadStats& stats) const override {
-        // 1. The camera ray, and emission it sees directly.
         Interaction it;
-        ++stats.rays;
         bool hit = scene.intersect(ray, it);
-        if (!hit) {
+        shade(scene, sampler, ray, hit ? &it : nullptr, out, stats);
+    }
+
+    // The camera driver traces the camera rays in packets (integrator.h).
+    bool takes_camera_hits() const override { return true; }
+    void sample_from_hit(const Scene& scene, Sampler& sampler, const Ray& ray, const Interaction* hit,
+                         EffectRadiance& out, ThreadStats& stats) const override {
+        shade(scene, sampler, ray, hit, out, stats);
+    }
+
+private:
+    // Direct illumination at the camera ray's closest hit `first` (nullptr: none).
+    void shade(const Scene& scene, Sampler& sampler, const Ray& ray, const Interaction* first, EffectRadiance& out,
+               ThreadStats& stats) const {
+        // 1. The camera ray, and emission it sees directly.
+        ++stats.rays;
+        if (!first) {
             if (!hide_ && mask[kEmission])
                 for (const Emitter* e : scene.environment) out.add(kEmission, e->eval_environment(ray.d));
             return;
         }
+        const Interaction& it = *first;
         const Shape& shape = *scene.shapes[it.shape];
         if (shape.emitter >= 0 && !hide_ && mask[kEmission])
             out.add(kEmission, scene.emitters[shape.emitter]->eval(it, it.wi));
@@ -106,7 +121,6 @@ public:
         }
     }
 
-private:
     int n_light_, n_bsdf_;
     bool hide_;
     float light_frac_, bsdf_frac_;
