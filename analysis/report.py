@@ -771,6 +771,47 @@ def metropolis_chains_html(recs) -> str:
     return head + "".join(out)
 
 
+def time_to_error_html(results_json: Path, out: Path) -> str:
+    """The side-by-side measurement against Mitsuba 3
+    (benchmarks/studies/time_to_error.py's results file): per scene the
+    target error, the time each contender takes to reach it, the ratio of
+    our best to Mitsuba's best, samples per second and thread scaling,
+    with the commit and machine it was measured on; its plot copied beside
+    the page. A note when the study has not been run."""
+    import json
+    import shutil
+
+    results_json = Path(results_json)
+    head = "<h2>Against Mitsuba 3: time to error</h2>"
+    if not results_json.exists():
+        return (head + "<p class='note'>Not measured yet: run <code>python -m "
+                "radiometer.benchmarks.studies.time_to_error</code>.</p>")
+    d = json.loads(results_json.read_text())
+    m = d.get("machine") or {}
+    rows = []
+    for scene, r in d.get("scenes", {}).items():
+        best = {c["renderer"]: c for c in sorted(r["contenders"], key=lambda c: c["time_to_target_s"], reverse=True)}
+        threads = "; ".join(f"{t} thr.: ours {v['ours_msamples_per_s']:.2f}, Mitsuba "
+                            f"{v['mitsuba_llvm_msamples_per_s']:.2f}" for t, v in r.get("thread_scaling", {}).items())
+        rows.append(f"<tr><td>{esc(scene)}</td><td>{r['target_relmse']:.3g}</td>"
+                    f"<td>{esc(r['best_ours'])}: {best['radiometer']['time_to_target_s']:.3g} s</td>"
+                    f"<td>{esc(r['best_mitsuba'])}: {best['mitsuba']['time_to_target_s']:.3g} s</td>"
+                    f"<td style='background:{_ratio_colour(1 / r['ratio'], 'yes')}'>{r['ratio']:.2f}</td>"
+                    f"<td>{esc(threads)}</td></tr>")
+    png = results_json.with_suffix(".png")
+    img = ""
+    if png.exists():
+        shutil.copy(png, Path(out) / "time_to_error.png")
+        img = "<p><img src='time_to_error.png' alt='error against time, ours and Mitsuba 3' width='100%'></p>"
+    return (head + "<p class='note'>Time to the scene's target relMSE on each renderer's own error-against-time "
+            "curve (box filter on both sides, the same max_depth; Msamples/s at the ladder's middle spp), our best "
+            "sampler against Mitsuba 3's best variant and sampler; the goal is a ratio of at most 0.5. Measured at "
+            f"commit {esc(str(d.get('commit')))} on {esc(str(m.get('cpu', '?')))}, {esc(str(m.get('cores', '?')))} "
+            f"cores, {esc(str(d.get('date')))}.</p>"
+            "<table><tr><th>scene</th><th>target relMSE</th><th>ours, best</th><th>Mitsuba, best</th>"
+            "<th>ratio</th><th>Msamples/s by threads</th></tr>" + "".join(rows) + "</table>" + img)
+
+
 def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, history=None) -> Path:
     """Writes the report of one run (its store row `run` and job records
     `recs`, renders under `root`) into the folder `out`; `source` names
@@ -825,6 +866,8 @@ def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, 
              "largest of: " + "; ".join(f"<b>{esc(k)}</b>: {esc(v)}" for k, v in TERM_HOW.items()) +
              ". Means over seeds.</p>",
              verdict_table_html(rows),
+             time_to_error_html(Path(__file__).resolve().parents[1] / "benchmarks" / "results" /
+                                "time_to_error.json", out),
              "<h2>Per-effect error</h2>",
              "<p class='note'>relMSE (eps 1e-2) of each effect class against its per-effect reference, mean over "
              "seeds; total: the whole image against the scene's reference (analytic, or Mitsuba 3's). Per-effect "

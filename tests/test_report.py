@@ -309,3 +309,29 @@ def test_effect_budget_over_seeds_recovers_known_noise_and_bias():
         assert abs(t["bias"] - np.mean(b ** 2 / d)) < tol, (b, t)
     # Power: the injected bias is told apart from none.
     assert got[0.0]["bias"] < tol < got[0.05]["bias"], got
+
+
+def test_time_to_error_section_from_the_study_results(tmp_path):
+    """The report's side-by-side section (issue 13 point 4) shows what
+    benchmarks/studies/time_to_error.py wrote, and says so when it has not
+    run."""
+    from radiometer.analysis.report import time_to_error_html
+    from radiometer.benchmarks.studies.time_to_error import time_to
+
+    missing = time_to_error_html(tmp_path / "none.json", tmp_path)
+    assert "Not measured yet" in missing and "time_to_error" in missing
+    pts = [{"spp": 4, "seconds": 1.0, "relmse": 0.04}, {"spp": 16, "seconds": 4.0, "relmse": 0.01}]
+    t, extrapolated = time_to(pts, 0.02)
+    assert t == pytest.approx(2.0) and not extrapolated  # 1/relMSE linear in time: halfway in log-log
+    t, extrapolated = time_to(pts, 0.005)
+    assert t == pytest.approx(8.0) and extrapolated
+    scene = {"target_relmse": 0.02, "best_ours": "zsobol", "best_mitsuba": "llvm_ad_rgb multijitter", "ratio": 2.5,
+             "thread_scaling": {"1": {"ours_msamples_per_s": 0.5, "mitsuba_llvm_msamples_per_s": 1.6}},
+             "contenders": [{"renderer": "radiometer", "time_to_target_s": 5.0},
+                            {"renderer": "mitsuba", "time_to_target_s": 2.0}]}
+    f = tmp_path / "time_to_error.json"
+    f.write_text(json.dumps({"commit": "abc1234", "date": "2026-12-06", "machine": {"cpu": "X", "cores": 2},
+                             "scenes": {"cornell_box": scene}}))
+    page = time_to_error_html(f, tmp_path)
+    assert "cornell_box" in page and ">2.50<" in page and "abc1234" in page
+    assert "zsobol: 5 s" in page and "llvm_ad_rgb multijitter: 2 s" in page
