@@ -528,11 +528,6 @@ Cylinder::Cylinder(const Matrix4& rigid, double radius, double length) : r_(radi
         for (int j = 0; j < 3; ++j) q_[i][j] = rigid[size_t(4 * i + j)];
         t_[i] = rigid[size_t(4 * i + 3)];
     }
-    sign_ = (q_[0][0] * (q_[1][1] * q_[2][2] - q_[1][2] * q_[2][1]) -
-             q_[0][1] * (q_[1][0] * q_[2][2] - q_[1][2] * q_[2][0]) +
-             q_[0][2] * (q_[1][0] * q_[2][1] - q_[1][1] * q_[2][0])) < 0
-                ? -1.0
-                : 1.0;
     // The box around both end circles (Mitsuba's bbox()): per axis the
     // circle's half-extent r sqrt(q_i0^2 + q_i1^2), padded for rounding.
     const double e0[3] = {0, 0, 0}, e1[3] = {0, 0, len_};
@@ -581,10 +576,10 @@ void Cylinder::fill_interaction(const Ray& ray, const RTCHit&, float t, Interact
     to_world(on, p);
     it.p = Vec3(float(p[0]), float(p[1]), float(p[2]));
     it.uv = Vec2(float(phi / (2 * 3.14159265358979323846)), float(z / len_));
-    // cross(dp/du, dp/dv) with dp/du = 2 pi Q (-y, x, 0), dp/dv = Q (0, 0, length):
-    // sign_ Q (cos phi, sin phi, 0).
-    Vec3 n(float(sign_ * (q_[0][0] * cp + q_[0][1] * sp)), float(sign_ * (q_[1][0] * cp + q_[1][1] * sp)),
-           float(sign_ * (q_[2][0] * cp + q_[2][1] * sp)));
+    // Radial, outwards: Q (cos phi, sin phi, 0), under a mirror too (as
+    // Mitsuba 3.9's cylinder does, measured with its ray_intersect).
+    Vec3 n(float(q_[0][0] * cp + q_[0][1] * sp), float(q_[1][0] * cp + q_[1][1] * sp),
+           float(q_[2][0] * cp + q_[2][1] * sp));
     n = normalize(n);
     if (flip_normals) n = -n;
     it.n = n;
@@ -604,8 +599,8 @@ PositionSample Cylinder::sample_position(Vec2 u, float) const {
     double p[3];
     to_world(l, p);
     ps.p = Vec3(float(p[0]), float(p[1]), float(p[2]));
-    Vec3 n(float(sign_ * (q_[0][0] * cp + q_[0][1] * sp)), float(sign_ * (q_[1][0] * cp + q_[1][1] * sp)),
-           float(sign_ * (q_[2][0] * cp + q_[2][1] * sp)));
+    Vec3 n(float(q_[0][0] * cp + q_[0][1] * sp), float(q_[1][0] * cp + q_[1][1] * sp),
+           float(q_[2][0] * cp + q_[2][1] * sp));
     n = normalize(n);
     ps.n = flip_normals ? -n : n;
     ps.pdf_a = 1.f / area();

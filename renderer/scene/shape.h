@@ -136,8 +136,8 @@ private:
 // around the segment from the local origin to (0, 0, length), placed by a
 // rigid map (rotation, possibly a mirror, and translation; the loader has
 // split the radius and length off Mitsuba's to_world). uv = (phi / 2 pi,
-// z / length), the normal is cross(dp/du, dp/dv) as Mitsuba's (outwards
-// under a rotation, inwards under a mirror), then flip_normals.
+// z / length) in that frame; the normal points away from the axis, under a
+// mirror too (as Mitsuba 3.9's), then flip_normals.
 class Cylinder final : public Shape {
 public:
     // rigid: row-major 4x4, its 3x3 part orthogonal.
@@ -152,7 +152,6 @@ public:
     void to_world(const double l[3], double w[3]) const;
     double q_[3][3], t_[3];  // the rigid map: rotation (or mirror) and translation
     double r_, len_;
-    double sign_;  // det(q_): -1 when the map mirrors (the normal then points in)
 
 private:
     Vec3 lo_, hi_;

@@ -429,9 +429,8 @@ class _Builder:
             path = self.file(p, "mesh")
             index = p.int("shape_index", 0, lo=0)
             face_normals = p.bool("face_normals", False)
-            pos, f, n, uv, flagged = _read_serialized(path, index, where, not self.confine)
-            # The file's own face-normals flag means face_normals = true (Mitsuba's documentation).
-            _mesh_shape(s, m, pos, f, n, uv, face_normals or flagged, where)
+            pos, f, n, uv = _read_serialized(path, index, where, not self.confine)
+            _mesh_shape(s, m, pos, f, n, uv, face_normals, where)
         elif t == "cylinder":
             self._cylinder(p, s, m)
         elif t == "rectangle":

@@ -246,13 +246,16 @@ def _cube_mesh():
 # Read here with Python's zlib and numpy: no maintained Python package reads
 # this format, and the layout is a few lines.
 _SER_MAGIC = 0x041C
-_SER_NORMALS, _SER_TEXCOORDS, _SER_COLORS, _SER_FACE_NORMALS = 0x0001, 0x0002, 0x0008, 0x0010
+_SER_NORMALS, _SER_TEXCOORDS, _SER_COLORS = 0x0001, 0x0002, 0x0008
 _SER_DOUBLE = 0x2000
 
 
 def _read_serialized(path, shape_index, err, quote=True):
-    """(positions, faces, normals or None, uvs or None, face_normals flag)
-    of mesh number `shape_index` of a .serialized file."""
+    """(positions, faces, normals or None, uvs or None) of mesh number
+    `shape_index` of a .serialized file. The face-normals flag (0x0010) is
+    read past: Mitsuba 3's reader ignores it too (its documentation calls it
+    face_normals = true; measured with mitsuba.load_dict, 3.9.1: the file's
+    vertex normals are kept)."""
     import struct
     import zlib
 
@@ -326,4 +329,4 @@ def _read_serialized(path, shape_index, err, quote=True):
     if not (np.all(np.isfinite(p)) and (n is None or np.all(np.isfinite(n)))
             and (uv is None or np.all(np.isfinite(uv)))):
         raise bad("non-finite vertex data")
-    return p, f.astype(np.uint32), n, uv, bool(flags & _SER_FACE_NORMALS)
+    return p, f.astype(np.uint32), n, uv
