@@ -406,9 +406,6 @@ class _Builder:
 
     def _shape(self, node):
         p, t = _Params(node), node.type
-        if t == "sdfgrid":
-            raise p.error("Mitsuba 3's signed-distance grid shape is not supported; turn the grid into a mesh "
-                          "(e.g. marching cubes) and load it as 'ply' or 'obj'")
         if t == "shapegroup":
             return self._shapegroup(p)
         if t == "instance":

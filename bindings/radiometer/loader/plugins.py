@@ -7,7 +7,7 @@ from ..samplers import SAMPLER_NAMES
 
 PLUGINS = {
     "shape": ("obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere", "cylinder", "shapegroup",
-              "instance", "sdfgrid"),
+              "instance"),
     "bsdf": ("diffuse", "conductor", "roughconductor", "dielectric", "roughdielectric",
              "thindielectric", "plastic", "roughplastic", "twosided", "null"),
     "emitter": ("area", "point", "spot", "directional", "constant", "envmap"),
