@@ -221,26 +221,41 @@ PYBIND11_MODULE(_core, m) {
         .def(
             "add_mesh",
             [](Scene& s, const std::string& id, py::object pos, py::object idx, py::object normals, py::object uvs,
-               int bsdf, bool flip) {
+               int bsdf, bool flip, int group) {
                 return s.add_mesh(id, flat<float>(pos, 3, "positions"), flat<uint32_t>(idx, 3, "indices"),
-                                  flat<float>(normals, 3, "normals"), flat<float>(uvs, 2, "uvs"), bsdf, flip);
+                                  flat<float>(normals, 3, "normals"), flat<float>(uvs, 2, "uvs"), bsdf, flip, group);
             },
             py::arg("id"), py::arg("positions"), py::arg("indices"), py::arg("normals") = py::none(),
-            py::arg("uvs") = py::none(), py::arg("bsdf"), py::arg("flip_normals") = false)
+            py::arg("uvs") = py::none(), py::arg("bsdf"), py::arg("flip_normals") = false, py::arg("group") = -1)
         .def(
             "add_sphere",
-            [](Scene& s, const std::string& id, py::object c, float r, int bsdf, bool flip, py::object m4) {
+            [](Scene& s, const std::string& id, py::object c, float r, int bsdf, bool flip, py::object m4, int group) {
                 Color cc = to_color(c);
-                return s.add_sphere(id, cc, r, bsdf, flip, m4.is_none() ? identity4() : to_matrix(m4));
+                return s.add_sphere(id, cc, r, bsdf, flip, m4.is_none() ? identity4() : to_matrix(m4), group);
             },
             py::arg("id"), py::arg("center"), py::arg("radius"), py::arg("bsdf"), py::arg("flip_normals") = false,
-            py::arg("to_world") = py::none())
+            py::arg("to_world") = py::none(), py::arg("group") = -1)
         .def(
             "add_disk",
-            [](Scene& s, const std::string& id, py::object m4, int bsdf, bool flip) {
-                return s.add_disk(id, to_matrix(m4), bsdf, flip);
+            [](Scene& s, const std::string& id, py::object m4, int bsdf, bool flip, int group) {
+                return s.add_disk(id, to_matrix(m4), bsdf, flip, group);
             },
-            py::arg("id"), py::arg("to_world"), py::arg("bsdf"), py::arg("flip_normals") = false)
+            py::arg("id"), py::arg("to_world"), py::arg("bsdf"), py::arg("flip_normals") = false, py::arg("group") = -1)
+        .def(
+            "add_cylinder",
+            [](Scene& s, const std::string& id, py::object m4, double radius, double length, int bsdf, bool flip,
+               int group) { return s.add_cylinder(id, to_matrix(m4), radius, length, bsdf, flip, group); },
+            py::arg("id"), py::arg("rigid"), py::arg("radius"), py::arg("length"), py::arg("bsdf"),
+            py::arg("flip_normals") = false, py::arg("group") = -1)
+        .def("add_shapegroup", &Scene::add_shapegroup, py::arg("id"))
+        .def(
+            "add_instance",
+            [](Scene& s, const std::string& id, int group, py::object m4) {
+                return s.add_instance(id, group, to_matrix(m4));
+            },
+            py::arg("id"), py::arg("group"), py::arg("to_world"))
+        .def("set_member_media", &Scene::set_member_media, py::arg("group"), py::arg("member"), py::arg("interior"),
+             py::arg("exterior"))
         .def("add_medium", &Scene::add_medium)
         .def("set_shape_media", &Scene::set_shape_media, py::arg("shape"), py::arg("interior"), py::arg("exterior"))
         .def("add_dipole", &Scene::add_dipole, py::arg("shape"), py::arg("desc"))

@@ -16,6 +16,7 @@ fresh examples."""
 import os
 import struct
 import warnings
+import zlib
 from collections import Counter
 
 import numpy as np
@@ -53,6 +54,12 @@ PARAMS = {
         "cube": {"to_world": "transform", "flip_normals": "bool", "face_normals": "bool"},
         "disk": {"to_world": "transform", "flip_normals": "bool"},
         "sphere": {"center": "point", "radius": "float", "to_world": "transform", "flip_normals": "bool"},
+        "cylinder": {"p0": "point", "p1": "point", "radius": "float", "to_world": "transform",
+                     "flip_normals": "bool"},
+        "serialized": {"filename": "ser_file", "shape_index": "int", "face_normals": "bool",
+                       "flip_normals": "bool", "to_world": "transform"},
+        "shapegroup": {},
+        "instance": {"to_world": "transform"},
     },
     "bsdf": {
         "diffuse": {"reflectance": "rgb"},
@@ -92,7 +99,7 @@ PARAMS = {
     "volume": {"gridvolume": {"filename": "vol_file", "to_world": "transform", "use_grid_bbox": "bool",
                               "filter_type": "filter_type", "wrap_mode": "wrap_mode", "raw": "bool",
                               "accel": "bool"},
-               "constvolume": {"value": "rgb"}},
+               "constvolume": {"value": "rgb", "to_world": "transform"}},
     "texture": {"checkerboard": {"color0": "rgb", "color1": "rgb", "to_uv": "transform"},
                 "bitmap": {"filename": "img_file", "filter_type": "tex_filter", "wrap_mode": "tex_wrap",
                            "raw": "bool", "to_uv": "transform", "format": "tex_format", "accel": "bool"}},
@@ -135,13 +142,20 @@ FILES = {
     "rgb.png": _png("RGB", (3, 4, 3)),
     "grey.png": _png("L", (1, 5)),
     "bad.png": b"\x89PNG\r\n\x1a\n" + bytes(30),
+    # Mitsuba's serialized format (tests/test_shapes.py writes it the same way): one triangle.
+    "tri.serialized": (struct.pack("<HH", 0x041C, 4) + zlib.compress(
+        struct.pack("<I", 0x1000) + b"tri\0" + struct.pack("<QQ", 3, 1)
+        + np.array([0, 0, 0, 1, 0, 0, 0, 1, 0], "<f4").tobytes() + np.array([0, 1, 2], "<u4").tobytes())
+        + struct.pack("<QI", 0, 1)),
+    "bad.serialized": struct.pack("<HH", 0x041C, 4) + b"not zlib",
 }
 _OBJ_NAMES = ["tri.obj", "uv.obj", "degenerate.obj", "nan.obj", "bad.obj", "absent.obj", "tri.ply",
               "../outside.obj", "link.obj", "sub/../tri.obj", "", "."]
 _PLY_NAMES = ["tri.ply", "bad.ply", "absent.ply", "tri.obj"]
 _VOL_NAMES = ["ok.vol", "rgb.vol", "bad.vol", "absent.vol", "../outside.vol", "link.vol"]
 _IMG_NAMES = ["rgb.png", "grey.png", "bad.png", "absent.png", "tri.obj", "ok.vol"]
-_FILE_NAMES = set(_OBJ_NAMES + _PLY_NAMES + _VOL_NAMES + _IMG_NAMES)
+_SER_NAMES = ["tri.serialized", "bad.serialized", "absent.serialized", "tri.obj"]
+_FILE_NAMES = set(_OBJ_NAMES + _PLY_NAMES + _VOL_NAMES + _IMG_NAMES + _SER_NAMES)
 
 # -- values ---------------------------------------------------------------------
 
@@ -224,6 +238,7 @@ def _good_table():
         "ply_file": st.sampled_from(_PLY_NAMES).map(lambda s: ("string", s)),
         "vol_file": st.sampled_from(_VOL_NAMES).map(lambda s: ("string", s)),
         "img_file": st.sampled_from(_IMG_NAMES).map(lambda s: ("string", s)),
+        "ser_file": st.sampled_from(_SER_NAMES).map(lambda s: ("string", s)),
     }
     table.update({k: st.sampled_from(v).map(lambda s: ("string", s)) for k, v in _STRINGS.items()})
     return table
@@ -257,7 +272,8 @@ def _value(draw, kind):
 
 
 # Parameters a plugin cannot do without, drawn nearly always.
-_REQUIRED = {"obj": "filename", "ply": "filename", "gridvolume": "filename", "bitmap": "filename"}
+_REQUIRED = {"obj": "filename", "ply": "filename", "serialized": "filename", "gridvolume": "filename",
+             "bitmap": "filename"}
 # Plugin types that stand only nested, rarely drawn elsewhere.
 _NESTED_ONLY = {"emitter": ["area"], "sensor": ["irradiancemeter"]}
 
@@ -284,7 +300,13 @@ def _node(draw, category, name=None, depth=0, types=None):
     children = []
     child = (lambda c, n=None, **k: children.append(draw(_node(c, n, depth + 1, **k)))) if depth < 4 else None
     if child is not None:
-        if category == "shape":
+        if category == "shape" and t == "shapegroup":
+            for n in ("a", "b")[:draw(st.integers(0, 2))]:
+                child("shape", n)
+        elif category == "shape" and t == "instance":
+            if draw(st.integers(0, 9)):
+                child("shape", "group", types=["shapegroup"] if draw(st.integers(0, 9)) else None)
+        elif category == "shape":
             if draw(st.booleans()):
                 child("bsdf", "bsdf")
             if draw(st.integers(0, 3)) == 0:

@@ -97,32 +97,72 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
     default_bsdfs = {}
     sensor_shape = -1
     media = {}
+    groups = {}  # id(shapegroup ShapeDesc) -> its index in the C++ scene
+
+    def bsdf_of(s):
+        if s.bsdf is None:
+            black = s.emitter is not None
+            if black not in default_bsdfs:
+                d = BsdfDesc(id="default diffuse of an emitter" if black else "default diffuse")
+                if black:
+                    d.reflectance = (0.0, 0.0, 0.0)
+                default_bsdfs[black] = scene.add_bsdf(_bsdf(d))
+            return default_bsdfs[black]
+        return scene.add_bsdf(_bsdf(s.bsdf))
+
+    def add_geometry(s, where, group=-1):
+        """The shape's geometry (in the scene, or in shapegroup `group`): its index there."""
+        b = bsdf_of(s)
+        flip = bool(s.flip_normals)
+        if s.type == "mesh":
+            return scene.add_mesh(where, np.asarray(s.positions, np.float32), np.asarray(s.indices, np.uint32),
+                                  None if s.normals is None else np.asarray(s.normals, np.float32),
+                                  None if s.uvs is None else np.asarray(s.uvs, np.float32), b, flip, group)
+        if s.type == "sphere":
+            return scene.add_sphere(where, tuple(float(x) for x in s.center), float(s.radius), b, flip,
+                                    None if s.object_to_world is None else np.asarray(s.object_to_world, np.float64),
+                                    group)
+        if s.type == "disk":
+            return scene.add_disk(where, np.asarray(s.to_world, np.float64), b, flip, group)
+        if s.type == "cylinder":
+            return scene.add_cylinder(where, np.asarray(s.to_world, np.float64), float(s.radius), float(s.length), b,
+                                      flip, group)
+        raise SceneError(f"{desc.source}: {where}: unknown shape type '{s.type}'")
+
+    def media_of(s, idx):
+        if s.interior is not None or s.exterior is not None:
+            scene.set_shape_media(idx, _medium_index(scene, media, s.interior, desc.source),
+                                  _medium_index(scene, media, s.exterior, desc.source))
+
+    def group_of(g):
+        """The C++ shapegroup of ShapeDesc g, made (with its members) on first use."""
+        if id(g) not in groups:
+            gi = scene.add_shapegroup(g.id)
+            for k, m in enumerate(g.members):
+                where = m.id or f"{g.id} member #{k}"
+                try:
+                    mi = add_geometry(m, where, gi)
+                except (ValueError, RuntimeError) as e:
+                    if isinstance(e, SceneError):
+                        raise
+                    raise SceneError(f"{desc.source}: {where}: {e}") from None
+                if m.interior is not None or m.exterior is not None:
+                    # Media of a member: kept on the member, which its instances copy.
+                    scene.set_member_media(gi, mi, _medium_index(scene, media, m.interior, desc.source),
+                                           _medium_index(scene, media, m.exterior, desc.source))
+            groups[id(g)] = gi
+        return groups[id(g)]
+
     for i, s in enumerate(desc.shapes):
         where = s.id or f"shape #{i}"
+        if s.type == "shapegroup":
+            group_of(s)  # drawn only through its instances
+            continue
         try:
-            if s.bsdf is None:
-                black = s.emitter is not None
-                if black not in default_bsdfs:
-                    d = BsdfDesc(id="default diffuse of an emitter" if black else "default diffuse")
-                    if black:
-                        d.reflectance = (0.0, 0.0, 0.0)
-                    default_bsdfs[black] = scene.add_bsdf(_bsdf(d))
-                b = default_bsdfs[black]
-            else:
-                b = scene.add_bsdf(_bsdf(s.bsdf))
-            if s.type == "mesh":
-                idx = scene.add_mesh(where, np.asarray(s.positions, np.float32), np.asarray(s.indices, np.uint32),
-                                     None if s.normals is None else np.asarray(s.normals, np.float32),
-                                     None if s.uvs is None else np.asarray(s.uvs, np.float32), b, bool(s.flip_normals))
-            elif s.type == "sphere":
-                idx = scene.add_sphere(where, tuple(float(x) for x in s.center), float(s.radius), b,
-                                       bool(s.flip_normals),
-                                       None if s.object_to_world is None else np.asarray(s.object_to_world,
-                                                                                         np.float64))
-            elif s.type == "disk":
-                idx = scene.add_disk(where, np.asarray(s.to_world, np.float64), b, bool(s.flip_normals))
-            else:
-                raise SceneError(f"{desc.source}: {where}: unknown shape type '{s.type}'")
+            if s.type == "instance":
+                scene.add_instance(where, group_of(s.group), np.asarray(s.to_world, np.float64))
+                continue
+            idx = add_geometry(s, where)
             if s.emitter is not None:
                 scene.add_area_emitter(idx, _emitter(s.emitter))
             if s.sensor is not None:
@@ -137,9 +177,7 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
                 c.int_ior = float(d.int_ior)
                 c.ext_ior = float(d.ext_ior)
                 scene.add_dipole(idx, c)
-            if s.interior is not None or s.exterior is not None:
-                scene.set_shape_media(idx, _medium_index(scene, media, s.interior, desc.source),
-                                      _medium_index(scene, media, s.exterior, desc.source))
+            media_of(s, idx)
         except (ValueError, RuntimeError) as e:
             if isinstance(e, SceneError):
                 raise

@@ -118,6 +118,8 @@ def _mixed_bsdfs(desc) -> list:
 
     for s in desc.shapes:
         visit(s.bsdf)
+        for m in s.members or (s.group.members if s.group is not None else []):  # shapegroups, instances
+            visit(m.bsdf)
     return sorted(set(found))
 
 

@@ -127,7 +127,8 @@ class DipoleDesc:
 
 @dataclass
 class ShapeDesc:
-    type: str = "mesh"  # mesh sphere disk (rectangle, cube, obj, ply become meshes)
+    type: str = "mesh"  # mesh sphere disk cylinder shapegroup instance (rectangle, cube, obj, ply,
+    #                     serialized become meshes)
     id: str = ""
     positions: Optional[np.ndarray] = None  # (N, 3) float32, world space
     indices: Optional[np.ndarray] = None  # (M, 3) uint32
@@ -138,7 +139,10 @@ class ShapeDesc:
     # kept, unlike to_world), which fixes its texture coordinates.
     object_to_world: Optional[np.ndarray] = None
     center: tuple = (0.0, 0.0, 0.0)  # sphere, world space
-    radius: float = 1.0  # sphere, world space
+    radius: float = 1.0  # sphere, world space; cylinder
+    length: float = 1.0  # cylinder (to_world then holds its rigid placement)
+    members: list = field(default_factory=list)  # shapegroup: [ShapeDesc] in the group's space
+    group: Optional["ShapeDesc"] = None  # instance: its shapegroup (to_world places it)
     flip_normals: bool = False
     bsdf: Optional[BsdfDesc] = None  # None: diffuse 0.5 (Mitsuba's default)
     emitter: Optional[EmitterDesc] = None  # an area emitter attached to this shape

@@ -56,6 +56,8 @@ Scene::Scene() {
 
 Scene::~Scene() {
     if (scene_) rtcReleaseScene(scene_);
+    for (ShapeGroup& g : groups_)
+        if (g.scene) rtcReleaseScene(g.scene);
     if (device_) rtcReleaseDevice(device_);
 }
 
@@ -64,7 +66,7 @@ int Scene::add_bsdf(const BsdfDesc& desc) {
     return int(bsdfs.size()) - 1;
 }
 
-int Scene::add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals) {
+int Scene::add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals, int group) {
     if (committed_) throw std::logic_error("scene is already committed");
     if (bsdf < 0 || bsdf >= int(bsdfs.size()))
         throw std::invalid_argument("shape '" + s->id + "': bsdf index out of range");
@@ -73,6 +75,16 @@ int Scene::add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals) {
     s->uv_frame = bsdfs[size_t(bsdf)]->anisotropic();
     Vec3 lo = s->bbox_min(), hi = s->bbox_max();
     if (!is_finite(lo) || !is_finite(hi)) throw std::invalid_argument("shape '" + s->id + "': non-finite geometry");
+    if (group >= 0) {
+        if (group >= int(groups_.size()))
+            throw std::invalid_argument("shape '" + s->id + "': shapegroup index out of range");
+        ShapeGroup& g = groups_[size_t(group)];
+        if (g.scene)
+            throw std::invalid_argument("shapegroup '" + g.id + "' is already instanced; shape '" + s->id +
+                                        "' cannot join it");
+        g.members.push_back(std::move(s));
+        return int(g.members.size()) - 1;
+    }
     bbox_lo = vmin(bbox_lo, lo);
     bbox_hi = vmax(bbox_hi, hi);
     unsigned geom_id = unsigned(shapes.size());
@@ -86,7 +98,7 @@ int Scene::add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals) {
 }
 
 int Scene::add_mesh(const std::string& id, std::vector<float> positions, std::vector<uint32_t> indices,
-                    std::vector<float> normals, std::vector<float> uvs, int bsdf, bool flip_normals) {
+                    std::vector<float> normals, std::vector<float> uvs, int bsdf, bool flip_normals, int group) {
     size_t nv = positions.size() / 3;
     if (positions.size() % 3 != 0 || indices.size() % 3 != 0)
         throw std::invalid_argument("shape '" + id + "': positions and indices must come in triples");
@@ -102,19 +114,19 @@ int Scene::add_mesh(const std::string& id, std::vector<float> positions, std::ve
         throw std::invalid_argument("shape '" + id + "': uvs must match positions");
     auto m = std::make_unique<Mesh>(std::move(positions), std::move(indices), std::move(normals), std::move(uvs));
     m->id = id;
-    return add_shape(std::move(m), bsdf, flip_normals);
+    return add_shape(std::move(m), bsdf, flip_normals, group);
 }
 
 int Scene::add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals,
-                      const Matrix4& to_world) {
+                      const Matrix4& to_world, int group) {
     if (!(radius > 0.f) || !std::isfinite(radius) || !is_finite(center))
         throw std::invalid_argument("shape '" + id + "': sphere needs a finite centre and a positive radius");
     auto s = std::make_unique<Sphere>(center, radius, to_world);
     s->id = id;
-    return add_shape(std::move(s), bsdf, flip_normals);
+    return add_shape(std::move(s), bsdf, flip_normals, group);
 }
 
-int Scene::add_disk(const std::string& id, const Matrix4& to_world, int bsdf, bool flip_normals) {
+int Scene::add_disk(const std::string& id, const Matrix4& to_world, int bsdf, bool flip_normals, int group) {
     std::unique_ptr<Disk> d;
     try {
         d = std::make_unique<Disk>(to_world);
@@ -122,7 +134,77 @@ int Scene::add_disk(const std::string& id, const Matrix4& to_world, int bsdf, bo
         throw std::invalid_argument("shape '" + id + "': " + e.what());
     }
     d->id = id;
-    return add_shape(std::move(d), bsdf, flip_normals);
+    return add_shape(std::move(d), bsdf, flip_normals, group);
+}
+
+int Scene::add_cylinder(const std::string& id, const Matrix4& rigid, double radius, double length, int bsdf,
+                        bool flip_normals, int group) {
+    std::unique_ptr<Cylinder> c;
+    try {
+        c = std::make_unique<Cylinder>(rigid, radius, length);
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument("shape '" + id + "': " + e.what());
+    }
+    c->id = id;
+    return add_shape(std::move(c), bsdf, flip_normals, group);
+}
+
+int Scene::add_shapegroup(const std::string& id) {
+    if (committed_) throw std::logic_error("scene is already committed");
+    groups_.push_back(ShapeGroup{id, {}, nullptr});
+    return int(groups_.size()) - 1;
+}
+
+int Scene::add_instance(const std::string& id, int group, const Matrix4& to_world) {
+    if (committed_) throw std::logic_error("scene is already committed");
+    if (group < 0 || group >= int(groups_.size()))
+        throw std::invalid_argument("instance '" + id + "': shapegroup index out of range");
+    ShapeGroup& g = groups_[size_t(group)];
+    if (g.members.empty()) return -1;
+    if (!g.scene) {
+        g.scene = rtcNewScene(device_);
+        rtcSetSceneFlags(g.scene, RTC_SCENE_FLAG_ROBUST);
+        rtcSetSceneBuildQuality(g.scene, RTC_BUILD_QUALITY_HIGH);
+        for (size_t i = 0; i < g.members.size(); ++i) {
+            RTCGeometry geom = g.members[i]->create_geometry(device_, unsigned(i));
+            check_embree();
+            rtcAttachGeometryByID(g.scene, geom, unsigned(i));
+            rtcReleaseGeometry(geom);
+            check_embree();
+        }
+        rtcCommitScene(g.scene);
+        check_embree();
+    }
+    // One Instance per member at indices first .. first + n - 1; the
+    // top-level instance geometry takes the id `first`, so a hit's shape is
+    // instID + geomID (intersect()).
+    const int first = int(shapes.size());
+    std::vector<std::unique_ptr<Instance>> made;
+    for (const auto& m : g.members) {
+        try {
+            made.push_back(std::make_unique<Instance>(m.get(), to_world));
+        } catch (const std::invalid_argument& e) {
+            throw std::invalid_argument("instance '" + id + "': " + e.what());
+        }
+        made.back()->id = id + " (" + m->id + ")";
+        Vec3 lo = made.back()->bbox_min(), hi = made.back()->bbox_max();
+        if (!is_finite(lo) || !is_finite(hi)) throw std::invalid_argument("instance '" + id + "': non-finite geometry");
+    }
+    RTCGeometry inst = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(inst, g.scene);
+    float xfm[12];
+    for (int i = 0; i < 12; ++i) xfm[i] = float(to_world[size_t(i)]);
+    rtcSetGeometryTransform(inst, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, xfm);
+    rtcCommitGeometry(inst);
+    rtcAttachGeometryByID(scene_, inst, unsigned(first));
+    rtcReleaseGeometry(inst);
+    check_embree();
+    for (auto& m : made) {
+        bbox_lo = vmin(bbox_lo, m->bbox_min());
+        bbox_hi = vmax(bbox_hi, m->bbox_max());
+        shapes.push_back(std::move(m));
+    }
+    return first;
 }
 
 void Scene::add_area_emitter(int shape, const EmitterDesc& desc) {
@@ -172,6 +254,20 @@ void Scene::set_shape_media(int shape, int interior, int exterior) {
             throw std::invalid_argument("shape '" + shapes[shape]->id + "': medium index out of range");
     shapes[shape]->medium_interior = interior;
     shapes[shape]->medium_exterior = exterior;
+}
+
+void Scene::set_member_media(int group, int member, int interior, int exterior) {
+    if (group < 0 || group >= int(groups_.size()))
+        throw std::invalid_argument("set_member_media: shapegroup index out of range");
+    ShapeGroup& g = groups_[size_t(group)];
+    if (member < 0 || member >= int(g.members.size()))
+        throw std::invalid_argument("shapegroup '" + g.id + "': member index out of range");
+    if (g.scene) throw std::invalid_argument("shapegroup '" + g.id + "' is already instanced");
+    for (int m : {interior, exterior})
+        if (m < -1 || m >= int(media.size()))
+            throw std::invalid_argument("shape '" + g.members[size_t(member)]->id + "': medium index out of range");
+    g.members[size_t(member)]->medium_interior = interior;
+    g.members[size_t(member)]->medium_exterior = exterior;
 }
 
 int Scene::add_dipole(int shape, const DipoleDesc& desc) {
@@ -345,14 +441,17 @@ bool Scene::intersect(const Ray& ray, Interaction& it) const {
 }
 
 void Scene::fill_hit(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const {
-    const Shape& s = *shapes[hit.geomID];
+    // A hit inside a shapegroup's instance names the member by geomID and
+    // the instance by instID, whose Instances start at index instID.
+    const unsigned index = hit.instID[0] == RTC_INVALID_GEOMETRY_ID ? hit.geomID : hit.instID[0] + hit.geomID;
+    const Shape& s = *shapes[index];
     // Every field is set here or by fill_interaction (no second zeroing).
     it.kind = VertexKind::Surface;
     it.medium_inside = s.medium_interior;
     it.medium_outside = s.medium_exterior;
     it.valid = true;
     it.t = t;
-    it.shape = int(hit.geomID);
+    it.shape = int(index);
     it.prim = int(hit.primID);
     it.wi = -ray.d;
     s.fill_interaction(ray, hit, t, it);
@@ -426,6 +525,8 @@ bool Scene::occluded(const Ray& ray) const {
 }
 
 void Scene::set_robust(bool on) {
+    // Instances leave gaps in the geometry ids (add_instance): not needed here.
+    if (committed_ && !groups_.empty()) throw std::logic_error("set_robust: not for a scene with instances");
     robust_ = on;
     rtcSetSceneFlags(scene_, on ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
     if (committed_) {

@@ -53,14 +53,32 @@ public:
 
     int add_bsdf(const BsdfDesc& desc);
     // positions (3N), indices (3M), normals (3N or empty), uvs (2N or empty); world space.
+    // group >= 0 (here and in the other add_* of shapes): the shape goes into
+    // that shapegroup (add_shapegroup), in the group's space, instead of
+    // the scene; the index returned is then its place in the group.
     int add_mesh(const std::string& id, std::vector<float> positions, std::vector<uint32_t> indices,
-                 std::vector<float> normals, std::vector<float> uvs, int bsdf, bool flip_normals);
+                 std::vector<float> normals, std::vector<float> uvs, int bsdf, bool flip_normals, int group = -1);
     // to_world: the unit sphere's object-to-world map (Mitsuba's to_world
     // with translate(center) scale(radius) applied), for the texture
     // coordinates; identity: the sphere's frame is the world's.
     int add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals,
-                   const Matrix4& to_world = identity4());
-    int add_disk(const std::string& id, const Matrix4& to_world, int bsdf, bool flip_normals);
+                   const Matrix4& to_world = identity4(), int group = -1);
+    int add_disk(const std::string& id, const Matrix4& to_world, int bsdf, bool flip_normals, int group = -1);
+    // Mitsuba 3's cylinder: radius and length, placed by `rigid` (Cylinder in shape.h).
+    int add_cylinder(const std::string& id, const Matrix4& rigid, double radius, double length, int bsdf,
+                     bool flip_normals, int group = -1);
+    // Shapegroups (Mitsuba 3's `shapegroup` + `instance`): add_shapegroup
+    // opens an empty group and returns its index; shapes join it through
+    // their add_* call's `group`. Once an instance of it exists, a group
+    // takes no more shapes. add_instance places the
+    // group by to_world: each member becomes one Instance in `shapes`, in
+    // a run of consecutive indices, and Embree traces the group once, as a
+    // child scene under an instance geometry. Returns the first index (-1
+    // for an empty group).
+    int add_shapegroup(const std::string& id);
+    int add_instance(const std::string& id, int group, const Matrix4& to_world);
+    // set_shape_media for member `member` of shapegroup `group` (before its first instance).
+    void set_member_media(int group, int member, int interior, int exterior);
     void add_area_emitter(int shape, const EmitterDesc& desc);
     void add_emitter(const EmitterDesc& desc);
     void set_sensor(const SensorDesc& desc);
@@ -155,9 +173,17 @@ private:
     mutable std::unique_ptr<LightSampler> lights_[3];
     mutable const LightSampler* active_lights_ = nullptr;
     mutable int lights_users_ = 0;
-    int add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals);
     // The Interaction of a closest hit (intersect, intersect_packet).
     void fill_hit(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const;
+    int add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals, int group);
+    // A shapegroup: its members (in the group's space) and its Embree scene,
+    // committed when its first instance is made.
+    struct ShapeGroup {
+        std::string id;
+        std::vector<std::unique_ptr<Shape>> members;
+        RTCScene scene = nullptr;
+    };
+    std::vector<ShapeGroup> groups_;
     RTCDevice device_ = nullptr;
     RTCScene scene_ = nullptr;
     bool committed_ = false;

@@ -1,5 +1,7 @@
 #include "scene/shape.h"
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 #include "core/warp.h"
@@ -189,7 +191,7 @@ bool sphere_roots(const Sphere& s, const RTCRay& r, double& t0, double& t1) {
 }
 
 template <bool kOccluded>
-void sphere_intersect_impl(const Sphere& s, RTCRay& ray, RTCHit* hit, unsigned geom_id, int* valid) {
+void sphere_intersect_impl(const Sphere& s, RTCRay& ray, RTCHit* hit, unsigned geom_id, unsigned inst_id, int* valid) {
     if (!valid[0]) return;
     double t0, t1;
     if (!sphere_roots(s, ray, t0, t1)) return;
@@ -212,11 +214,11 @@ void sphere_intersect_impl(const Sphere& s, RTCRay& ray, RTCHit* hit, unsigned g
     hit->v = 0;
     hit->primID = 0;
     hit->geomID = geom_id;
-    hit->instID[0] = RTC_INVALID_GEOMETRY_ID;
+    hit->instID[0] = inst_id;  // the instance being traversed, if any
 }
 
 template <bool kOccluded>
-void disk_intersect_impl(const Disk& d, RTCRay& ray, RTCHit* hit, unsigned geom_id, int* valid) {
+void disk_intersect_impl(const Disk& d, RTCRay& ray, RTCHit* hit, unsigned geom_id, unsigned inst_id, int* valid) {
     if (!valid[0]) return;
     const auto& M = d.xf_.inv;
     double o[3] = {ray.org_x, ray.org_y, ray.org_z}, v[3] = {ray.dir_x, ray.dir_y, ray.dir_z};
@@ -242,18 +244,71 @@ void disk_intersect_impl(const Disk& d, RTCRay& ray, RTCHit* hit, unsigned geom_
     hit->Ng_z = 1;
     hit->primID = 0;
     hit->geomID = geom_id;
-    hit->instID[0] = RTC_INVALID_GEOMETRY_ID;
+    hit->instID[0] = inst_id;  // the instance being traversed, if any
+}
+// The open tube x^2 + y^2 = r^2, 0 <= z <= length, in its local frame
+// (Mitsuba 3's cylinder, src/shapes/cylinder.cpp), in double: the ray is
+// taken into the frame by the rigid map's transpose, and the roots come
+// from the closest approach in the xy-plane as the sphere's do (Haines et
+// al. 2019, eqs. 8 and 10), which keeps them for grazing rays. The nearer
+// root within the tube's length and (tnear, tfar) is the hit.
+template <bool kOccluded>
+void cylinder_intersect_impl(const Cylinder& c, RTCRay& ray, RTCHit* hit, unsigned geom_id, unsigned inst_id,
+                             int* valid) {
+    if (!valid[0]) return;
+    const double w[3] = {ray.org_x - c.t_[0], ray.org_y - c.t_[1], ray.org_z - c.t_[2]};
+    const double v[3] = {ray.dir_x, ray.dir_y, ray.dir_z};
+    double o[3], d[3];
+    for (int i = 0; i < 3; ++i) {
+        o[i] = c.q_[0][i] * w[0] + c.q_[1][i] * w[1] + c.q_[2][i] * w[2];
+        d[i] = c.q_[0][i] * v[0] + c.q_[1][i] * v[1] + c.q_[2][i] * v[2];
+    }
+    const double a = d[0] * d[0] + d[1] * d[1];
+    if (!(a > 0)) return;  // along the axis: never crosses the tube
+    const double b = -(o[0] * d[0] + o[1] * d[1]);
+    const double fx = o[0] + (b / a) * d[0], fy = o[1] + (b / a) * d[1];
+    const double disc = a * (c.r_ * c.r_ - (fx * fx + fy * fy));
+    if (disc < 0) return;
+    const double q = b + std::copysign(std::sqrt(disc), b);
+    const double cc = o[0] * o[0] + o[1] * o[1] - c.r_ * c.r_;
+    double t0 = q / a, t1 = (q != 0) ? cc / q : t0;
+    if (t0 > t1) std::swap(t0, t1);
+    double t = 0;
+    bool found = false;
+    for (double tc : {t0, t1}) {
+        const double z = o[2] + tc * d[2];
+        if (tc > ray.tnear && tc < ray.tfar && z >= 0 && z <= c.len_) {
+            t = tc;
+            found = true;
+            break;
+        }
+    }
+    if (!found) return;
+    if (kOccluded) {
+        ray.tfar = -kInf;
+        return;
+    }
+    ray.tfar = float(t);
+    hit->Ng_x = float(o[0] + t * d[0]);
+    hit->Ng_y = float(o[1] + t * d[1]);
+    hit->Ng_z = 0;
+    hit->u = 0;
+    hit->v = 0;
+    hit->primID = 0;
+    hit->geomID = geom_id;
+    hit->instID[0] = inst_id;
 }
 // A user geometry's query over Embree's N rays (SoA, RTCRayHitN) with their
 // valid mask: N == 1 in place; otherwise each valid lane gathered into one
 // RTCRay / RTCHit, tested by Impl<kOccluded> and written back when it hit.
-template <class S, bool kOccluded, void (*Impl)(const S&, RTCRay&, RTCHit*, unsigned, int*)>
-void user_query(void* user, const int* valid, unsigned geom_id, unsigned N, RTCRayN* rays, RTCHitN* hits) {
+template <class S, bool kOccluded, void (*Impl)(const S&, RTCRay&, RTCHit*, unsigned, unsigned, int*)>
+void user_query(void* user, const int* valid, unsigned geom_id, unsigned inst_id, unsigned N, RTCRayN* rays,
+                RTCHitN* hits) {
     const S& shape = *static_cast<const S*>(user);
     if (N == 1) {
         int v = valid[0];
         RTCRay& r = *reinterpret_cast<RTCRay*>(rays);
-        Impl(shape, r, kOccluded ? nullptr : reinterpret_cast<RTCHit*>(hits), geom_id, &v);
+        Impl(shape, r, kOccluded ? nullptr : reinterpret_cast<RTCHit*>(hits), geom_id, inst_id, &v);
         return;
     }
     for (unsigned i = 0; i < N; ++i) {
@@ -270,7 +325,7 @@ void user_query(void* user, const int* valid, unsigned geom_id, unsigned N, RTCR
         const float before = r.tfar;
         RTCHit h{};  // written by Impl only on a hit, read only then
         int one = -1;
-        Impl(shape, r, kOccluded ? nullptr : &h, geom_id, &one);
+        Impl(shape, r, kOccluded ? nullptr : &h, geom_id, inst_id, &one);
         if (r.tfar == before) continue;
         RTCRayN_tfar(rays, N, i) = r.tfar;
         if (kOccluded) continue;
@@ -285,14 +340,14 @@ void user_query(void* user, const int* valid, unsigned geom_id, unsigned N, RTCR
     }
 }
 
-template <class S, void (*Impl)(const S&, RTCRay&, RTCHit*, unsigned, int*)>
+template <class S, void (*Impl)(const S&, RTCRay&, RTCHit*, unsigned, unsigned, int*)>
 void user_intersect(const RTCIntersectFunctionNArguments* a) {
-    user_query<S, false, Impl>(a->geometryUserPtr, a->valid, a->geomID, a->N, RTCRayHitN_RayN(a->rayhit, a->N),
-                               RTCRayHitN_HitN(a->rayhit, a->N));
+    user_query<S, false, Impl>(a->geometryUserPtr, a->valid, a->geomID, a->context->instID[0], a->N,
+                               RTCRayHitN_RayN(a->rayhit, a->N), RTCRayHitN_HitN(a->rayhit, a->N));
 }
-template <class S, void (*Impl)(const S&, RTCRay&, RTCHit*, unsigned, int*)>
+template <class S, void (*Impl)(const S&, RTCRay&, RTCHit*, unsigned, unsigned, int*)>
 void user_occluded(const RTCOccludedFunctionNArguments* a) {
-    user_query<S, true, Impl>(a->geometryUserPtr, a->valid, a->geomID, a->N, a->ray, nullptr);
+    user_query<S, true, Impl>(a->geometryUserPtr, a->valid, a->geomID, 0, a->N, a->ray, nullptr);
 }
 
 }  // namespace
@@ -483,6 +538,148 @@ PositionSample Disk::sample_position(Vec2 u, float) const {
     ps.pdf_a = 1.f / area_;
     ps.eps = hit_epsilon(ps.p, std::sqrt(area_ / kPi));
     return ps;
+}
+
+// ---------------------------------------------------------------- cylinder
+Cylinder::Cylinder(const Matrix4& rigid, double radius, double length) : r_(radius), len_(length) {
+    if (!(radius > 0) || !(length > 0) || !std::isfinite(radius) || !std::isfinite(length))
+        throw std::invalid_argument("cylinder: needs a positive radius and length");
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) q_[i][j] = rigid[size_t(4 * i + j)];
+        t_[i] = rigid[size_t(4 * i + 3)];
+    }
+    // The box around both end circles (Mitsuba's bbox()): per axis the
+    // circle's half-extent r sqrt(q_i0^2 + q_i1^2), padded for rounding.
+    const double e0[3] = {0, 0, 0}, e1[3] = {0, 0, len_};
+    double p0[3], p1[3];
+    to_world(e0, p0);
+    to_world(e1, p1);
+    Vec3 lo, hi;
+    for (int i = 0; i < 3; ++i) {
+        const double x = r_ * std::sqrt(q_[i][0] * q_[i][0] + q_[i][1] * q_[i][1]);
+        const double pad = 1e-6 * (std::max(std::fabs(p0[i]), std::fabs(p1[i])) + r_ + len_);
+        lo[i] = float(std::min(p0[i], p1[i]) - x - pad);
+        hi[i] = float(std::max(p0[i], p1[i]) + x + pad);
+    }
+    lo_ = lo;
+    hi_ = hi;
+}
+
+void Cylinder::to_world(const double l[3], double w[3]) const {
+    for (int i = 0; i < 3; ++i) w[i] = q_[i][0] * l[0] + q_[i][1] * l[1] + q_[i][2] * l[2] + t_[i];
+}
+
+RTCGeometry Cylinder::create_geometry(RTCDevice device, unsigned geom_id) {
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
+    rtcSetGeometryUserPrimitiveCount(g, 1);
+    rtcSetGeometryUserData(g, this);
+    rtcSetGeometryBoundsFunction(g, user_bounds<Cylinder>, nullptr);
+    rtcSetGeometryIntersectFunction(g, user_intersect<Cylinder, cylinder_intersect_impl<false>>);
+    rtcSetGeometryOccludedFunction(g, user_occluded<Cylinder, cylinder_intersect_impl<true>>);
+    rtcCommitGeometry(g);
+    return g;
+}
+
+void Cylinder::fill_interaction(const Ray& ray, const RTCHit&, float t, Interaction& it) const {
+    // The hit in the local frame (double), put back on the tube (Mitsuba
+    // shifts its point along the normal by the same radial error).
+    const double w[3] = {double(ray.o.x) + double(t) * ray.d.x - t_[0], double(ray.o.y) + double(t) * ray.d.y - t_[1],
+                         double(ray.o.z) + double(t) * ray.d.z - t_[2]};
+    double l[3];
+    for (int i = 0; i < 3; ++i) l[i] = q_[0][i] * w[0] + q_[1][i] * w[1] + q_[2][i] * w[2];
+    double phi = std::atan2(l[1], l[0]);
+    if (phi < 0) phi += 2 * 3.14159265358979323846;
+    const double cp = std::cos(phi), sp = std::sin(phi);
+    const double z = std::min(len_, std::max(0.0, l[2]));
+    const double on[3] = {r_ * cp, r_ * sp, z};
+    double p[3];
+    to_world(on, p);
+    it.p = Vec3(float(p[0]), float(p[1]), float(p[2]));
+    it.uv = Vec2(float(phi / (2 * 3.14159265358979323846)), float(z / len_));
+    // Radial, outwards: Q (cos phi, sin phi, 0), under a mirror too (as
+    // Mitsuba 3.9's cylinder does, measured with its ray_intersect).
+    Vec3 n(float(q_[0][0] * cp + q_[0][1] * sp), float(q_[1][0] * cp + q_[1][1] * sp),
+           float(q_[2][0] * cp + q_[2][1] * sp));
+    n = normalize(n);
+    if (flip_normals) n = -n;
+    it.n = n;
+    it.sh = Frame(n);
+    if (uv_frame)
+        it.sh = tangent_frame(n, Vec3(float(q_[0][1] * cp - q_[0][0] * sp), float(q_[1][1] * cp - q_[1][0] * sp),
+                                      float(q_[2][1] * cp - q_[2][0] * sp)));
+    it.eps = hit_epsilon(it.p, float(std::max(r_, len_)));
+}
+
+PositionSample Cylinder::sample_position(Vec2 u, float) const {
+    // Uniform by area (Mitsuba's sample_position): z = u.x length, phi = 2 pi u.y.
+    PositionSample ps;
+    const double phi = 2 * 3.14159265358979323846 * double(u.y);
+    const double cp = std::cos(phi), sp = std::sin(phi);
+    const double l[3] = {r_ * cp, r_ * sp, double(u.x) * len_};
+    double p[3];
+    to_world(l, p);
+    ps.p = Vec3(float(p[0]), float(p[1]), float(p[2]));
+    Vec3 n(float(q_[0][0] * cp + q_[0][1] * sp), float(q_[1][0] * cp + q_[1][1] * sp),
+           float(q_[2][0] * cp + q_[2][1] * sp));
+    n = normalize(n);
+    ps.n = flip_normals ? -n : n;
+    ps.pdf_a = 1.f / area();
+    ps.eps = hit_epsilon(ps.p, float(std::max(r_, len_)));
+    return ps;
+}
+
+// ---------------------------------------------------------------- instance
+Instance::Instance(const Shape* member, const Matrix4& to_world) : member_(member) {
+    if (!xf_.set(to_world.data())) throw std::invalid_argument("instance: to_world is singular");
+    double nrm = 0;
+    for (int i = 0; i < 3; ++i)
+        nrm = std::max(nrm, std::fabs(xf_.m[i][0]) + std::fabs(xf_.m[i][1]) + std::fabs(xf_.m[i][2]));
+    norm_ = float(nrm);
+    bsdf = member->bsdf;
+    flip_normals = member->flip_normals;
+    medium_interior = member->medium_interior;
+    medium_exterior = member->medium_exterior;
+    uv_frame = member->uv_frame;
+    // The box around the member's box's eight corners, mapped.
+    Vec3 mlo = member->bbox_min(), mhi = member->bbox_max();
+    lo_ = Vec3(kInf);
+    hi_ = Vec3(-kInf);
+    for (int c = 0; c < 8; ++c) {
+        Vec3 p = xf_.point(Vec3(c & 1 ? mhi.x : mlo.x, c & 2 ? mhi.y : mlo.y, c & 4 ? mhi.z : mlo.z));
+        lo_ = vmin(lo_, p);
+        hi_ = vmax(hi_, p);
+    }
+    const Vec3 pad = (abs(lo_) + abs(hi_)) * 1e-6f;
+    lo_ = lo_ - pad;
+    hi_ = hi_ + pad;
+}
+
+RTCGeometry Instance::create_geometry(RTCDevice, unsigned) {
+    throw std::logic_error("instance '" + id + "': Embree traces its shapegroup through Scene::add_instance");
+}
+
+void Instance::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const {
+    // Embree traced the ray mapped by the inverse (direction not
+    // renormalised, so t is the same); the member fills the record there.
+    Ray local = ray;
+    local.o = xf_.inv_point(ray.o);
+    local.d = xf_.inv_vector(ray.d);
+    member_->fill_interaction(local, hit, t, it);
+    it.p = xf_.point(it.p);
+    // Mitsuba 3's instance: normals by the inverse transpose, dp/du as a vector.
+    it.n = normalize(xf_.normal(it.n));
+    const Vec3 ns = normalize(xf_.normal(it.sh.n));
+    it.sh = member_->uv_frame ? tangent_frame(ns, xf_.vector(it.sh.s)) : Frame(ns);
+    // The member's offset stretched by the map, plus the rounding of the mapped point.
+    it.eps = it.eps * norm_ + hit_epsilon(it.p, 0.f);
+}
+
+PositionSample Instance::sample_position(Vec2, float) const {
+    throw std::logic_error("instance '" + id + "': shapes in a shapegroup are not sampled by area");
+}
+
+float Instance::area() const {
+    throw std::logic_error("instance '" + id + "': shapes in a shapegroup have no area emitter or sensor");
 }
 
 }  // namespace rm

@@ -1,7 +1,10 @@
-// Shapes: triangle meshes (rectangle, cube, OBJ, PLY) and the analytic sphere
-// and disk (Embree user geometry, intersected in double precision so scene
-// scales from 1e-4 to 1e4 keep their hits). Each can carry a BSDF, an area
-// emitter and an irradiance meter.
+// Shapes: triangle meshes (rectangle, cube, OBJ, PLY, serialized) and the
+// analytic sphere, disk and cylinder (Embree user geometry, intersected in
+// double precision so scene scales from 1e-4 to 1e4 keep their hits). Each
+// can carry a BSDF, an area emitter and an irradiance meter. An Instance
+// (Mitsuba 3's `instance` of a `shapegroup`) stands for one member of a
+// group placed by a transform; Embree traces the group once, as a child
+// scene under an instance geometry (no copies).
 #pragma once
 #include <embree3/rtcore.h>
 
@@ -126,6 +129,56 @@ public:
 private:
     Vec3 normal_;
     float area_;
+    Vec3 lo_, hi_;
+};
+
+// Mitsuba 3's cylinder (src/shapes/cylinder.cpp): the open tube of radius r
+// around the segment from the local origin to (0, 0, length), placed by a
+// rigid map (rotation, possibly a mirror, and translation; the loader has
+// split the radius and length off Mitsuba's to_world). uv = (phi / 2 pi,
+// z / length) in that frame; the normal points away from the axis, under a
+// mirror too (as Mitsuba 3.9's), then flip_normals.
+class Cylinder final : public Shape {
+public:
+    // rigid: row-major 4x4, its 3x3 part orthogonal.
+    Cylinder(const Matrix4& rigid, double radius, double length);
+    RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) override;
+    void fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const override;
+    PositionSample sample_position(Vec2 u, float u_extra) const override;
+    float area() const override { return float(2.0 * 3.14159265358979323846 * r_ * len_); }
+    Vec3 bbox_min() const override { return lo_; }
+    Vec3 bbox_max() const override { return hi_; }
+    // Local point (object frame, radius and length in units) to world, in double.
+    void to_world(const double l[3], double w[3]) const;
+    double q_[3][3], t_[3];  // the rigid map: rotation (or mirror) and translation
+    double r_, len_;
+
+private:
+    Vec3 lo_, hi_;
+};
+
+// One member of a shapegroup placed by an instance's to_world (Mitsuba 3's
+// src/shapes/instance.cpp): hits come from Embree's instance geometry with
+// the ray in the group's space, where the member fills the record; p, the
+// normals (inverse transpose) and the tangent are then mapped to the world.
+// Its BSDF, media and flip_normals are the member's. Emitters and sensors
+// are refused inside shapegroups (as Mitsuba does), so an Instance is never
+// sampled by area.
+class Instance final : public Shape {
+public:
+    Instance(const Shape* member, const Matrix4& to_world);
+    RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) override;
+    void fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const override;
+    PositionSample sample_position(Vec2 u, float u_extra) const override;
+    float area() const override;
+    Vec3 bbox_min() const override { return lo_; }
+    Vec3 bbox_max() const override { return hi_; }
+    const Shape* member() const { return member_; }
+
+private:
+    const Shape* member_;
+    Transform xf_;
+    float norm_;  // a bound on how much the map stretches a length (infinity norm of its linear part)
     Vec3 lo_, hi_;
 };
 

@@ -40,6 +40,18 @@ shape      obj, ply: filename, face_normals [false], flip_normals [false],
            disk (analytic): to_world, flip_normals.
            sphere (analytic): center [0], radius [1], to_world (no shear or
                non-uniform scale), flip_normals.
+           cylinder (analytic, open tube): radius [1], p0 [0,0,0], p1
+               [0,0,1], to_world (no shear, equal x and y scales),
+               flip_normals; uv = (phi / 2 pi, z / length).
+           serialized (Mitsuba's zlib-compressed format, versions 3 and 4):
+               filename, shape_index [0], face_normals [false], to_world,
+               flip_normals.
+           shapegroup: shapes in the group's own space, drawn only through
+               instances (no emitter, sensor, subsurface or nested
+               shapegroup/instance inside, as Mitsuba); instance: one nested
+               or referenced shapegroup, to_world (Embree instancing: the
+               group is traced once, normals by the inverse transpose).
+           sdfgrid is refused by name.
            Each shape may nest one bsdf, one area emitter and one
            irradiancemeter sensor.
 bsdf       diffuse: reflectance [0.5]
@@ -154,7 +166,11 @@ volume     gridvolume: filename (Mitsuba's .vol, version 3, float32, 1 or 3
                channels), to_world (maps the unit cube), use_grid_bbox
                [false], filter_type ['trilinear'], wrap_mode ['clamp'], raw,
                accel [true] (as sigma_t: a majorant grid for tracking; false:
-               one global majorant); constvolume: value [1].
+               one global majorant); constvolume: value [1], to_world (it
+               places the volume's box, the unit cube: a heterogeneous medium
+               exists only inside its sigma_t volume's box, constant or
+               grid, as Mitsuba 3's; a plain sigma_t value is a constvolume
+               over [0, 1]^3 there too).
 phase      isotropic; hg: g [0.8] in (-1, 1).
 subsurface dipole (Mitsuba 0.6's plugin; nested in a shape, which it turns
                into a smooth dielectric boundary over a dipole BSSRDF, Jensen

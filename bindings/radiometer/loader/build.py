@@ -26,11 +26,11 @@ from ..scene_desc import (
 from ..samplers import ALIASES as SAMPLER_ALIASES
 from ..samplers import SAMPLER_PARAMS
 from .images import read_rgb, read_texture
-from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _rectangle_mesh
+from .meshes import _cube_mesh, _mesh_shape, _read_obj, _read_ply, _read_serialized, _rectangle_mesh
 from .nodes import _Node, _Prop, _Ref
 from .parameters import INT32_RANGE, _Params, _parse_float
 from .spectra import conductor_ior, conductor_materials
-from .transforms import FLOAT32_MAX, _frame_along, _translate, _unit
+from .transforms import FLOAT32_MAX, _frame_along, _onb_first, _translate, _unit
 from .volumes import _read_vol
 
 _MAX_RESOLUTION = 16384
@@ -226,6 +226,7 @@ class _Builder:
     def _medium(self, node):
         p, t = _Params(node), node.type
         m = MediumDesc(type=t, id=node.id or node.place)
+        box = np.eye(4)  # where a constant sigma_t of a heterogeneous medium is (below)
         if t == "heterogeneous":
             # sigma_t and albedo: a nested volume (gridvolume, constvolume)
             # named so, or a plain value as for `homogeneous`.
@@ -239,7 +240,10 @@ class _Builder:
                 if isinstance(value, GridDesc):
                     setattr(m, name + "_grid", value)
                 else:  # constvolume: its value stands in for the parameter
-                    node.props[name] = _Prop("rgb", np.array(value), vol.place)
+                    const, to_world = value
+                    node.props[name] = _Prop("rgb", np.array(const), vol.place)
+                    if name == "sigma_t":
+                        box = to_world
         given_3 = p.has("sigma_t") or p.has("albedo")
         given_06 = p.has("sigma_a") or p.has("sigma_s")
         if given_3 and given_06:
@@ -262,6 +266,13 @@ class _Builder:
         m.sigma_t = tuple(float(x) for x in st * scale)
         m.albedo = tuple(float(x) for x in albedo)
         m.scale = scale
+        if t == "heterogeneous" and m.sigma_t_grid is None:
+            # Mitsuba 3's heterogeneous medium exists only inside its sigma_t
+            # volume's box (Medium::intersect_aabb, vacuum elsewhere); a
+            # constant sigma_t is a constvolume (a plain value becomes one),
+            # whose box is its to_world's unit cube (Volume::update_bbox):
+            # a one-voxel grid over that cube has that extent and value.
+            m.sigma_t_grid = GridDesc(data=np.array(st, np.float32).reshape(1, 1, 1, 3), to_world=box, accel=False)
         if t == "heterogeneous":
             p.bool("has_spectral_extinction", True)  # an optimisation hint in Mitsuba; no effect here
         if not all(abs(x) <= FLOAT32_MAX for x in m.sigma_t):
@@ -285,12 +296,15 @@ class _Builder:
         return self.cached(node, self._volume)
 
     def _volume(self, node):
-        """gridvolume -> GridDesc; constvolume -> its value (3 floats)."""
+        """gridvolume -> GridDesc; constvolume -> (its value (3 floats), its to_world)."""
         p, t = _Params(node), node.type
         if t == "constvolume":
             v = p.rgb("value", 1.0, spectrum="unbounded")
+            # The value is the same everywhere; to_world places the volume's
+            # box (the unit cube), which bounds a heterogeneous medium (_medium).
+            m = p.transform("to_world")
             p.done()
-            return v
+            return v, np.eye(4) if m is None else m
         path = self.file(p, "volume")
         data, bbox = _read_vol(path, f"{node.place}: {node.label()}", quote=not self.confine)
         m = p.transform("to_world")
@@ -392,6 +406,10 @@ class _Builder:
 
     def _shape(self, node):
         p, t = _Params(node), node.type
+        if t == "shapegroup":
+            return self._shapegroup(p)
+        if t == "instance":
+            return self._instance(p)
         m = p.transform("to_world")
         m = np.eye(4) if m is None else m
         s = ShapeDesc(id=node.place, flip_normals=p.bool("flip_normals", False))
@@ -404,6 +422,14 @@ class _Builder:
             pos, f, n, uv = (_read_obj(path, flip_tex, where, quote) if t == "obj"
                              else _read_ply(path, where, quote))
             _mesh_shape(s, m, pos, f, n, uv, face_normals, where)
+        elif t == "serialized":
+            path = self.file(p, "mesh")
+            index = p.int("shape_index", 0, lo=0)
+            face_normals = p.bool("face_normals", False)
+            pos, f, n, uv = _read_serialized(path, index, where, not self.confine)
+            _mesh_shape(s, m, pos, f, n, uv, face_normals, where)
+        elif t == "cylinder":
+            self._cylinder(p, s, m)
         elif t == "rectangle":
             p.bool("face_normals", False)  # Mitsuba accepts it; a plane has no other normal
             pos, f, uv = _rectangle_mesh()
@@ -513,6 +539,79 @@ class _Builder:
             raise p.error("sigma_a + sigma_s is 0 in every channel: nothing to scatter")
         p.done()
         return d
+
+    def _shapegroup(self, p):
+        """Mitsuba 3's shapegroup (src/shapes/shapegroup.cpp): its shapes, in
+        the group's own space, drawn only through instances. Like Mitsuba,
+        no emitter, sensor or nested instancing inside."""
+        node = p.node
+        members = []
+        for c in p.children("shape"):
+            if c.type in ("shapegroup", "instance"):
+                raise p.error(f"a shapegroup cannot hold a {c.type} (nested instancing is not supported, "
+                              f"as in Mitsuba 3)", c.place)
+            for _, k in c.children:
+                if k.category in ("emitter", "sensor", "subsurface"):
+                    raise SceneError(f"{k.place}: {k.label()} on shape '{c.type}' inside shapegroup "
+                                     f"'{node.id or node.place}': a shape in a shapegroup cannot carry an "
+                                     f"{k.category} (Mitsuba 3 refuses emitters and sensors in shapegroups "
+                                     f"too); place the shape outside the group")
+            members.append(self.shape(c))
+        p.done()
+        return ShapeDesc(type="shapegroup", id=node.id or node.place, members=members)
+
+    def _instance(self, p):
+        """Mitsuba 3's instance (src/shapes/instance.cpp): one shapegroup
+        placed by to_world (normals by its inverse transpose)."""
+        m = p.transform("to_world")
+        groups = p.children("shape")
+        if len(groups) != 1 or groups[0].type != "shapegroup":
+            raise p.error("needs exactly one nested or referenced shapegroup, got "
+                          + (", ".join(f"shape '{g.type}'" for g in groups) or "none"))
+        g = self.shape(groups[0])
+        p.done()
+        return ShapeDesc(type="instance", id=p.node.place, group=g, to_world=np.eye(4) if m is None else m)
+
+    def _cylinder(self, p, s, m):
+        """Mitsuba 3's cylinder (src/shapes/cylinder.cpp): to_world *
+        translate(p0) * to_frame(Frame(d / |d|)) * scale(radius, radius, |d|)
+        with d = p1 - p0, split by polar decomposition into a rigid map and a
+        stretch whose diagonal gives the radius (x, y) and the length (z).
+        Mitsuba warns on shear or unequal x and y scales and renders
+        something else; refused here."""
+        radius = p.float("radius", 1.0, check="positive")
+        p0 = np.asarray(p.vec3("p0", (0.0, 0.0, 0.0)), np.float64)
+        p1 = np.asarray(p.vec3("p1", (0.0, 0.0, 1.0)), np.float64)
+        d = _unit(p1 - p0)
+        if d is None:
+            raise p.error("p0 and p1 coincide: the cylinder has no length")
+        frame = np.eye(4)
+        # Mitsuba's Frame3f(n): s, t from coordinate_system (Duff et al. 2017), t = n x s.
+        frame[:3, 0] = _onb_first(d)
+        frame[:3, 1] = np.cross(d, frame[:3, 0])
+        frame[:3, 2] = d
+        length = float(np.linalg.norm(p1 - p0))
+        with np.errstate(over="ignore", invalid="ignore"):
+            full = m @ _translate(p0) @ frame @ np.diag([radius, radius, length, 1.0])
+        if not np.all(np.abs(full) <= FLOAT32_MAX):
+            raise p.error("radius, p0, p1 and to_world place the cylinder beyond the float32 range")
+        u, sig, vt = np.linalg.svd(full[:3, :3])
+        q = u @ vt
+        stretch = vt.T @ np.diag(sig) @ vt
+        scale = float(sig.max())
+        where = p.node.props["to_world"].place if p.has("to_world") else None
+        if np.abs(stretch - np.diag(np.diag(stretch))).max() > 1e-5 * scale:
+            raise p.error("cylinder to_world must not shear the cylinder (Mitsuba 3 warns and renders "
+                          "something else)", where)
+        if abs(stretch[0, 0] - stretch[1, 1]) > 1e-5 * scale:
+            raise p.error(f"cylinder to_world must scale its x and y axes alike (got {stretch[0, 0]:.6g} "
+                          f"and {stretch[1, 1]:.6g}; Mitsuba 3 warns and renders something else)", where)
+        s.type = "cylinder"
+        s.radius = float(0.5 * (stretch[0, 0] + stretch[1, 1]))
+        s.length = float(stretch[2, 2])
+        s.to_world = np.eye(4)
+        s.to_world[:3, :3] = q
+        s.to_world[:3, 3] = full[:3, 3]
 
     def _sphere(self, p, s, m):
         """Mitsuba: to_world * translate(center) * scale(radius), split by polar

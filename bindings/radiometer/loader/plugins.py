@@ -6,7 +6,8 @@ from ..registry import estimator_names
 from ..samplers import SAMPLER_NAMES
 
 PLUGINS = {
-    "shape": ("obj", "ply", "rectangle", "cube", "disk", "sphere"),
+    "shape": ("obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere", "cylinder", "shapegroup",
+              "instance"),
     "bsdf": ("diffuse", "conductor", "roughconductor", "dielectric", "roughdielectric",
              "thindielectric", "plastic", "roughplastic", "twosided", "null"),
     "emitter": ("area", "point", "spot", "directional", "constant", "envmap"),

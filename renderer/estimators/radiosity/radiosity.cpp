@@ -255,6 +255,12 @@ public:
 
     void check_scene(const Scene& scene) const override {
         for (const auto& s : scene.shapes) {
+            // Patches are cut from meshes, spheres and disks only (patches.cpp).
+            if (!dynamic_cast<const Mesh*>(s.get()) && !dynamic_cast<const Sphere*>(s.get()) &&
+                !dynamic_cast<const Disk*>(s.get()))
+                throw std::invalid_argument("integrator 'radiosity' cannot render shape '" + s->id +
+                                            "': it cuts patches from meshes, spheres and disks only, not from "
+                                            "cylinders or shapegroup instances; use 'path' or 'bdpt'");
             if (s->bsdf < 0) continue;
             const Bsdf& b = *scene.bsdfs[size_t(s->bsdf)];
             if (b.flags() != kDiffuseReflection)
