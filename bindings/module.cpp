@@ -86,6 +86,8 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("sample_visible", &BsdfDesc::sample_visible)
         .def_readwrite("nonlinear", &BsdfDesc::nonlinear)
         .def_readwrite("nested", &BsdfDesc::nested)
+        .def_property("base_color", color_get(&BsdfDesc::base_color), color_set(&BsdfDesc::base_color))
+        .def_readwrite("floats", &BsdfDesc::floats)
         .def_readwrite("textures", &BsdfDesc::textures);
 
     py::class_<EmitterDesc>(m, "EmitterDesc")
