@@ -310,7 +310,8 @@ for dist in ("beckmann", "ggx"):
 # material with base_color 1: 1.04 at 0 deg, 1.19 at 85 deg):
 # tests/test_principled.py checks that ours equals Mitsuba's there.
 for th in (0, 60, 85):
-    ENERGY_CASES.append(pytest.param("principled", principled("principled", base_color=1.0, metallic=1.0, roughness=0.3),
+    ENERGY_CASES.append(pytest.param("principled",
+                                     principled("principled", base_color=1.0, metallic=1.0, roughness=0.3),
                                      direction(th, 5), False, id=f"principled-metal-{th}"))
     ENERGY_CASES.append(pytest.param("principled", principled("principled", base_color=1.0, metallic=1.0, clearcoat=1.0,
                                                               clearcoat_gloss=0.5, roughness=0.5),
