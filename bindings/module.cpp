@@ -366,9 +366,11 @@ PYBIND11_MODULE(_core, m) {
                 std::vector<float> out(n);
                 BsdfContext ctx;
                 ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
-                for (size_t i = 0; i < n; ++i)
-                    out[i] = b.pdf_w(BsdfContext{ctx.mode, Vec2(uvs[2 * i], uvs[2 * i + 1])}, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
+                for (size_t i = 0; i < n; ++i) {
+                    ctx.uv = Vec2(uvs[2 * i], uvs[2 * i + 1]);
+                    out[i] = b.pdf_w(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
                                      Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
+                }
                 return to_numpy(std::move(out), {py::ssize_t(n)});
             },
             py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, py::arg("uv") = py::none(),
