@@ -53,7 +53,8 @@ def rgb(*v):
 
 
 def checker(c0, c1, scale=4.0):
-    return {"type": "checkerboard", "color0": c0, "color1": c1, "to_uv": mi.ScalarTransform4f().scale([scale, scale, 1])}
+    to_uv = mi.ScalarTransform4f().scale([scale, scale, 1])
+    return {"type": "checkerboard", "color0": c0, "color1": c1, "to_uv": to_uv}
 
 
 CASES = [
