@@ -485,3 +485,25 @@ def test_photon_walks_agree_with_path():
     ratio = res.image.sum() / ref.image.sum()
     print(f"sppm / path = {ratio:.5f}")
     assert abs(ratio - 1) < 0.03, ratio
+
+
+def test_bdpt_with_a_delta_lobe_in_a_blend():
+    """blendbsdf of a smooth mirror and a diffuse base (the floor; the ball
+    a principled metal) under the area light: its samples are delta or
+    not, one by one, and bdpt's vertices must carry that flag (a delta
+    vertex is not connectible, its pdf a probability). bdpt against path,
+    blocked z-test with a 3 % power check. ptracer is left out: light paths
+    cannot reach the camera through the mirror part (L ... S E)."""
+    import radiometer as rm
+    from refcompare import assert_agrees, assert_clean
+
+    desc = _estimator_scene()
+    floor = next(s for s in desc.shapes if s.bsdf is not None and s.bsdf.type == "blendbsdf")
+    floor.bsdf.nested[1] = _load({"type": "conductor"})
+    desc.shapes = [s for s in desc.shapes if s.bsdf is None or s.bsdf.type != "principledthin"]
+    scene = rm.Scene(desc)
+    ref = rm.render(scene, integrator={"type": "path", "max_depth": 5}, spp=1024, seed=1)
+    res = rm.render(scene, integrator={"type": "bdpt", "max_depth": 5}, spp=128, seed=2)
+    assert_clean(res, "bdpt")
+    print(f"bdpt / path = {res.image.sum() / ref.image.sum():.5f}")
+    assert_agrees(res, ref, power=1.03, what="bdpt / path")
