@@ -63,8 +63,8 @@
 //  (0.65 eta - 0.35) (Burley 2015, sec. 4.3, fig. 15). Mitsuba's side
 //  checks of that lobe's microfacet (mac_mic_compatibility, G1's chi) are
 //  made with the unmirrored wo, which makes it non-reciprocal for some pairs
-//  (one way 0, the other not: measured with Mitsuba 3.9.1 on 10 to 18 % of pairs
-//  near the lobe); Radiance mode is Mitsuba's f(wi, wo), Importance mode
+//  (one way 0, the other not; docs/principled.md has the measurements on
+//  Mitsuba itself); Radiance mode is Mitsuba's f(wi, wo), Importance mode
 //  its transpose f(wo, wi) (Veach 1997, eq. 5.15), so that light and camera
 //  paths estimate the same image. The other lobes are reciprocal.
 // Roughness alpha = max(1e-3, roughness^2), anisotropic alpha_x = alpha /
