@@ -44,6 +44,15 @@ py::array_t<double> map_channel(int ch, const DoubleArray& x, F f) {
     return out;
 }
 
+// Optional (N, 2) texture coordinates for a BSDF query (textured
+// parameters, BsdfContext::uv); None: all (0, 0).
+std::vector<float> bsdf_uvs(const py::object& uv, size_t n) {
+    if (uv.is_none()) return std::vector<float>(2 * n, 0.f);
+    auto u = flat<float>(uv, 2, "uv");
+    if (u.size() != 2 * n) throw py::value_error("uv must be (N, 2) for N directions wi");
+    return std::vector<float>(u.data(), u.data() + u.size());
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_core, m) {
@@ -86,6 +95,8 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("sample_visible", &BsdfDesc::sample_visible)
         .def_readwrite("nonlinear", &BsdfDesc::nonlinear)
         .def_readwrite("nested", &BsdfDesc::nested)
+        .def_property("base_color", color_get(&BsdfDesc::base_color), color_set(&BsdfDesc::base_color))
+        .def_readwrite("floats", &BsdfDesc::floats)
         .def_readwrite("textures", &BsdfDesc::textures);
 
     py::class_<EmitterDesc>(m, "EmitterDesc")
@@ -337,16 +348,18 @@ PYBIND11_MODULE(_core, m) {
         .def_property_readonly("flags", &Bsdf::flags)
         .def(
             "eval",
-            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint) {
+            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint, py::object uv) {
                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
                 size_t n = a.size() / 3;
+                const std::vector<float> uvs = bsdf_uvs(uv, n);
                 std::vector<float> out(3 * n);
                 BsdfContext ctx;
                 ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
                 {
                     py::gil_scoped_release nogil;
                     for (size_t i = 0; i < n; ++i) {
+                        ctx.uv = Vec2(uvs[2 * i], uvs[2 * i + 1]);
                         Color f = b.eval(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
                                          Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
                         out[3 * i] = f.x;
@@ -356,37 +369,43 @@ PYBIND11_MODULE(_core, m) {
                 }
                 return to_numpy(std::move(out), {py::ssize_t(n), 3});
             },
-            py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false,
-            "f(wi, wo) |cos theta_o| for (N, 3) local directions")
+            py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, py::arg("uv") = py::none(),
+            "f(wi, wo) |cos theta_o| for (N, 3) local directions (at (N, 2) uvs, if given)")
         .def(
             "pdf",
-            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint) {
+            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint, py::object uv) {
                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
                 size_t n = a.size() / 3;
+                const std::vector<float> uvs = bsdf_uvs(uv, n);
                 std::vector<float> out(n);
                 BsdfContext ctx;
                 ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
-                for (size_t i = 0; i < n; ++i)
+                for (size_t i = 0; i < n; ++i) {
+                    ctx.uv = Vec2(uvs[2 * i], uvs[2 * i + 1]);
                     out[i] = b.pdf_w(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
                                      Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
+                }
                 return to_numpy(std::move(out), {py::ssize_t(n)});
             },
-            py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, "solid-angle pdf of sampling wo given wi")
+            py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, py::arg("uv") = py::none(),
+            "solid-angle pdf of sampling wo given wi (at (N, 2) uvs, if given)")
         .def(
             "sample",
-            [](const Bsdf& b, py::object wi, py::object u1, py::object u2, bool adjoint) {
+            [](const Bsdf& b, py::object wi, py::object u1, py::object u2, bool adjoint, py::object uv) {
                 auto a = flat<float>(wi, 3, "wi");
                 auto uu1 = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(u1);
                 auto uu2 = flat<float>(u2, 2, "u2");
                 size_t n = a.size() / 3;
                 if (!uu1 || size_t(uu1.size()) != n || uu2.size() != 2 * n)
                     throw py::value_error("u1 must be (N,) and u2 (N, 2) for N directions wi");
+                const std::vector<float> uvs = bsdf_uvs(uv, n);
                 std::vector<float> wo(3 * n), weight(3 * n), pdf(n), eta(n), delta(n), flags(n);
                 BsdfContext ctx;
                 ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
                 const float* pu1 = uu1.data();
                 for (size_t i = 0; i < n; ++i) {
+                    ctx.uv = Vec2(uvs[2 * i], uvs[2 * i + 1]);
                     BsdfSample bs = b.sample(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), pu1[i],
                                              Vec2(uu2[2 * i], uu2[2 * i + 1]));
                     for (int k = 0; k < 3; ++k) {
@@ -408,7 +427,7 @@ PYBIND11_MODULE(_core, m) {
                 r["sampled_flags"] = to_numpy(std::move(flags), {N});
                 return r;
             },
-            py::arg("wi"), py::arg("u1"), py::arg("u2"), py::arg("adjoint") = false);
+            py::arg("wi"), py::arg("u1"), py::arg("u2"), py::arg("adjoint") = false, py::arg("uv") = py::none());
 
     py::class_<PhaseFunction>(m, "Phase")
         .def(py::init([](const std::string& type, float g) { return make_phase(type, g); }), py::arg("type"),

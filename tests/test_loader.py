@@ -743,8 +743,8 @@ BAD_DICTS = [
     (_scene(floor={"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": {
         "type": "rgb", "value": [0.5, -0.1, 0.5]}}}),
      ["scene['floor']['bsdf']['reflectance']", "negative value -0.1"]),
-    (_scene(floor={"type": "rectangle", "bsdf": {"type": "principled"}}),
-     ["scene['floor']['bsdf']", "'principled' is not supported"]),
+    (_scene(floor={"type": "rectangle", "bsdf": {"type": "hair"}}),
+     ["scene['floor']['bsdf']", "'hair' is not supported"]),
     (_scene(floor={"type": "rectangle", "bsdf": {"type": "ref", "id": "nope"}}),
      ["scene['floor']['bsdf']", "unknown id 'nope'"]),
     (_scene(cam={"type": "perspective", "film": {"type": "hdrfilm", "width": 256.0}}),

@@ -45,6 +45,8 @@ _DIEL = {"int_ior": "ior", "ext_ior": "ior", "specular_reflectance": "rgb", "spe
 _COND = {"material": "material", "eta": "rgb", "k": "rgb", "specular_reflectance": "rgb"}
 _MEDIUM = {"sigma_t": "rgb", "albedo": "rgb", "sigma_a": "rgb", "sigma_s": "rgb", "scale": "float",
            "sample_emitters": "bool"}
+_PRINCIPLED = {"base_color": "rgb", "roughness": "unit", "anisotropic": "unit", "spec_trans": "unit",
+               "spec_tint": "unit", "sheen": "unit", "sheen_tint": "unit", "flatness": "unit"}
 PARAMS = {
     "shape": {
         "obj": {"filename": "obj_file", "face_normals": "bool", "flip_normals": "bool", "to_world": "transform",
@@ -70,6 +72,15 @@ PARAMS = {
         "roughplastic": {"diffuse_reflectance": "rgb", "specular_reflectance": "rgb", "int_ior": "ior",
                          "ext_ior": "ior", "nonlinear": "bool", **_MICRO},
         "twosided": {}, "null": {},
+        "principled": {**_PRINCIPLED, "metallic": "unit", "clearcoat": "unit", "clearcoat_gloss": "unit",
+                       "specular": "unit", "eta": "float", "main_specular_sampling_rate": "float",
+                       "clearcoat_sampling_rate": "float", "diffuse_reflectance_sampling_rate": "float"},
+        "principledthin": {**_PRINCIPLED, "eta": "float", "diff_trans": "float",
+                           "specular_reflectance_sampling_rate": "float",
+                           "specular_transmittance_sampling_rate": "float",
+                           "diffuse_reflectance_sampling_rate": "float",
+                           "diffuse_transmittance_sampling_rate": "float"},
+        "blendbsdf": {"weight": "unit"},
     },
     "emitter": {
         "area": {"radiance": "rgb"}, "constant": {"radiance": "rgb"},
@@ -220,6 +231,7 @@ def _good_table():
     rgb = st.one_of(_finite_floats(0, 1), st.lists(_finite_floats(0, 1), min_size=3, max_size=3))
     table = {
         "float": _finite_floats(0.05, 3).map(lambda x: ("float", x)),
+        "unit": _finite_floats(0, 1).map(lambda x: ("float", x)),
         "angle": _finite_floats(1, 120).map(lambda x: ("float", x)),
         "clip": _finite_floats(10, 1e4).map(lambda x: ("float", x)),
         "g": _finite_floats(-0.9, 0.9).map(lambda x: ("float", x)),
@@ -273,7 +285,7 @@ def _value(draw, kind):
 
 # Parameters a plugin cannot do without, drawn nearly always.
 _REQUIRED = {"obj": "filename", "ply": "filename", "serialized": "filename", "gridvolume": "filename",
-             "bitmap": "filename"}
+             "bitmap": "filename", "blendbsdf": "weight"}
 # Plugin types that stand only nested, rarely drawn elsewhere.
 _NESTED_ONLY = {"emitter": ["area"], "sensor": ["irradiancemeter"]}
 
@@ -317,11 +329,12 @@ def _node(draw, category, name=None, depth=0, types=None):
                 child("subsurface", "subsurface")
             if draw(st.integers(0, 19)) == 0:
                 child("sensor", "sensor", types=["irradiancemeter"])
-        elif category == "bsdf" and t != "twosided" and draw(st.integers(0, 3)) == 0:
+        elif category == "bsdf" and t not in ("twosided", "blendbsdf") and draw(st.integers(0, 3)) == 0:
             # a texture on a colour parameter that takes one, or on one that does not
             child("texture", draw(st.sampled_from(["reflectance", "diffuse_reflectance", "specular_reflectance",
-                                                   "specular_transmittance", "eta", "alpha", "alpha_u"])))
-        elif category == "bsdf" and t == "twosided":
+                                                   "specular_transmittance", "eta", "alpha", "alpha_u",
+                                                   "base_color", "roughness", "diff_trans"])))
+        elif category == "bsdf" and t in ("twosided", "blendbsdf"):
             for n in ("a", "b")[:draw(st.integers(0, 3))] + (("c",) if draw(st.integers(0, 9)) == 0 else ()):
                 child("bsdf", n)
         elif category == "sensor":

@@ -21,6 +21,8 @@ def _bsdf(d: BsdfDesc) -> "_core.BsdfDesc":
     c.sample_visible = bool(d.sample_visible)
     c.nonlinear = bool(d.nonlinear)
     c.nested = [_bsdf(n) for n in d.nested]
+    c.base_color = tuple(float(x) for x in d.base_color)
+    c.floats = {name: float(v) for name, v in d.floats.items()}
     c.textures = {name: _texture(t) for name, t in d.textures.items()}
     return c
 

@@ -52,7 +52,7 @@ class TextureDesc:
 @dataclass
 class BsdfDesc:
     type: str = "diffuse"  # diffuse conductor roughconductor dielectric roughdielectric
-    #                        thindielectric plastic twosided null
+    #                        thindielectric plastic twosided null principled principledthin blendbsdf
     id: str = ""  # the place it came from, for error messages
     reflectance: tuple = field(default_factory=lambda: _rgb(0.5))
     diffuse_reflectance: tuple = field(default_factory=lambda: _rgb(0.5))
@@ -67,7 +67,12 @@ class BsdfDesc:
     distribution: str = "beckmann"
     sample_visible: bool = True
     nonlinear: bool = False
-    nested: list = field(default_factory=list)  # twosided: [bsdf] or [front, back]
+    nested: list = field(default_factory=list)  # twosided: [bsdf] or [front, back]; blendbsdf: 2
+    # principled, principledthin: base_color; their scalar parameters and
+    # blendbsdf's weight by Mitsuba's names, defaults filled in (a textured
+    # one holds its texture's mean and has its texture in `textures`).
+    base_color: tuple = field(default_factory=lambda: _rgb(0.5))
+    floats: dict = field(default_factory=dict)
     # Textured colour parameters: name -> TextureDesc, replacing the plain
     # value of that name (reflectance, diffuse_reflectance,
     # specular_reflectance), which then holds the texture's mean colour.

@@ -30,6 +30,11 @@
 //  twosided         nested: 1 BSDF used on both sides, or 2 (front, back). The
 //                   nested BSDFs must not transmit (as Mitsuba).
 //  null             none. Passes light unchanged (medium boundaries).
+//  blendbsdf        weight (floats["weight"], no default, as Mitsuba 3.9.1;
+//                   clamped to [0, 1] where read), nested: 2 BSDFs;
+//                   (1 - weight) f_0 + weight f_1. A textured weight with a
+//                   nested null lobe is refused (null_transmission has no uv).
+//  principled, principledthin: bsdf_principled.cpp.
 // Textured colours (BsdfDesc::textures; scene/texture.h): reflectance
 // (diffuse), diffuse_reflectance (plastic, roughplastic) and
 // specular_reflectance (conductor, roughconductor), evaluated at the
@@ -49,6 +54,8 @@
 #include <tuple>
 
 #include "core/warp.h"
+#include "scene/bsdf_principled.h"
+#include "scene/bsdf_util.h"
 #include "scene/fresnel.h"
 #include "scene/microfacet.h"
 #include "scene/texture.h"
@@ -58,29 +65,9 @@ namespace rm {
 namespace {
 
 // ---------------------------------------------------------------------------
-// Helpers
+// Helpers (the shared ones are in bsdf_util.h)
 
-// a, negated when b's sign bit is set (Mitsuba's mulsign: -0 counts as negative).
-inline float mulsign(float a, float b) { return std::signbit(b) ? -a : a; }
-
-// The last line of defence of "no NaN, no Inf": a sample that is not finite
-// and positive in every part becomes a failed sample.
-BsdfSample sanitize(BsdfSample bs) {
-    if (!(bs.pdf_w > 0.f) || !std::isfinite(bs.pdf_w) || !is_finite(bs.weight) || !is_finite(bs.wo) ||
-        !std::isfinite(bs.eta) || min_component(bs.weight) < 0.f)
-        return BsdfSample{};
-    return bs;
-}
-inline Color finite_or_zero(const Color& c) { return is_finite(c) ? c : Color(0.f); }
-inline float finite_or_zero(float v) { return std::isfinite(v) ? v : 0.f; }
-
-[[noreturn]] void fail(const BsdfDesc& d, const std::string& param, const std::string& why) {
-    throw std::invalid_argument("bsdf '" + d.id + "' (type '" + d.type + "'): parameter '" + param + "' " + why);
-}
-
-void check_color(const BsdfDesc& d, const char* name, const Color& c) {
-    if (!is_finite(c) || min_component(c) < 0.f) fail(d, name, "must be finite and non-negative");
-}
+using namespace bsdf_util;
 
 // Relative IOR int_ior / ext_ior, validated.
 float relative_ior(const BsdfDesc& d) {
@@ -778,6 +765,72 @@ private:
 };
 
 // ---------------------------------------------------------------------------
+// blendbsdf: (1 - w) f_0 + w f_1, w = clamp(weight, 0, 1) (Mitsuba
+// src/bsdfs/blendbsdf.cpp). Sampling picks BSDF 1 with probability w, as
+// Mitsuba; unlike Mitsuba, whose sample weight is the picked BSDF's own, a
+// smooth sample's pdf is the mixture's, (1 - w) pdf_0 + w pdf_1, and its
+// weight the mixture's eval / pdf (the same expectation; weight = eval /
+// pdf holds, as every estimator's MIS assumes). A delta sample keeps its
+// weight, its probability scaled by that of its BSDF.
+
+class BlendBsdf final : public Bsdf {
+public:
+    BlendBsdf(TexturedFloat weight, std::unique_ptr<Bsdf> b0, std::unique_ptr<Bsdf> b1)
+        : weight_(std::move(weight)), b0_(std::move(b0)), b1_(std::move(b1)) {
+        flags_ = b0_->flags() | b1_->flags();
+        textured_ = weight_.textured() || b0_->textured() || b1_->textured();
+        anisotropic_ = b0_->anisotropic() || b1_->anisotropic();
+    }
+
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
+        const float w = weight(ctx.uv);
+        // Mitsuba's split of u1: BSDF 1 on [0, w], BSDF 0 above, each
+        // rescaled to [0, 1).
+        const bool first = u1 > w;
+        const float p = first ? 1.f - w : w;
+        if (!(p > 0.f)) return BsdfSample{};
+        BsdfSample bs = first ? b0_->sample(ctx, wi, (u1 - w) / p, u2) : b1_->sample(ctx, wi, u1 / p, u2);
+        if (!(bs.pdf_w > 0.f)) return BsdfSample{};
+        if (bs.is_delta) {
+            bs.pdf_w *= p;
+            return sanitize(bs);
+        }
+        Color value;
+        mix(ctx, wi, bs.wo, w, &value, &bs.pdf_w);
+        if (!(bs.pdf_w > 0.f)) return BsdfSample{};
+        bs.weight = value / bs.pdf_w;
+        return sanitize(bs);
+    }
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
+        Color value;
+        float pdf;
+        mix(ctx, wi, wo, weight(ctx.uv), &value, &pdf);
+        return value;
+    }
+    float pdf_w(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
+        Color value;
+        float pdf;
+        mix(ctx, wi, wo, weight(ctx.uv), &value, &pdf);
+        return pdf;
+    }
+    // Only with a plain weight (make_bsdf refuses a textured one here).
+    Color null_transmission(float cos_theta) const override {
+        const float w = clamp(weight_.value, 0.f, 1.f);
+        return b0_->null_transmission(cos_theta) * (1.f - w) + b1_->null_transmission(cos_theta) * w;
+    }
+
+private:
+    float weight(Vec2 uv) const { return clamp(weight_.eval(uv), 0.f, 1.f); }
+    void mix(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo, float w, Color* value, float* pdf) const {
+        *value = b0_->eval(ctx, wi, wo) * (1.f - w) + b1_->eval(ctx, wi, wo) * w;
+        *pdf = b0_->pdf_w(ctx, wi, wo) * (1.f - w) + b1_->pdf_w(ctx, wi, wo) * w;
+    }
+
+    TexturedFloat weight_;
+    std::unique_ptr<Bsdf> b0_, b1_;
+};
+
+// ---------------------------------------------------------------------------
 // null: an invisible surface (medium boundaries); a forward delta of weight 1
 // (Mitsuba src/bsdfs/null.cpp).
 
@@ -798,7 +851,21 @@ public:
     float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
 };
 
-// The parameter `name` of value `plain`, or its texture when BsdfDesc::textures has one.
+}  // namespace
+
+// ---------------------------------------------------------------------------
+// bsdf_util.h
+
+namespace bsdf_util {
+
+void fail(const BsdfDesc& d, const std::string& param, const std::string& why) {
+    throw std::invalid_argument("bsdf '" + d.id + "' (type '" + d.type + "'): parameter '" + param + "' " + why);
+}
+
+void check_color(const BsdfDesc& d, const char* name, const Color& c) {
+    if (!is_finite(c) || min_component(c) < 0.f) fail(d, name, "must be finite and non-negative");
+}
+
 TexturedColor textured(const BsdfDesc& d, const char* name, const Color& plain) {
     TexturedColor c(plain);
     auto it = d.textures.find(name);
@@ -814,7 +881,6 @@ TexturedColor textured(const BsdfDesc& d, const char* name, const Color& plain) 
     return c;
 }
 
-// A scalar parameter's texture (read with eval_1), or null when it has none.
 std::shared_ptr<const Texture> texture_of(const BsdfDesc& d, const char* name) {
     auto it = d.textures.find(name);
     if (it == d.textures.end()) return nullptr;
@@ -825,7 +891,6 @@ std::shared_ptr<const Texture> texture_of(const BsdfDesc& d, const char* name) {
     }
 }
 
-// Only the parameters listed in the file head take a texture.
 void check_textured_names(const BsdfDesc& d, std::initializer_list<const char*> allowed) {
     for (const auto& [name, tex] : d.textures) {
         bool ok = false;
@@ -834,9 +899,24 @@ void check_textured_names(const BsdfDesc& d, std::initializer_list<const char*> 
     }
 }
 
-}  // namespace
+}  // namespace bsdf_util
 
 std::unique_ptr<Bsdf> make_bsdf(const BsdfDesc& d) {
+    if (d.type == "principled" || d.type == "principledthin") return make_principled(d);
+    if (d.type == "blendbsdf") {
+        check_textured_names(d, {"weight"});
+        if (d.nested.size() != 2) fail(d, "nested", "must hold 2 BSDFs, got " + std::to_string(d.nested.size()));
+        auto it = d.floats.find("weight");
+        if (it == d.floats.end()) fail(d, "weight", "is missing (Mitsuba 3 requires it)");
+        TexturedFloat weight(it->second);
+        if (!std::isfinite(weight.value)) fail(d, "weight", "must be finite");
+        weight.texture = texture_of(d, "weight");
+        std::unique_ptr<Bsdf> b0 = make_bsdf(d.nested[0]), b1 = make_bsdf(d.nested[1]);
+        // A shadow ray through a null lobe has no uv to read the weight at.
+        if (weight.textured() && ((b0->flags() | b1->flags()) & kNull))
+            fail(d, "weight", "cannot be a texture when a nested BSDF has a null lobe (null, thindielectric)");
+        return std::make_unique<BlendBsdf>(std::move(weight), std::move(b0), std::move(b1));
+    }
     if (d.type == "diffuse") {
         check_textured_names(d, {"reflectance"});
         return std::make_unique<DiffuseBsdf>(textured(d, "reflectance", d.reflectance));

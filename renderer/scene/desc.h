@@ -18,7 +18,8 @@ inline Matrix4 identity4() { return {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0
 
 struct BsdfDesc {
     std::string type = "diffuse";       // diffuse conductor roughconductor dielectric roughdielectric
-                                        // thindielectric plastic twosided null
+                                        // thindielectric plastic twosided null principled
+                                        // principledthin blendbsdf
     std::string id;                     // for error messages
     Color reflectance{0.5f};            // diffuse
     Color diffuse_reflectance{0.5f};    // plastic
@@ -30,7 +31,13 @@ struct BsdfDesc {
     std::string distribution = "beckmann";  // "beckmann" | "ggx"
     bool sample_visible = true;
     bool nonlinear = false;        // plastic
-    std::vector<BsdfDesc> nested;  // twosided: 1 (both sides) or 2 (front, back)
+    std::vector<BsdfDesc> nested;  // twosided: 1 (both sides) or 2 (front, back); blendbsdf: 2
+    // principled, principledthin: base_color; their scalar parameters
+    // (roughness, metallic, ..., the sampling rates) and blendbsdf's weight
+    // by Mitsuba's names, defaults filled in by the loader; a textured one
+    // also has its texture in `textures`, which then replaces the value.
+    Color base_color{0.5f};
+    std::map<std::string, float> floats;
     // Textured colour parameters: parameter name -> its texture, which then
     // replaces the plain value above (reflectance of diffuse,
     // diffuse_reflectance of plastic and roughplastic, specular_reflectance

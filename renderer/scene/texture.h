@@ -75,4 +75,16 @@ struct TexturedColor {
     float mean() const { return texture ? texture->mean() : average(value); }
 };
 
+// A scalar parameter that may be textured (roughness and the like, read as
+// Mitsuba reads them, Texture::eval_1): the plain value, or a texture.
+struct TexturedFloat {
+    float value = 0.f;
+    std::shared_ptr<const Texture> texture;  // null: untextured
+
+    TexturedFloat() = default;
+    TexturedFloat(float v) : value(v) {}  // NOLINT: a plain value converts implicitly
+    bool textured() const { return texture != nullptr; }
+    float eval(Vec2 uv) const { return texture ? texture->eval_1(uv) : value; }
+};
+
 }  // namespace rm

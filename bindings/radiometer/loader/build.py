@@ -35,7 +35,21 @@ from .volumes import _read_vol
 
 _MAX_RESOLUTION = 16384
 # BSDFs that transmit light (a null boundary included).
-_TRANSMITTING = ("dielectric", "roughdielectric", "thindielectric", "null")
+_TRANSMITTING = ("dielectric", "roughdielectric", "thindielectric", "null", "principledthin")
+# principled and principledthin: their scalar parameters (float or texture,
+# read with eval_1) and plain sampling rates, with Mitsuba 3's defaults
+# (src/bsdfs/principled.cpp, principledthin.cpp).
+_PRINCIPLED_FLOATS = {
+    "principled": {"roughness": 0.5, "anisotropic": 0.0, "metallic": 0.0, "spec_trans": 0.0, "spec_tint": 0.0,
+                   "sheen": 0.0, "sheen_tint": 0.0, "flatness": 0.0, "clearcoat": 0.0, "clearcoat_gloss": 0.0},
+    "principledthin": {"roughness": 0.5, "anisotropic": 0.0, "spec_trans": 0.0, "spec_tint": 0.0, "sheen": 0.0,
+                       "sheen_tint": 0.0, "flatness": 0.0, "eta": 1.5, "diff_trans": 0.0},
+}
+_PRINCIPLED_RATES = {
+    "principled": ("main_specular_sampling_rate", "clearcoat_sampling_rate", "diffuse_reflectance_sampling_rate"),
+    "principledthin": ("specular_reflectance_sampling_rate", "specular_transmittance_sampling_rate",
+                       "diffuse_reflectance_sampling_rate", "diffuse_transmittance_sampling_rate"),
+}
 _MAX_SPP = 1 << 24  # render()'s limit on spp, which the sampler's sample_count sets
 
 
@@ -133,6 +147,59 @@ class _Builder:
         b.textures[name] = tex
         return tex.mean_rgb()
 
+    def scalar(self, p, b, name, default, lo=None, hi=None):
+        """A scalar parameter that takes a texture (read with eval_1): a
+        nested or referenced texture of that name goes into b.textures and
+        the value is the texture's mean; otherwise p.float, within [lo, hi]
+        when given (a texture's range is the renderer's to check)."""
+        node = p.named_child("texture", name)
+        if node is None:
+            x = p.float(name, default)
+            if p.has(name) and ((lo is not None and not x >= lo) or (hi is not None and not x <= hi)):
+                raise p.error(f"parameter '{name}' must lie in [{lo}, {hi}], got {x}", p.node.props[name].place)
+            return x
+        if p.has(name):
+            raise p.error(f"parameter '{name}' given both as a value and as a texture", node.place)
+        tex = self.texture(node)
+        b.textures[name] = tex
+        return float(np.mean(tex.mean_rgb()))
+
+    def _principled(self, p, b, t):
+        """principled and principledthin (Mitsuba 3's names and defaults; the
+        model and its value ranges: renderer/scene/bsdf_principled.cpp)."""
+        b.base_color = self.colour(p, b, "base_color", 0.5)
+        for name, default in _PRINCIPLED_FLOATS[t].items():
+            # Mitsuba's documented ranges: [0, 1]; diff_trans [0, 2]; eta > 0.
+            hi = {"diff_trans": 2.0, "eta": FLOAT32_MAX}.get(name, 1.0)
+            b.floats[name] = self.scalar(p, b, name, default, 0.0, hi)
+        if t == "principledthin" and not b.floats["eta"] > 0:
+            raise p.error("parameter 'eta' must be > 0", p.node.props["eta"].place)
+        for name in _PRINCIPLED_RATES[t]:
+            b.floats[name] = p.float(name, 1.0, check="nonneg")
+        if t == "principledthin":
+            return
+        # Mitsuba's get_flag: a lobe exists when its parameter is a texture or non-zero.
+        transmits = "spec_trans" in b.textures or b.floats["spec_trans"] != 0.0
+        f32 = np.float32
+        if p.has("eta") and p.has("specular"):
+            raise p.error("give either 'eta' or 'specular', not both (as Mitsuba)", p.node.props["specular"].place)
+        if p.has("eta"):
+            eta = f32(p.float("eta", check="positive"))
+            if transmits and eta == 1:  # as Mitsuba: eta 1 would make the transmission a delta
+                eta = f32(1.001)
+        else:
+            specular = p.float("specular", 0.5)
+            if not 0.0 <= specular <= 1.0:
+                raise p.error(f"parameter 'specular' must lie in [0, 1], got {specular}",
+                              p.node.props["specular"].place)
+            specular = f32(specular)
+            if transmits and specular == 0:  # as Mitsuba, for the same reason
+                specular = f32(1e-3)
+            # Burley 2015, sec. 5.1 (F0 = 0.08 specular), inverted for eta,
+            # in float32 as Mitsuba computes it.
+            eta = f32(2) / (f32(1) - np.sqrt(f32(0.08) * specular)) - f32(1)
+        b.floats["eta"] = float(eta)
+
     # -- BSDFs ---------------------------------------------------------------
 
     def bsdf(self, node):
@@ -179,6 +246,18 @@ class _Builder:
                 if k.type in _TRANSMITTING:  # as Mitsuba: a two-sided surface has no inside to transmit to
                     raise p.error(f"a twosided bsdf nests only reflective bsdfs, got '{k.type}', which "
                                   f"transmits light", k.place)
+            b.nested = [self.bsdf(k) for k in kids]
+        elif t in ("principled", "principledthin"):
+            self._principled(p, b, t)
+        elif t == "blendbsdf":
+            # Mitsuba 3.9.1: `weight` has no default; the nested BSDFs count
+            # in the order given (measured with mitsuba.load_dict / load_string).
+            if not p.has("weight") and p.named_child("texture", "weight") is None:
+                raise p.error("missing parameter 'weight' (a float or a texture, as Mitsuba 3 requires)")
+            b.floats["weight"] = self.scalar(p, b, "weight", None)
+            kids = p.children("bsdf")
+            if len(kids) != 2:
+                raise p.error(f"needs two nested bsdfs, got {len(kids)}")
             b.nested = [self.bsdf(k) for k in kids]
         if t in ("roughconductor", "roughdielectric", "roughplastic"):
             b.distribution = p.string("distribution", "beckmann", ("beckmann", "ggx"))

@@ -78,6 +78,11 @@ TEXTURED = {
     "conductor": ("specular_reflectance",),
     "roughconductor": ("specular_reflectance", "alpha", "alpha_u", "alpha_v"),
     "spot": ("texture",),
+    "principled": ("base_color", "roughness", "anisotropic", "metallic", "spec_trans", "spec_tint", "sheen",
+                   "sheen_tint", "flatness", "clearcoat", "clearcoat_gloss"),
+    "principledthin": ("base_color", "roughness", "anisotropic", "spec_trans", "spec_tint", "sheen", "sheen_tint",
+                       "flatness", "eta", "diff_trans"),
+    "blendbsdf": ("weight",),
 }
 _TEXTURED_TEXT = "; ".join(f"{t}.{', '.join(n)}" for t, n in TEXTURED.items())
 
