@@ -12,7 +12,8 @@ each render runs in a fresh process.
 Reported per (scene, estimator): spp (for sppm the passes: one photon pass
 per spp; for photonmapper the camera passes over the image after its one
 set of photon maps), passes per second of wall time, the process's CPU
-seconds, and where the time went: photon tracing and kd-tree builds of each
+seconds (all threads) per pass (on a loaded machine the wall clock
+measures the load more than the work), and where the time went: photon tracing and kd-tree builds of each
 map (res.stats["photon_maps"]), and, where the build reports them
 (res.stats "phase_seconds"), the camera and gather phases; otherwise the
 rest of the wall time after tracing and building. `--base` runs the same
@@ -85,13 +86,17 @@ def _run(pkg, scene, params, estimator, seconds, threads):
     r["trace_seconds"] = sum(m["trace_seconds"] for m in maps)
     r["build_seconds"] = sum(m["build_seconds"] for m in maps)
     r["passes_per_second"] = r["spp"] / r["seconds"] if r["seconds"] > 0 else 0.0
+    # On a loaded machine the wall clock mostly measures the load; the
+    # process's CPU seconds (every thread) per pass measure the work.
+    r["cpu_seconds_per_pass"] = r["cpu_seconds"] / r["spp"] if r["spp"] > 0 else None
     return r
 
 
 def _cell(r):
     if "error" in r:
         return f"{'refused':>8}"
-    return f"{r['spp']:5d} {r['passes_per_second']:7.2f}/s tr {r['trace_seconds']:5.2f} bu {r['build_seconds']:5.2f}"
+    return (f"{r['spp']:5d} {r['passes_per_second']:7.2f}/s cpu/pass {r['cpu_seconds_per_pass']:6.2f} "
+            f"tr {r['trace_seconds']:5.2f} bu {r['build_seconds']:5.2f}")
 
 
 def main(argv=None):
@@ -137,7 +142,8 @@ def main(argv=None):
                 if "ratio_passes_per_second" in row:
                     line += f" | x{row['ratio_passes_per_second']:.2f}"
             print(line, flush=True)
-    path = record.write(a.study, record.params_of(a), {"rows": rows}, out=a.out)
+            # Written after every row, so that a run stopped early keeps what it measured.
+            path = record.write(a.study, record.params_of(a), {"rows": rows}, out=a.out)
     print(f"wrote {path}")
 
 
