@@ -10,14 +10,60 @@ namespace rm {
 
 namespace {
 
+// Our own selection instead of std::nth_element alone: libstdc++'s
+// partition branches on every comparison, and on photon positions about
+// half of those branches are mispredicted. select_nth partitions with
+// Lomuto's scheme in its branchless form (each element swapped with the
+// first not-less one, which advances by the comparison's result;
+// Alexandrescu, "Lomuto's Comeback", 2020), pivot the median of three,
+// and hands ranges of 32 or fewer, and any range still large after
+// 2 log2(n) + 8 partitions (bad pivots), to std::nth_element, so it is
+// O(n) in expectation and never worse than nth_element's bound.
+// The comparison must be a strict total order (no two elements equal):
+// then the element at nth, and the sets before and after it, are those
+// of a full sort, whichever algorithm selects them.
+template <class T, class Less>
+void select_nth(T* first, T* nth, T* last, Less less) {
+    int budget = 8;
+    for (size_t n = size_t(last - first); n > 1; n >>= 1) budget += 2;
+    while (last - first > 32 && budget-- > 0) {
+        // Median of three (first, middle, last - 1) moved to last - 1.
+        T* m = first + (last - first) / 2;
+        T* b = last - 1;
+        if (less(*m, *first)) std::swap(*m, *first);
+        if (less(*b, *m)) {
+            std::swap(*b, *m);
+            if (less(*m, *first)) std::swap(*m, *first);
+        }
+        std::swap(*m, *b);  // the median is the pivot, at last - 1
+        const T pivot = *b;
+        T* store = first;
+        for (T* it = first; it < b; ++it) {
+            const T x = *it;
+            const bool lt = less(x, pivot);
+            *it = *store;
+            *store = x;
+            store += lt;
+        }
+        std::swap(*store, *b);  // the pivot in its sorted place
+        if (nth == store) return;
+        if (nth < store)
+            last = store;
+        else
+            first = store + 1;
+    }
+    std::nth_element(first, nth, last, less);
+}
+
 // Jensen 2001, sec. 6.3 (balancing): the node of [lo, hi) is its median
 // mid = (lo + hi) / 2 along the axis of largest extent of its photons'
-// bounding box; nth_element keeps it O(n) per level. Comparisons tie-break
-// on the input index, so the order is a strict total order and the
-// arrangement nth_element leaves is a function of the photons alone (the
-// same whichever thread splits which node). Works on BuildKey, the
-// photon's position and input index side by side (16 bytes, no
-// indirection into the 40-byte photons).
+// bounding box; a selection keeps it O(n) per level. Comparisons
+// tie-break on the input index, so the order is a strict total order and
+// every slot of the tree is the median of one range's set: the layout is
+// a function of the photons alone (whichever thread splits which node,
+// whatever the selection algorithm). Works on BuildKey, the photon's
+// position and input index side by side (16 bytes, no indirection into
+// the 40-byte photons).
 size_t split_node(std::vector<PhotonMap::BuildKey>& keys, std::vector<uint8_t>& axis, size_t lo, size_t hi) {
     Vec3 bmin(kInf), bmax(-kInf);
     for (size_t i = lo; i < hi; ++i) {
@@ -28,13 +74,13 @@ size_t split_node(std::vector<PhotonMap::BuildKey>& keys, std::vector<uint8_t>& 
     const int a = (ext.x >= ext.y && ext.x >= ext.z) ? 0 : (ext.y >= ext.z ? 1 : 2);
     const size_t mid = (lo + hi) / 2;
     // The axis as a member pointer chosen once (Vec3's operator[] would
-    // branch on it in every comparison).
+    // branch on it in every comparison); the comparison without branches.
     const float Vec3::*c = a == 0 ? &Vec3::x : (a == 1 ? &Vec3::y : &Vec3::z);
-    std::nth_element(keys.begin() + lo, keys.begin() + mid, keys.begin() + hi,
-                     [c](const PhotonMap::BuildKey& u, const PhotonMap::BuildKey& v) {
-                         const float pu = u.p.*c, pv = v.p.*c;
-                         return pu < pv || (pu == pv && u.id < v.id);
-                     });
+    PhotonMap::BuildKey* k = keys.data();
+    select_nth(k + lo, k + mid, k + hi, [c](const PhotonMap::BuildKey& u, const PhotonMap::BuildKey& v) {
+        const float pu = u.p.*c, pv = v.p.*c;
+        return bool(int(pu < pv) | (int(pu == pv) & int(u.id < v.id)));
+    });
     axis[mid] = uint8_t(a);
     return mid;
 }
