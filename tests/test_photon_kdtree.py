@@ -87,6 +87,77 @@ def test_build_is_independent_of_threads_and_empty_tree_works():
     assert len(empty.range(q[0], 1.0)[0]) == 0
 
 
+def _reference_layout(pts):
+    """Jensen's balanced tree as photon_map.h defines it, in plain Python:
+    the node of a range is its median along the axis of largest extent of
+    its points' bounding box, ties ordered by input index, the lower half
+    left. Every slot is the median of exactly one range, so the layout is a
+    function of the points alone, whatever selection algorithm the build
+    uses. Returns the input index at each slot."""
+    out = np.empty(len(pts), np.int64)
+
+    def node(ids, lo):
+        if len(ids) == 0:
+            return
+        p = pts[ids]
+        ext = p.max(axis=0) - p.min(axis=0)
+        a = 0 if (ext[0] >= ext[1] and ext[0] >= ext[2]) else (1 if ext[1] >= ext[2] else 2)
+        order = ids[np.lexsort((ids, p[:, a]))]
+        mid = len(ids) // 2
+        out[lo + mid] = order[mid]
+        node(order[:mid], lo)
+        node(order[mid + 1:], lo + mid + 1)
+
+    node(np.arange(len(pts)), 0)
+    return out
+
+
+def _range_all_order(layout):
+    """The order in which PhotonMap::range visits the slots of `layout`
+    when every point is within the radius (its explicit stack: the node,
+    then the upper half, then the lower)."""
+    order, stack = [], [(0, len(layout))]
+    while stack:
+        lo, hi = stack.pop()
+        if lo >= hi:
+            continue
+        mid = (lo + hi) // 2
+        order.append(layout[mid])
+        stack.append((lo, mid))
+        stack.append((mid + 1, hi))
+    return np.array(order)
+
+
+@pytest.mark.parametrize("kind", ["uniform", "clustered", "duplicates"])
+def test_tree_layout_is_the_balanced_tree(kind):
+    """The build's layout (seen through the order in which range() returns
+    every point) equals the reference balanced tree's, duplicates (ties on
+    every axis) included."""
+    pts = point_sets(4)[kind]
+    tree = _core.PhotonMap(pts, threads=1)
+    ids, _ = tree.range(pts.mean(axis=0).tolist(), 1e9)
+    np.testing.assert_array_equal(ids, _range_all_order(_reference_layout(pts)))
+
+
+def test_tree_layout_is_independent_of_threads():
+    """The parallel build (top levels split in parallel, then subtrees as
+    tasks; photon_map.cpp) gives the same layout as one thread, at a size
+    where both parallel stages run; a tree that differs in one slot fails."""
+    rng = np.random.default_rng(5)
+    pts = np.concatenate([rng.random((150_000, 3), dtype=np.float32),
+                          np.float32(0.01) * rng.random((150_000, 3), dtype=np.float32)])
+    centre = pts.mean(axis=0).tolist()
+    want, _ = _core.PhotonMap(pts, threads=1).range(centre, 1e9)
+    for threads in (2, 3, 8):
+        got, _ = _core.PhotonMap(pts, threads=threads).range(centre, 1e9)
+        np.testing.assert_array_equal(got, want)
+    # Power: two points swapped give another tree, and another order.
+    swapped = pts.copy()
+    swapped[[0, 1]] = swapped[[1, 0]]
+    other, _ = _core.PhotonMap(swapped, threads=2).range(centre, 1e9)
+    assert not np.array_equal(other, want)
+
+
 def test_bad_query_arguments_raise():
     tree = _core.PhotonMap(np.zeros((4, 3), np.float32))
     with pytest.raises(ValueError, match="k must be"):

@@ -807,15 +807,26 @@ RenderOutput PhotonMapper::drive(const Scene& scene, const RenderOptions& opts, 
                         }
                         ++bias_n;
                     });
+    auto tc = Clock::now();
     RenderOutput out = render_camera_paths(loop, pass);
+    const double camera_seconds = since(tc);
     if (tally && bias_n > 0) {
         out.estimator_stats.push_back({"radius_bias_sum", {bias_sum[0], bias_sum[1], bias_sum[2]}});
         out.estimator_stats.push_back({"radius_bias_sq_sum", {bias_sq[0], bias_sq[1], bias_sq[2]}});
         out.estimator_stats.push_back({"radius_bias_samples", {double(bias_n)}});
     }
-    // 3. The photon passes' counters and maps.
+    // 3. The photon passes' counters and maps, and where the time went
+    //    (benchmarks/studies/photon_passes.py).
     out.stats.merge(pstats);
     out.photon_maps = info;
+    double trace_seconds = 0, build_seconds = 0;
+    for (const PhotonMapStats& s : info) {
+        trace_seconds += s.trace_seconds;
+        build_seconds += s.build_seconds;
+    }
+    out.estimator_stats.push_back({"phase_seconds_photon_trace", {trace_seconds}});
+    out.estimator_stats.push_back({"phase_seconds_photon_build", {build_seconds}});
+    out.estimator_stats.push_back({"phase_seconds_camera", {camera_seconds}});
     out.seconds = loop.elapsed();
     return out;
 }
@@ -876,7 +887,7 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
     scene.bounding_sphere(center, radius);
     const std::function<bool()>& poll_once = loop.poll_once();
     // Traces one map's photons and files its stats; `make(photons)` builds
-    // the tree(s) from them. False when cancelled.
+    // the tree(s) from them (false: cancelled). False when cancelled.
     auto trace_and_build = [&](const char* name, const PhotonTraceSpec& spec, uint64_t target, auto&& make) {
         PhotonPass pass = trace_photons_until(scene, spec, opts.seed, target, threads, poll_once, pstats);
         if (pass.cancelled) return false;
@@ -889,15 +900,16 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
         s.target = target;
         s.max_paths = pass.max_paths;
         auto tb = Clock::now();
-        make(std::move(pass.photons));
+        if (!make(std::move(pass.photons))) return false;
         s.build_seconds = since(tb);
         s.bytes_per_photon = double(PhotonMap::bytes_per_photon());
         info.push_back(s);
         return true;
     };
     auto build = [&](const char* name, const PhotonTraceSpec& spec, uint64_t target, PhotonMap& map) {
-        return trace_and_build(name, spec, target,
-                               [&](std::vector<Photon>&& photons) { map.build(std::move(photons), threads); });
+        return trace_and_build(name, spec, target, [&](std::vector<Photon>&& photons) {
+            return map.build(std::move(photons), threads, false, poll_once);
+        });
     };
     // Light-path segments a photon may need: at least one camera segment
     // follows it (two with final gathering, for the global map).
@@ -940,7 +952,9 @@ bool PhotonMapper::photon_pass(PassLoop& loop, Maps& maps, std::vector<PhotonMap
             }
             photons = {};
             maps.volume.resize(per.size());
-            for (size_t m = 0; m < per.size(); ++m) maps.volume[m].build(std::move(per[m]), threads);
+            for (size_t m = 0; m < per.size(); ++m)
+                if (!maps.volume[m].build(std::move(per[m]), threads, false, poll_once)) return false;
+            return true;
         };
         if (!trace_and_build("volume", spec, uint64_t(volume_photons_), per_medium)) return false;
         maps.has_volume = true;

@@ -201,20 +201,28 @@ public:
     }
 
     int pass(PassLoop& loop, int s0, int s1) override {
+        // Polled between sppm passes too: each of its parallel steps may
+        // finish before run_parallel's first poll (parallel.h).
+        PollGate gate(loop.poll_once());
         for (int s = s0; s < s1; ++s) {
+            if (!gate()) return s;
             // 1. Camera pass: visible points, emission and direct light (kept
             //    in the visible points until step 3, so a cancel leaves the
             //    finished passes untouched).
+            auto t0 = Clock::now();
             if (!loop.parallel_for(size_t(scene_.sensor->height),
                                    [&](size_t y, int t) { camera_row(loop, s, int(y), loop.stats(t)); }))
                 return s;
-            // 2. Photon pass: photon_count light paths into this pass's map.
-            PhotonMap map;
-            if (photons_needed_ && !photon_pass(loop, s, map)) return s;
+            camera_seconds_ += since(t0);
+            // 2. Photon pass: photon_count light paths into this pass's map
+            //    (map_, whose arrays the previous pass's map leaves behind).
+            if (photons_needed_ && !photon_pass(loop, s)) return s;
             // 3. Gather and update every pixel's statistics (never cancelled:
             //    a pass is either wholly in the estimate or not at all).
+            auto tg = Clock::now();
             row_bias_.assign(3 * size_t(scene_.sensor->height), 0.0);
-            loop.parallel_commit(size_t(scene_.sensor->height), [&](size_t y, int) { gather_row(map, int(y)); });
+            loop.parallel_commit(size_t(scene_.sensor->height), [&](size_t y, int) { gather_row(map_, int(y)); });
+            gather_seconds_ += since(tg);
             // The pass's radius-bias estimate of the image mean (rows summed
             // in order: the same whatever the thread count).
             for (int ch = 0; ch < 3; ++ch) {
@@ -276,6 +284,11 @@ public:
             out.estimator_stats.push_back({"radius_bias_passes", {double(bias_passes_)}});
         }
         if (photons_needed_) out.photon_maps.push_back(pms_);
+        // Where the passes' time went (benchmarks/studies/photon_passes.py).
+        out.estimator_stats.push_back({"phase_seconds_camera", {camera_seconds_}});
+        out.estimator_stats.push_back({"phase_seconds_photon_trace", {pms_.trace_seconds}});
+        out.estimator_stats.push_back({"phase_seconds_photon_build", {pms_.build_seconds}});
+        out.estimator_stats.push_back({"phase_seconds_gather", {gather_seconds_}});
     }
 
 private:
@@ -312,10 +325,11 @@ private:
         loop.add_done(uint64_t(W));
     }
 
-    // Step 2: pass s's photon paths into `map`; false when cancelled.
-    bool photon_pass(PassLoop& loop, int s, PhotonMap& map) {
+    // Step 2: pass s's photon paths into map_, traced into the photon
+    // array of the previous pass's map; false when cancelled.
+    bool photon_pass(PassLoop& loop, int s) {
         PhotonPass pp = trace_photon_paths(scene_, spec_, loop.seed(), uint64_t(s), uint64_t(sppm_.photon_count_),
-                                           loop.threads(), loop.poll_once(), pstats_, max_photons_);
+                                           loop.threads(), loop.poll_once(), pstats_, max_photons_, map_.release());
         if (pp.over_memory)
             throw std::invalid_argument("render: integrator 'sppm': a pass's " + std::to_string(sppm_.photon_count_) +
                                         " photon paths stored more than " + std::to_string(max_photons_) +
@@ -328,7 +342,7 @@ private:
         pms_.paths += pp.paths;
         pms_.trace_seconds += pp.seconds;
         auto tb = Clock::now();
-        map.build(std::move(pp.photons), loop.threads());
+        if (!map_.build(std::move(pp.photons), loop.threads(), false, loop.poll_once())) return false;
         pms_.build_seconds += since(tb);
         return true;
     }
@@ -399,6 +413,8 @@ private:
     FilterSampler filter_;
     std::vector<PixelStats> px_;
     std::vector<VisiblePoint> vps_;
+    PhotonMap map_;  // the current pass's photons; its arrays serve the next pass again
+    double camera_seconds_ = 0, gather_seconds_ = 0;
     bool photons_needed_ = false;
     PhotonTraceSpec spec_;
     PhotonMapStats pms_;

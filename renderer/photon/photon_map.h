@@ -18,6 +18,7 @@
 // extra bytes per photon; Jensen's "balanced heap" layout serves the same end).
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "core/math.h"
@@ -56,10 +57,18 @@ struct Neighbour {
 class PhotonMap {
 public:
     PhotonMap() = default;
-    // Builds the balanced tree over `photons` (taken over and reordered);
-    // `threads` > 1 builds the top levels' subtrees in parallel (the result
-    // is the same). keep_ids keeps each photon's input index (ids()).
-    void build(std::vector<Photon> photons, int threads = 1, bool keep_ids = false);
+    // Builds the balanced tree over `photons` (taken over and reordered in
+    // place); `threads` > 1 splits the top levels' nodes and then builds
+    // their subtrees in parallel (the tree is the same whatever the thread
+    // count). keep_ids keeps each photon's input index (ids()). `poll`
+    // (the pass loop's poll_once), when given, is called about every 50 ms
+    // from the calling thread; false cancels the build, which then leaves
+    // an empty map and returns false.
+    bool build(std::vector<Photon> photons, int threads = 1, bool keep_ids = false,
+               const std::function<bool()>& poll = {});
+    // The photon array, emptied but with its capacity, for the next pass's
+    // photons (sppm); the map is empty after it.
+    std::vector<Photon> release();
     size_t size() const { return photons_.size(); }
     bool empty() const { return photons_.empty(); }
     const std::vector<Photon>& photons() const { return photons_; }
@@ -72,10 +81,24 @@ public:
     // Every photon with d2 <= r2, in tree order. `out` is cleared.
     void range(const Vec3& q, float r2, std::vector<Neighbour>& out) const;
     static constexpr size_t bytes_per_photon() { return sizeof(Photon); }
+    // What a build needs beside the photons, per photon (memory.h): its key
+    // and split axis.
+    static constexpr size_t build_bytes_per_photon() { return sizeof(BuildKey) + 1; }
+
+    // A photon's position and input index, what the build sorts.
+    struct BuildKey {
+        Vec3 p;
+        uint32_t id;
+    };
 
 private:
+    bool cancelled_build();
+
     std::vector<Photon> photons_;
     std::vector<uint32_t> ids_;
+    // The build's scratch, kept for the next build.
+    std::vector<BuildKey> keys_;
+    std::vector<uint8_t> axis_;
 };
 
 }  // namespace rm

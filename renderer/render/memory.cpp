@@ -94,8 +94,11 @@ MemoryPart camera_film_memory(int width, int height, bool effect_variance) {
 }
 
 double photon_map_build_bytes(double photons) {
-    // The traced photons and the tree's reordered copy, with its index and split axes.
-    return photons * (2.0 * double(PhotonMap::bytes_per_photon()) + sizeof(uint32_t) + 1.0);
+    // The larger of two peaks: while tracing, the work items' photons and
+    // the array they are joined into (photon_trace.cpp); while building,
+    // that array (reordered in place) and the build's keys and axes.
+    const double per = double(PhotonMap::bytes_per_photon());
+    return photons * std::max(2.0 * per, per + double(PhotonMap::build_bytes_per_photon()));
 }
 
 }  // namespace rm

@@ -47,7 +47,8 @@ MemoryPart output_memory(const RenderOptions& opts, int width, int height);
 MemoryPart camera_film_memory(int width, int height, bool effect_variance = false);
 
 // Peak bytes of a photon map of n photons while it is traced and built
-// (photon_map.h: the traced vector, the tree's copy, its index and axes).
+// (photon_trace.cpp: the work items' photons and the joined array;
+// photon_map.h: the array, reordered in place, its keys and axes).
 double photon_map_build_bytes(double photons);
 
 }  // namespace rm

@@ -66,4 +66,26 @@ bool run_parallel(int threads, size_t n, Fn fn, const std::function<bool()>& pol
     return !cancel.load();
 }
 
+// A loop of short run_parallel calls (photon tracing's chunks, a kd-tree
+// build's levels) polls between them through this gate: run_parallel
+// polls only when one call outlasts its 50 ms wait, so calls that each
+// finish sooner would never see a cancel (Ctrl-C during a photon pass
+// came back only after the whole map was traced and built). The gate
+// calls `poll` when 50 ms have passed since its last call (or its start).
+class PollGate {
+public:
+    explicit PollGate(const std::function<bool()>& poll) : poll_(poll), last_(std::chrono::steady_clock::now()) {}
+    // False when the poll asked to cancel.
+    bool operator()() {
+        const auto now = std::chrono::steady_clock::now();
+        if (now - last_ < std::chrono::milliseconds(50)) return true;
+        last_ = now;
+        return !poll_ || poll_();
+    }
+
+private:
+    const std::function<bool()>& poll_;
+    std::chrono::steady_clock::time_point last_;
+};
+
 }  // namespace rm

@@ -234,9 +234,10 @@ PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, 
     std::vector<Item> items;
     std::vector<ThreadStats> tstats(threads);
     const uint64_t chunk = kChunkItems * kItemPaths;
+    PollGate gate(poll);
     while (r.photons.size() < target) {
         const uint64_t n = std::min(chunk, r.max_paths - r.paths);
-        if (!trace_chunk(scene, spec, seed, 0, r.paths, n, items, threads, poll, tstats)) {
+        if (!gate() || !trace_chunk(scene, spec, seed, 0, r.paths, n, items, threads, poll, tstats)) {
             r.cancelled = true;
             break;
         }
@@ -273,15 +274,18 @@ PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, 
 
 PhotonPass trace_photon_paths(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass,
                               uint64_t paths, int threads, const std::function<bool()>& poll, ThreadStats& stats,
-                              uint64_t max_photons) {
+                              uint64_t max_photons, std::vector<Photon> storage) {
     auto t0 = Clock::now();
     PhotonPass r;
+    r.photons = std::move(storage);
+    r.photons.clear();
     std::vector<Item> items;
     std::vector<ThreadStats> tstats(threads);
     const uint64_t chunk = kChunkItems * kItemPaths;
+    PollGate gate(poll);
     for (uint64_t g0 = 0; g0 < paths; g0 += chunk) {
         uint64_t n = std::min(chunk, paths - g0);
-        if (!trace_chunk(scene, spec, seed, pass, g0, n, items, threads, poll, tstats)) {
+        if (!gate() || !trace_chunk(scene, spec, seed, pass, g0, n, items, threads, poll, tstats)) {
             r.cancelled = true;
             break;
         }

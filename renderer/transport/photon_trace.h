@@ -85,8 +85,10 @@ PhotonPass trace_photons_until(const Scene& scene, const PhotonTraceSpec& spec, 
 // Traces exactly `paths` light paths of pass `pass` (SPPM's per-pass
 // photons); stops with over_memory once more than `max_photons` are stored
 // (the caller refuses the render: its photons outgrow the memory).
+// `storage` (a previous pass's photon array, PhotonMap::release) is
+// cleared and filled, so that its capacity serves again.
 PhotonPass trace_photon_paths(const Scene& scene, const PhotonTraceSpec& spec, uint64_t seed, uint64_t pass,
                               uint64_t paths, int threads, const std::function<bool()>& poll, ThreadStats& stats,
-                              uint64_t max_photons = UINT64_MAX);
+                              uint64_t max_photons = UINT64_MAX, std::vector<Photon> storage = {});
 
 }  // namespace rm
