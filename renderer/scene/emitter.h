@@ -36,6 +36,7 @@ struct DirectSample {
 struct EmissionSample {
     Vec3 p;             // origin of the ray
     Vec3 n;             // surface normal at p (area emitters; zero otherwise)
+    SurfaceUv uv;       // texture coordinates at p (area emitters)
     Vec3 d;             // unit direction the light travels
     Color weight{0.f};  // Le |cos| / (pdf_a pdf_w); black = failed sample
     float pdf_a = 0.f;  // origin density (1 for a delta position)

@@ -49,6 +49,9 @@ public:
     int add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals,
                    const Matrix4& to_world = identity4());
     int add_disk(const std::string& id, const Matrix4& to_world, int bsdf, bool flip_normals);
+    // A vertex_* or face_* attribute of mesh `shape` (Mesh::add_attribute):
+    // vertices (or triangles) x channels floats.
+    void add_mesh_attribute(int shape, const MeshAttribute& attribute);
     void add_area_emitter(int shape, const EmitterDesc& desc);
     void add_emitter(const EmitterDesc& desc);
     void set_sensor(const SensorDesc& desc);

@@ -78,6 +78,8 @@ TEXTURED = {
     "conductor": ("specular_reflectance",),
     "roughconductor": ("specular_reflectance", "alpha", "alpha_u", "alpha_v"),
     "spot": ("texture",),
+    "projector": ("irradiance",),
+    "area": ("radiance",),
 }
 _TEXTURED_TEXT = "; ".join(f"{t}.{', '.join(n)}" for t, n in TEXTURED.items())
 

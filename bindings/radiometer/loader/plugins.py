@@ -9,7 +9,7 @@ PLUGINS = {
     "shape": ("obj", "ply", "rectangle", "cube", "disk", "sphere"),
     "bsdf": ("diffuse", "conductor", "roughconductor", "dielectric", "roughdielectric",
              "thindielectric", "plastic", "roughplastic", "twosided", "null"),
-    "emitter": ("area", "point", "spot", "directional", "constant", "envmap"),
+    "emitter": ("area", "point", "spot", "projector", "directional", "constant", "envmap"),
     "sensor": ("perspective", "orthographic", "radiancemeter", "irradiancemeter"),
     "film": ("hdrfilm",),
     "rfilter": ("box", "tent", "gaussian"),
@@ -20,6 +20,6 @@ PLUGINS = {
     "phase": ("isotropic", "hg"),
     "volume": ("gridvolume", "constvolume"),
     "subsurface": ("dipole",),
-    "texture": ("checkerboard", "bitmap"),
+    "texture": ("checkerboard", "bitmap", "rawconstant", "mesh_attribute"),
 }
 _CATEGORY_OF = {t: c for c, types in PLUGINS.items() for t in types}
