@@ -40,6 +40,7 @@ public:
     AreaEmitter(const EmitterDesc& d, const Shape* shape) : shape_(shape), radiance_(d.radiance) {
         check_color(radiance_.value, d.id, "radiance");
         radiance_.texture = texture_param(d, "radiance");
+        textured_ = radiance_.textured();
         if (!(shape_->area() > 0.f))
             throw std::invalid_argument("emitter '" + d.id + "': its shape '" + shape_->id + "' has zero area");
     }
@@ -218,6 +219,7 @@ public:
     explicit SpotEmitter(const EmitterDesc& d) : LocalDeltaEmitter(d), intensity_(d.intensity) {
         check_color(intensity_, d.id, "intensity");
         texture_ = texture_param(d, "texture");
+        textured_ = texture_ != nullptr;
         if (!(d.cutoff_angle > 0.f && d.cutoff_angle <= 180.f))
             throw std::invalid_argument("emitter '" + d.id + "': cutoff_angle must be in (0, 180] degrees");
         float beam = d.beam_width < 0.f ? 0.75f * d.cutoff_angle : d.beam_width;
@@ -317,6 +319,7 @@ public:
         irradiance_.value = d.irradiance;
         check_color(irradiance_.value, d.id, "irradiance");
         irradiance_.texture = texture_param(d, "irradiance");
+        textured_ = irradiance_.textured();
         if (!(scale_ >= 0.f && std::isfinite(scale_)))
             throw std::invalid_argument("emitter '" + d.id + "': scale must be finite and non-negative");
         if (!(d.fov_x > 0.f && d.fov_x < 180.f))
