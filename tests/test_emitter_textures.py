@@ -477,3 +477,25 @@ def test_vertex_colour_emitter_estimators_agree(tmp_path):
         assert passed, f"{est}: ours / path = {res.image.sum() / ref.image.sum():.5f}\n{msg}"
     wrong = render(rolled, "path", 512, 2)
     assert not blocked_z(wrong.image, wrong.variance, ref.image, ref.variance)[0]
+
+
+def test_ply_attributes_grouped_as_mitsuba(tmp_path):
+    """The PLY properties beyond position, normal and uv become the same
+    attributes, with the same values, as in Mitsuba's PLY reader: NAME_0..
+    grouped into vertex_NAME / face_NAME, 8-bit red green blue into
+    vertex_color kept as integers (Mitsuba warns and keeps 255)."""
+    from radiometer.loader.meshes import _read_ply
+
+    lines = ["ply", "format ascii 1.0", "element vertex 3"]
+    lines += [f"property float {n}" for n in "xyz"] + [f"property uchar {n}" for n in ("red", "green", "blue")]
+    lines += [f"property float {n}" for n in ("foo_0", "bar_0", "bar_1", "bar_2")]
+    lines += ["element face 1", "property list uchar int vertex_indices", "property float w_0", "end_header",
+              "0 0 0 255 0 0 0.1 1 2 3", "1 0 0 0 255 0 0.2 4 5 6", "0 1 0 0 0 51 0.3 7 8 9", "3 0 1 2 0.5"]
+    path = tmp_path / "a.ply"
+    path.write_text("\n".join(lines) + "\n")
+    *_, ours = _read_ply(str(path), "test")
+    assert sorted(ours) == ["face_w", "vertex_bar", "vertex_color", "vertex_foo"]
+    theirs = mi.load_dict({"type": "ply", "filename": str(path)})
+    for name, a in ours.items():
+        assert theirs.has_attribute(name), name
+        np.testing.assert_allclose(a.ravel(), np.array(theirs.attribute_buffer(name)), rtol=1e-7, err_msg=name)

@@ -73,9 +73,10 @@ texture    checkerboard: color0 [0.4], color1 [0.2] (colours, not nested
            mesh_attribute: name (vertex_* or face_*), scale [1]: a PLY
                mesh's attribute (other vertex and face properties, grouped
                as Mitsuba does: NAME_0.. -> vertex_NAME / face_NAME, r g b
-               -> vertex_color; 1 or 3 channels), vertex attributes
-               interpolated with the barycentrics; every shape it is used
-               on must have the attribute (else a SceneError at its 'name').
+               -> vertex_color, integers as they are; 1 or 3 channels),
+               vertex attributes interpolated with the barycentrics; every
+               shape it is used on must have the attribute (else a
+               SceneError at its 'name').
            A texture is nested under the parameter's name or referenced
            (<ref name=".." id=".."/>; top-level textures are declarations).
            It takes the place of diffuse.reflectance,

@@ -196,8 +196,10 @@ def _ply_attributes(element, prefix, taken):
     """An element's other scalar properties as Mitsuba 3's PLY reader groups
     them into mesh attributes (src/shapes/ply.cpp): NAME_0, NAME_1, ...
     become attribute prefix + NAME with one channel each; r, g, b (or red,
-    green, blue) become prefix + "color", 8-bit values divided by 255.
-    Only groups of 1 or 3 channels are kept (mesh_attribute reads no other)."""
+    green, blue) become prefix + "color", integers kept as they are
+    (Mitsuba 3.9.1 warns that colours should lie in [0, 1] and keeps 255;
+    measured with mitsuba.load_dict). Only groups of 1 or 3 channels are
+    kept (mesh_attribute reads no other)."""
     groups = {}
     for pr in element.properties:
         name = pr.name
@@ -214,8 +216,7 @@ def _ply_attributes(element, prefix, taken):
             continue
         cols = []
         for k in sorted(chans):
-            a = np.asarray(element[chans[k]])
-            cols.append(a.astype(np.float64) / 255.0 if a.dtype == np.uint8 else a.astype(np.float64))
+            cols.append(np.asarray(element[chans[k]], dtype=np.float64))
         out[prefix + head] = np.stack(cols, axis=1).astype(np.float32)
     return out
 
