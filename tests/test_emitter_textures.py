@@ -402,6 +402,8 @@ def _ply_file(tmp_path):
     ('<texture type="mesh_attribute" id="t">\n<string name="name" value="color"/></texture>',
      r"s.xml:3: texture 'mesh_attribute': parameter 'name' must start with \"vertex_\" or \"face_\""),
     ('<texture type="rawconstant" id="t"/>', r"s.xml:2: texture 'rawconstant': missing parameter 'value'"),
+    ('<texture type="rawconstant" id="t">\n<vector name="value" value="0.5, -1, 0"/></texture>',
+     r"s.xml:3: texture 'rawconstant': parameter 'value': negative value -1.0"),
     ('<texture type="rawconstant" id="t">\n<string name="value" value="x"/></texture>',
      r"s.xml:3: texture 'rawconstant': parameter 'value' must be a float or a 3D vector"),
     ('<emitter type="projector">\n<float name="fov" value="190"/></emitter>',

@@ -205,7 +205,7 @@ std::shared_ptr<const Texture> make_texture(const TextureDesc& d) {
     if (d.type == "rawconstant") {
         if (d.value.size() != 1 && d.value.size() != 3) fail(d, "value", "must hold 1 or 3 floats");
         for (float v : d.value)
-            if (!std::isfinite(v)) fail(d, "value", "must be finite");
+            if (!std::isfinite(v) || v < 0.f) fail(d, "value", "must be finite and non-negative");
         return std::make_shared<RawConstantTexture>(d.value);
     }
     if (d.type == "mesh_attribute") {

@@ -103,10 +103,12 @@ class _Builder:
             if prop is None:
                 raise p.error("missing parameter 'value'")
             if prop.kind in ("float", "integer"):
-                tex.value = (p.float("value"),)
+                tex.value = (p.float("value", check="nonneg"),)
             else:
                 v = p.vec3("value", what="a float or a 3D vector")
                 tex.value = tuple(float(x) for x in v)
+                if min(tex.value) < 0:  # as the bitmaps' values: colours and emission are never negative
+                    raise p.error(f"parameter 'value': negative value {min(tex.value)}", prop.place)
             p.done()
             return tex
         if t == "mesh_attribute":
