@@ -72,7 +72,10 @@ PYBIND11_MODULE(_core, m) {
             "data", [](const TextureDesc& d) { return d.data; },
             [](TextureDesc& d, py::object v) { d.data = flat<float>(v, 1, "texture data"); })
         .def_readwrite("filter_type", &TextureDesc::filter_type)
-        .def_readwrite("wrap_mode", &TextureDesc::wrap_mode);
+        .def_readwrite("wrap_mode", &TextureDesc::wrap_mode)
+        .def_readwrite("value", &TextureDesc::value)
+        .def_readwrite("name", &TextureDesc::name)
+        .def_readwrite("scale", &TextureDesc::scale);
 
     py::class_<BsdfDesc>(m, "BsdfDesc")
         .def(py::init<>())
@@ -111,6 +114,9 @@ PYBIND11_MODULE(_core, m) {
             [](EmitterDesc& d, py::object v) { d.to_world = to_matrix(v); })
         .def_readwrite("cutoff_angle", &EmitterDesc::cutoff_angle)
         .def_readwrite("beam_width", &EmitterDesc::beam_width)
+        .def_readwrite("fov_x", &EmitterDesc::fov_x)
+        .def_readwrite("aspect", &EmitterDesc::aspect)
+        .def_readwrite("scale", &EmitterDesc::scale)
         .def_readwrite("env_width", &EmitterDesc::env_width)
         .def_readwrite("env_height", &EmitterDesc::env_height)
         .def_property(
@@ -238,6 +244,17 @@ PYBIND11_MODULE(_core, m) {
             },
             py::arg("id"), py::arg("positions"), py::arg("indices"), py::arg("normals") = py::none(),
             py::arg("uvs") = py::none(), py::arg("bsdf"), py::arg("flip_normals") = false, py::arg("group") = -1)
+        .def(
+            "add_mesh_attribute",
+            [](Scene& s, int shape, const std::string& name, bool per_face, int channels, py::object data) {
+                MeshAttribute a;
+                a.name = name;
+                a.per_face = per_face;
+                a.channels = channels;
+                a.data = flat<float>(data, 1, "attribute data");
+                s.add_mesh_attribute(shape, a);
+            },
+            py::arg("shape"), py::arg("name"), py::arg("per_face"), py::arg("channels"), py::arg("data"))
         .def(
             "add_sphere",
             [](Scene& s, const std::string& id, py::object c, float r, int bsdf, bool flip, py::object m4, int group) {

@@ -92,16 +92,20 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
         // The closest hits of N rays (origins and directions (N, 3)), as the
         // estimators see them (tests/test_textures.py compares the uv with
         // Mitsuba's): t (inf: miss), p, n, uv, the shading frame's tangent s,
-        // shape index (-1: miss).
+        // shape index (-1: miss); with `texture` (a TextureDesc), its eval
+        // at each hit's SurfaceUv, "tex" (tests/test_emitter_textures.py:
+        // mesh_attribute against Mitsuba's).
         .def(
             "intersect_rays",
-            [](const Scene& s, py::object o, py::object d, bool packet) {
+            [](const Scene& s, py::object o, py::object d, bool packet, py::object texture) {
                 if (!s.committed()) throw py::value_error("scene is not committed");
                 auto oo = flat<float>(o, 3, "o"), dd = flat<float>(d, 3, "d");
                 if (oo.size() != dd.size()) throw py::value_error("o and d differ in length");
                 size_t n = oo.size() / 3;
                 std::vector<float> t(n, kInf), p(3 * n, 0.f), nn(3 * n, 0.f), ss(3 * n, 0.f), uv(2 * n, 0.f),
-                    shape(n, -1.f);
+                    shape(n, -1.f), tex(3 * n, 0.f);
+                std::shared_ptr<const Texture> tx =
+                    texture.is_none() ? nullptr : make_texture(texture.cast<const TextureDesc&>());
                 std::vector<Ray> rays(n);
                 std::vector<Interaction> its(n);
                 std::unique_ptr<bool[]> hit(new bool[n]);
@@ -125,6 +129,10 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                     uv[2 * i] = it.uv.x;
                     uv[2 * i + 1] = it.uv.y;
                     shape[i] = float(it.shape);
+                    if (tx) {
+                        const Color c = tx->eval(it.uv);
+                        for (int k = 0; k < 3; ++k) tex[3 * i + size_t(k)] = c[k];
+                    }
                 }
                 py::ssize_t N = py::ssize_t(n);
                 py::dict out;
@@ -134,9 +142,10 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 out["uv"] = to_numpy(std::move(uv), {N, 2});
                 out["s"] = to_numpy(std::move(ss), {N, 3});
                 out["shape"] = to_numpy(std::move(shape), {N});
+                if (tx) out["tex"] = to_numpy(std::move(tex), {N, 3});
                 return out;
             },
-            py::arg("o"), py::arg("d"), py::arg("packet") = false)
+            py::arg("o"), py::arg("d"), py::arg("packet") = false, py::arg("texture") = py::none())
         // Tests of the majorant grid (tests/test_majorant_grid.py): sigma_t
         // and the local majorant at N x 3 world points, N x 3 arrays.
         .def("medium_sigma_t",

@@ -88,6 +88,8 @@ PARAMS = {
         "envmap": {"scale": "float", "to_world": "transform"},
         "spot": {"intensity": "rgb", "cutoff_angle": "angle", "beam_width": "angle", "to_world": "transform"},
         "directional": {"irradiance": "rgb", "direction": "vector", "to_world": "transform"},
+        "projector": {"irradiance": "rgb", "scale": "float", "fov": "angle", "fov_axis": "fov_axis",
+                      "focal_length": "focal_length", "to_world": "camera"},
     },
     "sensor": {
         "perspective": {"fov": "angle", "fov_axis": "fov_axis", "focal_length": "focal_length",
@@ -113,7 +115,9 @@ PARAMS = {
                "constvolume": {"value": "rgb", "to_world": "transform"}},
     "texture": {"checkerboard": {"color0": "rgb", "color1": "rgb", "to_uv": "transform"},
                 "bitmap": {"filename": "img_file", "filter_type": "tex_filter", "wrap_mode": "tex_wrap",
-                           "raw": "bool", "to_uv": "transform", "format": "tex_format", "accel": "bool"}},
+                           "raw": "bool", "to_uv": "transform", "format": "tex_format", "accel": "bool"},
+                "rawconstant": {"value": "float"},
+                "mesh_attribute": {"name": "attr_name", "scale": "float"}},
     "subsurface": {"dipole": {"sigma_a": "rgb", "sigma_s": "rgb", "sigma_t": "rgb", "albedo": "rgb",
                               "scale": "float", "g": "g", "int_ior": "ior", "ext_ior": "ior"}},
     # The estimators' declarations in the core's registry, Mitsuba 0.6 names included.
@@ -185,6 +189,7 @@ _STRINGS = {
     "string": ["power", "balance", "uniform", "x"],
     "tex_filter": ["bilinear", "nearest", "trilinear"], "tex_wrap": ["repeat", "mirror", "clamp", "wrap"],
     "tex_format": ["auto", "variant", "fp16", "uint8"],
+    "attr_name": ["vertex_color", "face_color", "color", "vertex_normal"],
 }
 
 
@@ -285,7 +290,7 @@ def _value(draw, kind):
 
 # Parameters a plugin cannot do without, drawn nearly always.
 _REQUIRED = {"obj": "filename", "ply": "filename", "serialized": "filename", "gridvolume": "filename",
-             "bitmap": "filename", "blendbsdf": "weight"}
+             "bitmap": "filename", "blendbsdf": "weight", "rawconstant": "value", "mesh_attribute": "name"}
 # Plugin types that stand only nested, rarely drawn elsewhere.
 _NESTED_ONLY = {"emitter": ["area"], "sensor": ["irradiancemeter"]}
 
@@ -334,6 +339,10 @@ def _node(draw, category, name=None, depth=0, types=None):
             child("texture", draw(st.sampled_from(["reflectance", "diffuse_reflectance", "specular_reflectance",
                                                    "specular_transmittance", "eta", "alpha", "alpha_u",
                                                    "base_color", "roughness", "diff_trans"])))
+        elif category == "emitter" and t in ("area", "spot", "projector") and draw(st.integers(0, 3)) == 0:
+            # a texture on the emission parameter that takes one, or on one that does not
+            child("texture", draw(st.sampled_from([{"area": "radiance", "spot": "texture",
+                                                    "projector": "irradiance"}[t], "intensity"])))
         elif category == "bsdf" and t in ("twosided", "blendbsdf"):
             for n in ("a", "b")[:draw(st.integers(0, 3))] + (("c",) if draw(st.integers(0, 9)) == 0 else ()):
                 child("bsdf", n)

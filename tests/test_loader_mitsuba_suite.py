@@ -330,8 +330,11 @@ def test_suite_scenes_get_past_the_format():
     # not explained). Shapegroup + instance and a constvolume's to_world
     # brought 2 more (both pass, tests/test_shapes.py); principled and
     # principledthin three more (each passes Mitsuba's protocol:
-    # tests/test_principled.py): 26 of 41.
-    assert len(loads) >= 26, sorted(loads)
+    # tests/test_principled.py); the projector, mesh_attribute, rawconstant
+    # and textured area emitters with blendbsdf six more: the two projector
+    # scenes, the three mesh_attributes scenes and various_emitters
+    # (tests/test_emitter_textures.py): 32 of 41.
+    assert len(loads) >= 32, sorted(loads)
     assert {"bsdf_spheres/test_texturedprincipled1_path.xml",
             "bsdf_spheres/test_texturedprincipled2_path.xml",
             "bsdf_spheres/test_texturedprincipledthin_path.xml",
@@ -343,11 +346,13 @@ def test_suite_scenes_get_past_the_format():
             "bsdf_spheres/test_textured_roughconductor_path.xml",
             "texture_interp/test_texture_interp_direct.xml",
             "spot_light/test_spot_direct.xml",
-            "participating_media/test_surf_area_light_volpath.xml"} <= loads
-    # What stops the mesh_attribute scenes: that texture type, named.
-    status = {r["scene"]: r["status"] for r in rows}
-    assert "texture type 'mesh_attribute' is not supported" in status[
-        "mesh_attributes/test_mesh_attributes_1_face_direct.xml"]
+            "participating_media/test_surf_area_light_volpath.xml",
+            "projector/test_projector_constant_direct.xml",
+            "projector/test_projector_textured_direct.xml",
+            "mesh_attributes/test_mesh_attributes_1_face_direct.xml",
+            "mesh_attributes/test_mesh_attributes_3_face_direct.xml",
+            "mesh_attributes/test_mesh_attributes_3_vertex_direct.xml",
+            "various_emitters/test_various_emitters_ptracer.xml"} <= loads
     # various_shapes stops at its sdfgrid, refused by name (it also names
     # meshes outside the copied data: mitsuba-data's tests/serialized,
     # tests/obj and tests/ply).

@@ -36,6 +36,9 @@ def _texture(t) -> "_core.TextureDesc":
     c.to_uv = [float(x) for x in np.asarray(t.to_uv, np.float64).reshape(9)]
     c.filter_type = t.filter_type
     c.wrap_mode = t.wrap_mode
+    c.value = [float(x) for x in t.value]
+    c.name = t.name
+    c.scale = float(t.scale)
     if t.data is not None:
         c.height, c.width, c.channels = (int(v) for v in t.data.shape)
         c.data = np.ascontiguousarray(t.data, np.float32).reshape(-1, 1)
@@ -52,6 +55,7 @@ def _emitter(e) -> "_core.EmitterDesc":
     c.to_world = np.asarray(e.to_world, dtype=np.float64)
     c.cutoff_angle = float(e.cutoff_angle)
     c.beam_width = float(e.beam_width)
+    c.fov_x, c.aspect, c.scale = float(e.fov_x), float(e.aspect), float(e.scale)
     c.textures = {name: _texture(t) for name, t in e.textures.items()}
     if e.env is not None:
         c.env_height, c.env_width = int(e.env.shape[0]), int(e.env.shape[1])
@@ -165,6 +169,9 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
                 scene.add_instance(where, group_of(s.group), np.asarray(s.to_world, np.float64))
                 continue
             idx = add_geometry(s, where)
+            for name, a in s.attributes.items():
+                scene.add_mesh_attribute(idx, name, name.startswith("face_"), int(a.shape[1]),
+                                         np.ascontiguousarray(a, np.float32).reshape(-1, 1))
             if s.emitter is not None:
                 scene.add_area_emitter(idx, _emitter(s.emitter))
             if s.sensor is not None:

@@ -29,9 +29,10 @@ class SceneError(ValueError):
 
 @dataclass
 class TextureDesc:
-    """A texture (renderer/scene/texture.h): `checkerboard` (color0, color1)
-    or `bitmap` (data: (rows, columns, 1 or 3) float32, linear, row 0 at
-    v = 0); to_uv maps uv (3x3, affine)."""
+    """A texture (renderer/scene/texture.h): `checkerboard` (color0, color1),
+    `bitmap` (data: (rows, columns, 1 or 3) float32, linear, row 0 at
+    v = 0), `rawconstant` (value: 1 or 3 floats) or `mesh_attribute` (name
+    of a mesh's attribute, scale); to_uv maps uv (3x3, affine)."""
     type: str = "checkerboard"
     id: str = ""  # the place it came from, for error messages
     color0: tuple = field(default_factory=lambda: _rgb(0.4))
@@ -40,9 +41,17 @@ class TextureDesc:
     data: Optional[np.ndarray] = None
     filter_type: str = "bilinear"
     wrap_mode: str = "repeat"
+    value: tuple = ()  # rawconstant
+    name: str = ""  # mesh_attribute
+    scale: float = 1.0  # mesh_attribute
 
     def mean_rgb(self):
-        """The channel-wise mean colour (what a plain value in its place would be)."""
+        """The channel-wise mean colour (what a plain value in its place would
+        be; a mesh attribute's, which depends on the mesh, is taken as grey 0.5)."""
+        if self.type == "rawconstant":
+            return tuple(float(x) for x in (self.value if len(self.value) == 3 else self.value * 3))
+        if self.type == "mesh_attribute":
+            return (0.5 * self.scale,) * 3
         if self.type == "bitmap":
             m = np.asarray(self.data, np.float64).reshape(-1, self.data.shape[-1]).mean(axis=0)
             return tuple(float(x) for x in (m if m.size == 3 else np.repeat(m, 3)))
@@ -81,11 +90,11 @@ class BsdfDesc:
 
 @dataclass
 class EmitterDesc:
-    type: str = "area"  # area point spot directional constant
+    type: str = "area"  # area point spot projector directional constant envmap
     id: str = ""
     radiance: tuple = field(default_factory=lambda: _rgb(1.0))  # area, constant (scale applied)
     intensity: tuple = field(default_factory=lambda: _rgb(1.0))  # point, spot (scale applied)
-    irradiance: tuple = field(default_factory=lambda: _rgb(1.0))  # directional (scale applied)
+    irradiance: tuple = field(default_factory=lambda: _rgb(1.0))  # directional (scale applied), projector
     to_world: np.ndarray = field(default_factory=_eye)  # point/spot position+frame; directional: +z is the direction
     cutoff_angle: float = 20.0
     beam_width: float = -1.0
@@ -93,7 +102,14 @@ class EmitterDesc:
     # to_world above maps its local frame (Mitsuba's latitude-longitude
     # convention, +y up) to the world.
     env: Optional[np.ndarray] = None
-    textures: dict = field(default_factory=dict)  # spot: {"texture": TextureDesc}, projected along the beam
+    # projector: horizontal field of view in degrees, the image's width /
+    # height, the factor on its irradiance.
+    fov_x: float = 90.0
+    aspect: float = 1.0
+    scale: float = 1.0
+    # spot: {"texture": TextureDesc}, projected along the beam; projector:
+    # {"irradiance": ...}; area: {"radiance": ...} (each replacing the plain value).
+    textures: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -155,6 +171,9 @@ class ShapeDesc:
     interior: Optional[MediumDesc] = None  # medium inside (against the normal)
     exterior: Optional[MediumDesc] = None  # medium outside (the normal's side)
     subsurface: Optional[DipoleDesc] = None  # a dipole BSSRDF; bsdf is then its dielectric boundary
+    # PLY attributes (Mitsuba's vertex_* / face_*): name -> (vertices or
+    # faces, 1 or 3) float32 array, read by mesh_attribute textures.
+    attributes: dict = field(default_factory=dict)
 
 
 @dataclass

@@ -230,7 +230,7 @@ private:
     // The distribution at uv: the constructed one, or one with the textures'
     // alphas (Mitsuba's roughconductor reads alpha_u / alpha_v with eval_1
     // per query). A value, a few floats: no allocation.
-    MicrofacetDistribution distribution(Vec2 uv) const {
+    MicrofacetDistribution distribution(const SurfaceUv& uv) const {
         if (!alpha_u_ && !alpha_v_) return distr_;
         const float au = alpha_u_ ? alpha_u_->eval_1(uv) : distr_.alpha_u();
         const float av = alpha_v_ ? alpha_v_->eval_1(uv) : distr_.alpha_v();
@@ -498,7 +498,9 @@ public:
         return ps + pd > 0.f ? ps / (ps + pd) : 0.5f;
     }
     // Precomputed when untextured; per query from the texture otherwise.
-    Color diffuse_norm(Vec2 uv) const { return diffuse_.textured() ? normalised(diffuse_.texture->eval(uv)) : norm_; }
+    Color diffuse_norm(const SurfaceUv& uv) const {
+        return diffuse_.textured() ? normalised(diffuse_.texture->eval(uv)) : norm_;
+    }
     bool textured() const { return diffuse_.textured(); }
     const Color& specular() const { return specular_; }
     float inv_eta2() const { return inv_eta2_; }

@@ -38,7 +38,7 @@ enum class TransportMode : uint8_t { Radiance, Importance };
 // read it).
 struct BsdfContext {
     TransportMode mode = TransportMode::Radiance;
-    Vec2 uv{};
+    SurfaceUv uv{};
 };
 
 struct BsdfSample {

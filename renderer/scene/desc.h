@@ -54,13 +54,17 @@ struct EmitterDesc {
     Matrix4 to_world = identity4();  // point/spot: position + frame (spot looks along +z)
     float cutoff_angle = 20.f;       // spot, degrees
     float beam_width = -1.f;         // spot, degrees; < 0: 3/4 of cutoff_angle (Mitsuba default)
+    // projector: horizontal field of view (degrees; fov_axis resolved in
+    // Python), the image's width / height, and `scale` on the irradiance.
+    float fov_x = 90.f, aspect = 1.f, scale = 1.f;
     // envmap: a latitude-longitude image, env_height rows of env_width RGB
     // pixels (row 0 looks along local +y), radiance with `scale` applied;
     // to_world maps its local frame to the world.
     int env_width = 0, env_height = 0;
     std::vector<float> env_data;
     // Textures by parameter name: spot "texture" (projected along the beam,
-    // multiplying the intensity; Mitsuba 3's spot).
+    // multiplying the intensity; Mitsuba 3's spot), projector "irradiance"
+    // (which then replaces the plain irradiance), area "radiance".
     std::map<std::string, TextureDesc> textures;
 };
 

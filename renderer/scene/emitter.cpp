@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "core/distribution.h"
 #include "core/warp.h"
 #include "scene/shape.h"
 #include "scene/texture.h"
@@ -18,10 +19,28 @@ void check_color(const Color& c, const std::string& id, const char* name) {
         throw std::invalid_argument("emitter '" + id + "': " + name + " must be finite and non-negative");
 }
 
+// The texture given for parameter `name` (null: none); any other textured
+// parameter is refused by name.
+std::shared_ptr<const Texture> texture_param(const EmitterDesc& d, const char* name) {
+    for (const auto& [param, tex] : d.textures) {
+        if (param != name)
+            throw std::invalid_argument("emitter '" + d.id + "': parameter '" + param + "' cannot take a texture");
+    }
+    auto it = d.textures.find(name);
+    if (it == d.textures.end()) return nullptr;
+    try {
+        return make_texture(it->second);
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument("emitter '" + d.id + "': parameter '" + name + "': " + e.what());
+    }
+}
+
 class AreaEmitter final : public Emitter {
 public:
     AreaEmitter(const EmitterDesc& d, const Shape* shape) : shape_(shape), radiance_(d.radiance) {
-        check_color(radiance_, d.id, "radiance");
+        check_color(radiance_.value, d.id, "radiance");
+        radiance_.texture = texture_param(d, "radiance");
+        textured_ = radiance_.textured();
         if (!(shape_->area() > 0.f))
             throw std::invalid_argument("emitter '" + d.id + "': its shape '" + shape_->id + "' has zero area");
     }
@@ -47,7 +66,7 @@ public:
         if (cos_l <= 0.f && !by_direction) return ds;
         // Area to solid angle: p_w = p_a d^2 / |cos theta_l| (Veach 1997, eq. 8.10).
         ds.pdf_w = by_direction ? cone_pdf_w : ps.pdf_a * d2 / cos_l;
-        ds.radiance = radiance_;
+        ds.radiance = radiance_.eval(ps.uv);
         return ds;
     }
     float pdf_direct(const Vec3& ref, const Vec3& p, const Vec3& n) const override {
@@ -60,10 +79,12 @@ public:
         return d2 / (cos_l * shape_->area());
     }
     Color eval(const Interaction& it, const Vec3& w) const override {
-        return dot(it.sh.n, w) > 0.f ? radiance_ : Color(0.f);
+        return dot(it.sh.n, w) > 0.f ? radiance_.eval(it.uv) : Color(0.f);
     }
     // Position by area, direction cosine-weighted about the emitting side's
     // normal: weight = Le cos / (pdf_a cos / pi) = Le pi / pdf_a (PBR4 12.5.1).
+    // A textured radiance is read at the point's uv; the point stays
+    // uniform by area (an unbiased choice whatever the texture).
     EmissionSample sample_emission(Vec2 u_pos, float u_extra, Vec2 u_dir, const Vec3&, float) const override {
         EmissionSample es;
         PositionSample ps = shape_->sample_position(u_pos, u_extra);
@@ -72,21 +93,26 @@ public:
         if (!(local.z > 0.f)) return es;
         es.p = ps.p;
         es.n = ps.n;
+        es.uv = ps.uv;
         es.eps = ps.eps;
         es.d = Frame(ps.n).to_world(local);
         es.pdf_a = ps.pdf_a;
         es.pdf_w = warp::square_to_cosine_hemisphere_pdf_w(local);
-        es.weight = radiance_ * (kPi / ps.pdf_a);
+        es.weight = radiance_.eval(ps.uv) * (kPi / ps.pdf_a);
         return es;
     }
     Color emitted_towards(const EmissionSample& es, const Vec3& w) const override {
         float c = dot(es.n, w);
         if (!(c > 0.f) || !(es.pdf_a > 0.f)) return Color(0.f);
-        return radiance_ * (c / es.pdf_a);
+        return radiance_.eval(es.uv) * (c / es.pdf_a);
     }
     float pdf_emission_a(const Vec3&) const override { return 1.f / shape_->area(); }
-    // pi L A: a cosine emitter on one side of every point.
-    float power(float) const override { return luminance(radiance_) * kPi * shape_->area(); }
+    // pi L A: a cosine emitter on one side of every point (a texture's mean
+    // for L: the light selection's weight, an estimate).
+    float power(float) const override {
+        const float l = radiance_.textured() ? radiance_.texture->mean() : luminance(radiance_.value);
+        return l * kPi * shape_->area();
+    }
     bool light_bounds(LightBounds& b) const override {
         b.lo = shape_->bbox_min();
         b.hi = shape_->bbox_max();
@@ -101,7 +127,7 @@ public:
 
 private:
     const Shape* shape_;
-    Color radiance_;
+    TexturedColor radiance_;
 };
 
 class PointEmitter final : public Emitter {
@@ -152,28 +178,54 @@ private:
     Vec3 pos_;
 };
 
-class SpotEmitter final : public Emitter {
+// A light at a point, the origin of to_world, whose intensity depends on the
+// direction in to_world's frame: spot and projector. Next event estimation
+// and the s = 1 connection of light paths read that intensity the same way;
+// each light samples its own directions.
+class LocalDeltaEmitter : public Emitter {
 public:
-    explicit SpotEmitter(const EmitterDesc& d) : intensity_(d.intensity) {
-        check_color(intensity_, d.id, "intensity");
-        for (const auto& [name, tex] : d.textures) {
-            if (name != "texture")
-                throw std::invalid_argument("emitter '" + d.id + "': parameter '" + name + "' cannot take a texture");
-            try {
-                texture_ = make_texture(tex);
-            } catch (const std::invalid_argument& e) {
-                throw std::invalid_argument("emitter '" + d.id + "': parameter 'texture': " + e.what());
-            }
-        }
+    DirectSample sample_direct(const Vec3& ref, Vec2, float) const override {
+        DirectSample ds;
+        Vec3 v = pos_ - ref;
+        float d2 = length_sq(v);
+        if (!(d2 > 0.f)) return ds;
+        ds.dist = std::sqrt(d2);
+        ds.d = v / ds.dist;
+        ds.p = pos_;
+        ds.pdf_w = 1.f;
+        ds.is_delta = true;
+        ds.radiance = intensity_over(normalize(xf_.inv_vector(-ds.d)), d2);
+        return ds;
+    }
+    Color emitted_towards(const EmissionSample&, const Vec3& w) const override {
+        return intensity_over(normalize(xf_.inv_vector(w)), 1.f);
+    }
+
+protected:
+    explicit LocalDeltaEmitter(const EmitterDesc& d) {
         if (!xf_.set(d.to_world.data())) throw std::invalid_argument("emitter '" + d.id + "': singular to_world");
+        pos_ = xf_.point(Vec3(0.f));
+        delta_ = true;
+    }
+    // The intensity towards the unit local direction `local`, divided by d2
+    // (the squared distance of the point it reaches; 1: the intensity).
+    virtual Color intensity_over(const Vec3& local, float d2) const = 0;
+    Transform xf_;
+    Vec3 pos_;
+};
+
+class SpotEmitter final : public LocalDeltaEmitter {
+public:
+    explicit SpotEmitter(const EmitterDesc& d) : LocalDeltaEmitter(d), intensity_(d.intensity) {
+        check_color(intensity_, d.id, "intensity");
+        texture_ = texture_param(d, "texture");
+        textured_ = texture_ != nullptr;
         if (!(d.cutoff_angle > 0.f && d.cutoff_angle <= 180.f))
             throw std::invalid_argument("emitter '" + d.id + "': cutoff_angle must be in (0, 180] degrees");
         float beam = d.beam_width < 0.f ? 0.75f * d.cutoff_angle : d.beam_width;
         cutoff_ = d.cutoff_angle * kPi / 180.f;
         beam_ = std::min(beam * kPi / 180.f, cutoff_);
         uv_factor_ = std::tan(cutoff_);
-        pos_ = xf_.point(Vec3(0.f));
-        delta_ = true;
     }
     // Mitsuba 3 spot falloff: 1 inside the beam, linear in angle to 0 at the
     // cutoff. Compared as angles from atan2(|xy|, z): the cosine of a 0.01
@@ -192,20 +244,9 @@ public:
         const float s = 0.5f / (local.z * uv_factor_);
         return intensity_ * texture_->eval(Vec2(0.5f + local.x * s, 0.5f + local.y * s));
     }
-    DirectSample sample_direct(const Vec3& ref, Vec2, float) const override {
-        DirectSample ds;
-        Vec3 v = pos_ - ref;
-        float d2 = length_sq(v);
-        if (!(d2 > 0.f)) return ds;
-        ds.dist = std::sqrt(d2);
-        ds.d = v / ds.dist;
-        ds.p = pos_;
-        ds.pdf_w = 1.f;
-        ds.is_delta = true;
-        Vec3 local = normalize(xf_.inv_vector(-ds.d));
+    Color intensity_over(const Vec3& local, float d2) const override {
         const float f = falloff(local);
-        ds.radiance = intensity_towards(local, f) * (f / d2);
-        return ds;
+        return intensity_towards(local, f) * (f / d2);
     }
     // Direction uniform in the cone of the cutoff angle (as Mitsuba 3's spot),
     // weight = I falloff / pdf_w. 1 - cos(cutoff) is formed as 2 sin^2(c / 2):
@@ -224,11 +265,6 @@ public:
         const float f = falloff(local);
         es.weight = intensity_towards(local, f) * (f * 2.f * kPi * omc_max);
         return es;
-    }
-    Color emitted_towards(const EmissionSample&, const Vec3& w) const override {
-        const Vec3 local = normalize(xf_.inv_vector(w));
-        const float f = falloff(local);
-        return intensity_towards(local, f) * f;
     }
     float pdf_emission_w(const Vec3&, const Vec3& w) const override {
         Vec3 local = normalize(xf_.inv_vector(w));
@@ -258,9 +294,102 @@ private:
     Color intensity_;
     std::shared_ptr<const Texture> texture_;  // spot "texture"; null: none
     float uv_factor_ = 1.f;                   // tan(cutoff)
-    Transform xf_;
-    Vec3 pos_;
     float cutoff_, beam_;
+};
+
+// Mitsuba 3's projector (src/emitters/projector.cpp): the reciprocal of a
+// perspective camera of horizontal field of view fov_x whose image, the
+// `irradiance` texture, lies on the plane z = 1 of its local frame, with
+// Mitsuba's sample-space uv: u = 1/2 - x / (2 z tan(fov_x / 2)),
+// v = 1/2 - y / (2 z tan(fov_x / 2) / aspect), aspect = the texture's
+// width / height (1 for a plain colour). Towards a local unit direction of
+// cosine c = z inside the image, the intensity is
+//     I = scale pi E(uv) / c^3,
+// Mitsuba's sample_direction (E pi / (z_local^2 cos theta) arriving at a
+// point of local depth z_local = dist c): a constant E lights the plane
+// z = 1 with irradiance pi E, so a white diffuse plane there reflects E.
+// Light paths sample uv by the texture's sampling grid (Texture::
+// sampling_grid), the direction through the image-plane point: with the
+// plane's area A = 4 tan^2(fov_x / 2) / aspect, dw = c^3 A duv, so
+// pdf_w = pdf_uv / (A c^3) and weight = I / pdf_w = scale pi E A / pdf_uv,
+// Mitsuba's sample_ray weight (pi m_sensor_area E / pdf).
+class ProjectorEmitter final : public LocalDeltaEmitter {
+public:
+    explicit ProjectorEmitter(const EmitterDesc& d) : LocalDeltaEmitter(d), scale_(d.scale) {
+        irradiance_.value = d.irradiance;
+        check_color(irradiance_.value, d.id, "irradiance");
+        irradiance_.texture = texture_param(d, "irradiance");
+        textured_ = irradiance_.textured();
+        if (!(scale_ >= 0.f && std::isfinite(scale_)))
+            throw std::invalid_argument("emitter '" + d.id + "': scale must be finite and non-negative");
+        if (!(d.fov_x > 0.f && d.fov_x < 180.f))
+            throw std::invalid_argument("emitter '" + d.id + "': fov must be in (0, 180) degrees");
+        if (!(d.aspect > 0.f && std::isfinite(d.aspect)))
+            throw std::invalid_argument("emitter '" + d.id + "': aspect must be positive");
+        tx_ = std::tan(0.5f * d.fov_x * kPi / 180.f);
+        ty_ = tx_ / d.aspect;
+        area_ = 4.f * tx_ * ty_;
+        int nx = 1, ny = 1;
+        std::vector<double> w(1, 1.0);
+        if (irradiance_.texture) irradiance_.texture->sampling_grid(nx, ny, w);
+        grid_ = PiecewiseConstant2D(w, nx, ny);
+    }
+    Color intensity_over(const Vec3& local, float d2) const override {
+        Vec2 uv;
+        if (!image_uv(local, uv)) return Color(0.f);
+        const float c = local.z;
+        return irradiance_.eval(uv) * (scale_ * kPi / (c * c * c * d2));
+    }
+    EmissionSample sample_emission(Vec2, float, Vec2 u, const Vec3&, float) const override {
+        EmissionSample es;
+        int i, j;
+        double rx, ry, p;
+        if (!grid_.sample(u, i, j, rx, ry, p)) return es;
+        const Vec2 uv(float((double(i) + rx) / double(grid_.nx())), float((double(j) + ry) / double(grid_.ny())));
+        const float pdf_uv = float(p * double(grid_.nx()) * double(grid_.ny()));
+        const Vec3 local = normalize(Vec3((1.f - 2.f * uv.x) * tx_, (1.f - 2.f * uv.y) * ty_, 1.f));
+        es.p = pos_;
+        es.d = normalize(xf_.vector(local));
+        es.pdf_a = 1.f;
+        es.pdf_w = pdf_uv / (area_ * local.z * local.z * local.z);
+        es.weight = irradiance_.eval(uv) * (scale_ * kPi * area_ / pdf_uv);
+        return es;
+    }
+    float pdf_emission_w(const Vec3&, const Vec3& w) const override {
+        const Vec3 local = normalize(xf_.inv_vector(w));
+        Vec2 uv;
+        if (!image_uv(local, uv)) return 0.f;
+        const int i = std::min(int(uv.x * float(grid_.nx())), grid_.nx() - 1);
+        const int j = std::min(int(uv.y * float(grid_.ny())), grid_.ny() - 1);
+        const float pdf_uv = float(grid_.prob(i, j) * double(grid_.nx()) * double(grid_.ny()));
+        return pdf_uv / (area_ * local.z * local.z * local.z);
+    }
+    // The flux: the integral of I over the image's directions, scale pi A
+    // times the mean of E over uv (its luminance; a texture's mean()).
+    float power(float) const override {
+        const float e = irradiance_.textured() ? irradiance_.texture->mean() : luminance(irradiance_.value);
+        return scale_ * kPi * area_ * e;
+    }
+    // The cone through the image's corners, widened by 1e-3 rad.
+    bool light_bounds(LightBounds& b) const override {
+        b.lo = b.hi = pos_;
+        b.w = normalize(xf_.vector(Vec3(0.f, 0.f, 1.f)));
+        b.cos_o = std::cos(std::min(std::atan(std::sqrt(tx_ * tx_ + ty_ * ty_)) + 1e-3f, kPi));
+        b.cos_e = std::cos(1e-3f);
+        return true;
+    }
+
+private:
+    // Mitsuba's camera_to_sample for the local direction; false outside the image or behind.
+    bool image_uv(const Vec3& local, Vec2& uv) const {
+        if (!(local.z > 0.f)) return false;
+        uv = Vec2(0.5f - local.x / (2.f * local.z * tx_), 0.5f - local.y / (2.f * local.z * ty_));
+        return uv.x >= 0.f && uv.x <= 1.f && uv.y >= 0.f && uv.y <= 1.f;
+    }
+    TexturedColor irradiance_;
+    float scale_ = 1.f;
+    float tx_ = 1.f, ty_ = 1.f, area_ = 4.f;  // the image's half extents at z = 1, its area
+    PiecewiseConstant2D grid_;                // over uv, from the texture's sampling grid
 };
 
 class DirectionalEmitter final : public Emitter {
@@ -391,18 +520,16 @@ public:
         dphi_ = 2.0 * kPiD / double(w_);
         cos_.resize(size_t(h_));
         for (int j = 0; j < h_; ++j) cos_[size_t(j)] = std::cos(kPiD * double(j) / double(h_ - 1));
-        cond_.assign(size_t(ch) * size_t(cw + 1), 0.0);
-        marg_.assign(size_t(ch) + 1, 0.0);
+        std::vector<double> weights(size_t(ch) * size_t(cw));
         for (int j = 0; j < ch; ++j) {
-            double* c = &cond_[size_t(j) * size_t(cw + 1)];
             double dcos = cos_[size_t(j)] - cos_[size_t(j) + 1];
             for (int i = 0; i < cw; ++i) {
                 double lum = 0.25 * (lum_at(i, j) + lum_at(i + 1, j) + lum_at(i, j + 1) + lum_at(i + 1, j + 1));
-                c[i + 1] = c[i] + lum * dcos * dphi_;
+                weights[size_t(j) * size_t(cw) + size_t(i)] = lum * dcos * dphi_;
             }
-            marg_[size_t(j) + 1] = marg_[size_t(j)] + c[cw];
         }
-        total_ = marg_[size_t(ch)];
+        dist_ = PiecewiseConstant2D(weights, cw, ch);
+        total_ = dist_.total();
     }
 
     Color eval_environment(const Vec3& d) const override {
@@ -424,8 +551,7 @@ public:
         to_uv(d, u, v);
         int i, j;
         cell_of(u, v, i, j);
-        const double* c = &cond_[size_t(j) * size_t(w_ + 1)];
-        double p = (c[i + 1] - c[i]) / total_;
+        double p = dist_.prob(i, j);
         double dcos = cos_[size_t(j)] - cos_[size_t(j) + 1];
         return float(p / (dphi_ * dcos));
     }
@@ -494,34 +620,18 @@ private:
         i = std::clamp(int(x), 0, w_ - 1);
         j = std::clamp(int(v * double(h_ - 1)), 0, h_ - 2);
     }
-    static int find(const double* cdf, int n, double t) {  // last k in [0, n) with cdf[k] <= t
-        int k = int(std::upper_bound(cdf, cdf + n + 1, t) - cdf) - 1;
-        return std::clamp(k, 0, n - 1);
-    }
     Vec3 sample_dir(Vec2 u, float& pdf) const {
         pdf = 0.f;
-        if (!(total_ > 0.0)) return Vec3(0, 0, 1);
-        const int ch = h_ - 1;
-        double t = double(u.y) * total_;
-        int j = find(marg_.data(), ch, t);
-        while (j > 0 && !(marg_[size_t(j) + 1] > marg_[size_t(j)])) --j;  // skip empty rows at the top end
-        double row = marg_[size_t(j) + 1] - marg_[size_t(j)];
-        if (!(row > 0.0)) return Vec3(0, 0, 1);
-        double ry = std::clamp((t - marg_[size_t(j)]) / row, 0.0, 1.0);
-        const double* c = &cond_[size_t(j) * size_t(w_ + 1)];
-        double s = double(u.x) * c[w_];
-        int i = find(c, w_, s);
-        while (i > 0 && !(c[i + 1] > c[i])) --i;
-        double cell = c[i + 1] - c[i];
-        if (!(cell > 0.0)) return Vec3(0, 0, 1);
-        double rx = std::clamp((s - c[i]) / cell, 0.0, 1.0);
+        int i, j;
+        double rx, ry, p;
+        if (!dist_.sample(u, i, j, rx, ry, p)) return Vec3(0, 0, 1);
         // In the cell: phi uniform, cos theta uniform.
         double phi = (double(i) + 0.5 + rx) * dphi_;
         double cos_t = cos_[size_t(j)] + ry * (cos_[size_t(j) + 1] - cos_[size_t(j)]);
         double sin_t = std::sqrt(std::max(0.0, 1.0 - cos_t * cos_t));
         Vec3 l(float(std::sin(phi) * sin_t), float(cos_t), float(-std::cos(phi) * sin_t));
         Vec3 d = normalize(xf_.vector(l));
-        pdf = float((cell / total_) / (dphi_ * (cos_[size_t(j)] - cos_[size_t(j) + 1])));
+        pdf = float(p / (dphi_ * (cos_[size_t(j)] - cos_[size_t(j) + 1])));
         return d;
     }
 
@@ -530,23 +640,19 @@ private:
     Transform xf_;
     double dphi_ = 0.0, total_ = 0.0;
     std::vector<double> cos_;   // cos theta of the grid's rows
-    std::vector<double> cond_;  // per row of cells: CDF over its columns (w + 1 entries)
-    std::vector<double> marg_;  // CDF over the rows of cells
+    PiecewiseConstant2D dist_;  // over the grid's cells
 };
 
 }  // namespace
 
 std::unique_ptr<Emitter> make_area_emitter(const EmitterDesc& desc, const Shape* shape) {
-    if (!desc.textures.empty())
-        throw std::invalid_argument("emitter '" + desc.id + "': parameter '" + desc.textures.begin()->first +
-                                    "' cannot take a texture");
     auto e = std::make_unique<AreaEmitter>(desc, shape);
     e->id = desc.id;
     return e;
 }
 
 std::unique_ptr<Emitter> make_emitter(const EmitterDesc& desc) {
-    if (desc.type != "spot" && !desc.textures.empty())
+    if (desc.type != "spot" && desc.type != "projector" && !desc.textures.empty())
         throw std::invalid_argument("emitter '" + desc.id + "': parameter '" + desc.textures.begin()->first +
                                     "' cannot take a texture");
     std::unique_ptr<Emitter> e;
@@ -554,6 +660,8 @@ std::unique_ptr<Emitter> make_emitter(const EmitterDesc& desc) {
         e = std::make_unique<PointEmitter>(desc);
     else if (desc.type == "spot")
         e = std::make_unique<SpotEmitter>(desc);
+    else if (desc.type == "projector")
+        e = std::make_unique<ProjectorEmitter>(desc);
     else if (desc.type == "directional")
         e = std::make_unique<DirectionalEmitter>(desc);
     else if (desc.type == "constant")

@@ -36,6 +36,7 @@ struct DirectSample {
 struct EmissionSample {
     Vec3 p;             // origin of the ray
     Vec3 n;             // surface normal at p (area emitters; zero otherwise)
+    SurfaceUv uv;       // texture coordinates at p (area emitters)
     Vec3 d;             // unit direction the light travels
     Color weight{0.f};  // Le |cos| / (pdf_a pdf_w); black = failed sample
     float pdf_a = 0.f;  // origin density (1 for a delta position)
@@ -92,9 +93,12 @@ public:
     // At infinity: directional and environment emitters (their light rays
     // start on the disk of infinite_disk_radius around the scene).
     bool is_infinite() const { return infinite_; }
+    // Its emission is a texture (area radiance, spot texture, projector
+    // irradiance): it varies over the surface or the image.
+    bool textured() const { return textured_; }
 
 protected:
-    bool delta_ = false, environment_ = false, infinite_ = false;
+    bool delta_ = false, environment_ = false, infinite_ = false, textured_ = false;
 };
 
 // Radius of the disk outside the scene's bounding sphere (of radius r) on

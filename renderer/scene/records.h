@@ -9,6 +9,22 @@
 
 namespace rm {
 
+struct MeshAttributes;  // scene/texture.h
+
+// A surface point's texture coordinates (the Vec2 itself), and, on a mesh
+// that carries attributes (Mitsuba's vertex_* and face_* PLY properties),
+// the triangle, its barycentrics and the mesh's attributes, which
+// mesh_attribute textures read. It travels wherever the uv does (hits,
+// BsdfContext, position and emission samples), so a texture sees the same
+// point whichever estimator asks; a plain Vec2 converts to it with no mesh.
+struct SurfaceUv : Vec2 {
+    int prim = -1;
+    Vec2 bary;  // (b1, b2) of the triangle's corners 1 and 2
+    const MeshAttributes* attributes = nullptr;
+    SurfaceUv() = default;
+    SurfaceUv(const Vec2& uv) : Vec2(uv) {}  // NOLINT: a plain uv converts implicitly
+};
+
 struct Ray {
     Vec3 o, d;
     float tmin = 0.f;
@@ -24,7 +40,7 @@ struct Interaction {
     Vec3 p;    // position, world space
     Vec3 n;    // geometric normal, oriented as the shape declares (flip_normals applied)
     Frame sh;  // shading frame (z = shading normal, same side as n)
-    Vec2 uv;
+    SurfaceUv uv;
     Vec3 wi;         // direction towards the previous vertex, world space
     int shape = -1;  // index in Scene::shapes
     int prim = -1;

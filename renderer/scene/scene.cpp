@@ -117,6 +117,18 @@ int Scene::add_mesh(const std::string& id, std::vector<float> positions, std::ve
     return add_shape(std::move(m), bsdf, flip_normals, group);
 }
 
+void Scene::add_mesh_attribute(int shape, const MeshAttribute& attribute) {
+    if (shape < 0 || size_t(shape) >= shapes.size()) throw std::invalid_argument("add_mesh_attribute: no such shape");
+    auto* mesh = dynamic_cast<Mesh*>(shapes[size_t(shape)].get());
+    if (!mesh)
+        throw std::invalid_argument("shape '" + shapes[size_t(shape)]->id + "': attribute '" + attribute.name +
+                                    "': only meshes carry attributes");
+    for (float v : attribute.data)
+        if (!std::isfinite(v))
+            throw std::invalid_argument("shape '" + mesh->id + "': attribute '" + attribute.name + "' is not finite");
+    mesh->add_attribute(attribute);
+}
+
 int Scene::add_sphere(const std::string& id, Vec3 center, float radius, int bsdf, bool flip_normals,
                       const Matrix4& to_world, int group) {
     if (!(radius > 0.f) || !std::isfinite(radius) || !is_finite(center))

@@ -79,6 +79,9 @@ public:
     int add_instance(const std::string& id, int group, const Matrix4& to_world);
     // set_shape_media for member `member` of shapegroup `group` (before its first instance).
     void set_member_media(int group, int member, int interior, int exterior);
+    // A vertex_* or face_* attribute of mesh `shape` (Mesh::add_attribute):
+    // vertices (or triangles) x channels floats.
+    void add_mesh_attribute(int shape, const MeshAttribute& attribute);
     void add_area_emitter(int shape, const EmitterDesc& desc);
     void add_emitter(const EmitterDesc& desc);
     void set_sensor(const SensorDesc& desc);

@@ -120,20 +120,46 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
         if (l > 0 && std::isfinite(l)) ns = flip_normals ? -(s / l) : s / l;
     }
     it.sh = Frame(ns);
-    if (!uvs_.empty()) {
+    it.uv = surface_uv(f, b1, b2);
+    if (!uvs_.empty() && uv_frame) {
+        // dp/du of the triangle's uv parametrisation (Mitsuba 3
+        // src/render/mesh.cpp, compute_surface_interaction): solve
+        // [dp0 dp1] = [dp/du dp/dv] [duv0 duv1] for dp/du.
         auto uv = [&](uint32_t i) { return Vec2(uvs_[2 * i], uvs_[2 * i + 1]); };
-        it.uv = uv(i0) * b0 + uv(i1) * b1 + uv(i2) * b2;
-        if (uv_frame) {
-            // dp/du of the triangle's uv parametrisation (Mitsuba 3
-            // src/render/mesh.cpp, compute_surface_interaction): solve
-            // [dp0 dp1] = [dp/du dp/dv] [duv0 duv1] for dp/du.
-            const Vec2 duv0 = uv(i1) - uv(i0), duv1 = uv(i2) - uv(i0);
-            const float det = duv0.x * duv1.y - duv0.y * duv1.x;
-            if (det != 0.f) it.sh = tangent_frame(ns, ((p1 - p0) * duv1.y - (p2 - p0) * duv0.y) * (1.f / det));
-        }
-    } else {
-        it.uv = Vec2(b1, b2);
+        const Vec2 duv0 = uv(i1) - uv(i0), duv1 = uv(i2) - uv(i0);
+        const float det = duv0.x * duv1.y - duv0.y * duv1.x;
+        if (det != 0.f) it.sh = tangent_frame(ns, ((p1 - p0) * duv1.y - (p2 - p0) * duv0.y) * (1.f / det));
     }
+}
+
+SurfaceUv Mesh::surface_uv(uint32_t f, float b1, float b2) const {
+    SurfaceUv out;
+    if (!uvs_.empty()) {
+        const uint32_t i0 = indices_[3 * f], i1 = indices_[3 * f + 1], i2 = indices_[3 * f + 2];
+        auto uv = [&](uint32_t i) { return Vec2(uvs_[2 * i], uvs_[2 * i + 1]); };
+        out = uv(i0) * (1.f - b1 - b2) + uv(i1) * b1 + uv(i2) * b2;
+    } else {
+        out = Vec2(b1, b2);
+    }
+    if (!attributes_.list.empty()) {
+        out.prim = int(f);
+        out.bary = Vec2(b1, b2);
+        out.attributes = &attributes_;
+    }
+    return out;
+}
+
+void Mesh::add_attribute(MeshAttribute a) {
+    const size_t n = a.per_face ? triangle_count() : num_vertices_;
+    if (a.channels != 1 && a.channels != 3)
+        throw std::invalid_argument("shape '" + id + "': attribute '" + a.name + "' must have 1 or 3 channels");
+    if (a.data.size() != n * size_t(a.channels))
+        throw std::invalid_argument("shape '" + id + "': attribute '" + a.name + "' must have " + std::to_string(n) +
+                                    " x " + std::to_string(a.channels) + " values");
+    for (auto& b : attributes_.list)
+        if (b.name == a.name) throw std::invalid_argument("shape '" + id + "': attribute '" + a.name + "' given twice");
+    attributes_.list.push_back(std::move(a));
+    attributes_.indices = indices_.data();
 }
 
 PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
@@ -150,6 +176,7 @@ PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
     constexpr float kGamma7 = 7.f * 0x1p-24f / (1.f - 7.f * 0x1p-24f);
     ps.eps = offset_epsilon(ps.p, ps.n, (abs(p0 * b0) + abs(p1 * b.x) + abs(p2 * b.y)) * kGamma7);
     ps.pdf_a = 1.f / total_area_;
+    ps.uv = surface_uv(uint32_t(f), b.x, b.y);
     return ps;
 }
 
@@ -399,11 +426,7 @@ void Sphere::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Intera
     // to_world's inverse; rot_ is orthogonal, so its inverse is its transpose.
     const double lx = rot_[0][0] * px + rot_[1][0] * py + rot_[2][0] * pz;
     const double ly = rot_[0][1] * px + rot_[1][1] * py + rot_[2][1] * pz;
-    const double lz = rot_[0][2] * px + rot_[1][2] * py + rot_[2][2] * pz;
-    double phi = std::atan2(ly, lx);
-    if (phi < 0) phi += 2 * 3.14159265358979323846;
-    it.uv = Vec2(float(phi / (2 * 3.14159265358979323846)),
-                 float(std::acos(std::min(1.0, std::max(-1.0, lz))) / 3.14159265358979323846));
+    it.uv = uv_of(px, py, pz);
     if (flip_normals) n = -n;
     it.n = n;
     it.sh = Frame(n);
@@ -418,11 +441,22 @@ void Sphere::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Intera
     it.eps = hit_epsilon(it.p, float(r_));
 }
 
+Vec2 Sphere::uv_of(double px, double py, double pz) const {
+    const double lx = rot_[0][0] * px + rot_[1][0] * py + rot_[2][0] * pz;
+    const double ly = rot_[0][1] * px + rot_[1][1] * py + rot_[2][1] * pz;
+    const double lz = rot_[0][2] * px + rot_[1][2] * py + rot_[2][2] * pz;
+    double phi = std::atan2(ly, lx);
+    if (phi < 0) phi += 2 * 3.14159265358979323846;
+    return Vec2(float(phi / (2 * 3.14159265358979323846)),
+                float(std::acos(std::min(1.0, std::max(-1.0, lz))) / 3.14159265358979323846));
+}
+
 PositionSample Sphere::sample_position(Vec2 u, float) const {
     PositionSample ps;
     Vec3 d = warp::square_to_uniform_sphere(u);
     ps.p = Vec3(float(cx_ + r_ * d.x), float(cy_ + r_ * d.y), float(cz_ + r_ * d.z));
     ps.n = flip_normals ? -d : d;
+    ps.uv = uv_of(d.x, d.y, d.z);
     ps.pdf_a = 1.f / area();
     ps.eps = hit_epsilon(ps.p, float(r_));
     return ps;
@@ -477,6 +511,7 @@ bool Sphere::sample_direction(const Vec3& ref, Vec2 u, PositionSample& ps, float
     nx /= nl, ny /= nl, nz /= nl;
     ps.p = Vec3(float(cx_ + r_ * nx), float(cy_ + r_ * ny), float(cz_ + r_ * nz));
     ps.n = Vec3(float(nx), float(ny), float(nz));
+    ps.uv = uv_of(nx, ny, nz);
     ps.eps = hit_epsilon(ps.p, float(r_));
     ps.pdf_a = 0.f;  // not by area
     pdf_w = float(1.0 / (2.0 * 3.14159265358979323846 * omc));
@@ -535,6 +570,9 @@ PositionSample Disk::sample_position(Vec2 u, float) const {
     Vec2 d = warp::square_to_uniform_disk_concentric(u);
     ps.p = xf_.point(Vec3(d.x, d.y, 0.f));
     ps.n = flip_normals ? -normal_ : normal_;
+    float phi = std::atan2(d.y, d.x);  // Mitsuba's disk uv (r, phi / 2 pi), as fill_interaction
+    if (phi < 0) phi += 2 * kPi;
+    ps.uv = Vec2(std::sqrt(d.x * d.x + d.y * d.y), phi * kInv2Pi);
     ps.pdf_a = 1.f / area_;
     ps.eps = hit_epsilon(ps.p, std::sqrt(area_ / kPi));
     return ps;

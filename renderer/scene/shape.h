@@ -19,6 +19,7 @@ namespace rm {
 
 struct PositionSample {
     Vec3 p, n;        // point on the shape and its (oriented) normal
+    SurfaceUv uv;     // its texture coordinates (and mesh attributes), as a hit there has them
     float pdf_a = 0;  // per unit area
     float eps = 0;    // ray-origin offset that clears p's floating-point error
 };
@@ -78,8 +79,14 @@ public:
     // Corner j (0..2) of triangle f, world space (the patches of radiosity).
     Vec3 corner(size_t f, int j) const { return vertex(indices_[3 * f + size_t(j)]); }
     void normal_cone(Vec3& w, float& cos_theta) const override;
+    // A vertex_* or face_* attribute (Mitsuba's Mesh::add_attribute), read by
+    // mesh_attribute textures through the SurfaceUv of hits and samples.
+    void add_attribute(MeshAttribute a);
+    const MeshAttributes& attributes() const { return attributes_; }
 
 private:
+    // uv, triangle, barycentrics and attributes at barycentrics (b1, b2) of triangle f.
+    SurfaceUv surface_uv(uint32_t f, float b1, float b2) const;
     Vec3 vertex(uint32_t i) const { return {pos_[3 * i], pos_[3 * i + 1], pos_[3 * i + 2]}; }
     std::vector<float> pos_;
     std::vector<uint32_t> indices_;
@@ -89,6 +96,7 @@ private:
     float total_area_ = 0;
     size_t num_vertices_ = 0;
     Vec3 lo_, hi_;
+    MeshAttributes attributes_;
 };
 
 class Sphere final : public Shape {
@@ -108,6 +116,8 @@ public:
     double cx_, cy_, cz_, r_;
 
 private:
+    // Mitsuba 3's sphere uv of the unit direction (px, py, pz) from the centre.
+    Vec2 uv_of(double px, double py, double pz) const;
     double rot_[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};  // to_world's linear part / radius (orthogonal)
 };
 

@@ -1,5 +1,6 @@
 #include "scene/texture.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace rm {
@@ -33,12 +34,12 @@ void check_to_uv(const TextureDesc& d) {
 class CheckerboardTexture final : public Texture {
 public:
     CheckerboardTexture(const Color& c0, const Color& c1, const UvMap& map) : c0_(c0), c1_(c1), map_(map) {}
-    Color eval(Vec2 uv) const override {
+    Color eval(const SurfaceUv& uv) const override {
         const Vec2 p = map_.apply(uv);
         const bool mu = p.x - std::floor(p.x) > 0.5f, mv = p.y - std::floor(p.y) > 0.5f;
         return mu == mv ? c0_ : c1_;
     }
-    float eval_1(Vec2 uv) const override {
+    float eval_1(const SurfaceUv& uv) const override {
         const Vec2 p = map_.apply(uv);
         const bool mu = p.x - std::floor(p.x) > 0.5f, mv = p.y - std::floor(p.y) > 0.5f;
         return mu != mv ? average(c0_) : average(c1_);
@@ -71,7 +72,7 @@ public:
         mean_ = float(sum / double(w_ * h_));
     }
 
-    Color eval(Vec2 uv) const override {
+    Color eval(const SurfaceUv& uv) const override {
         const Vec2 p = map_.apply(uv);
         if (!bilinear_) {
             const int x = wrap_index(int(std::floor(p.x * float(w_))), w_, wrap_);
@@ -89,11 +90,31 @@ public:
         const Color f1 = texel(xa, yb) * w0x + texel(xb, yb) * w1x;
         return f0 * w0y + f1 * w1y;
     }
-    float eval_1(Vec2 uv) const override {
+    float eval_1(const SurfaceUv& uv) const override {
         const Color c = eval(uv);
         return ch_ == 1 ? c.x : luminance(c);
     }
     float mean() const override { return mean_; }
+    // Per texel, where to_uv is the identity: its channel mean (nearest),
+    // or the largest over the texels a bilinear lookup in it blends, its
+    // wrapped 3x3 neighbourhood (bilinear), so that no lit uv has a zero
+    // weight. Under another to_uv: uniform.
+    void sampling_grid(int& nx, int& ny, std::vector<double>& w) const override {
+        if (!map_.identity) return Texture::sampling_grid(nx, ny, w);
+        nx = w_;
+        ny = h_;
+        w.assign(size_t(w_) * size_t(h_), 0.0);
+        for (int y = 0; y < h_; ++y)
+            for (int x = 0; x < w_; ++x) {
+                double m = 0.0;
+                const int r = bilinear_ ? 1 : 0;
+                for (int dy = -r; dy <= r; ++dy)
+                    for (int dx = -r; dx <= r; ++dx)
+                        m = std::max(
+                            m, double(average(texel(wrap_index(x + dx, w_, wrap_), wrap_index(y + dy, h_, wrap_)))));
+                w[size_t(y) * size_t(w_) + size_t(x)] = m;
+            }
+    }
 
 private:
     Color texel_at(int i) const {
@@ -108,6 +129,47 @@ private:
     Wrap wrap_;
     bool bilinear_;
     float mean_ = 0.f;
+};
+
+class RawConstantTexture final : public Texture {
+public:
+    explicit RawConstantTexture(const std::vector<float>& v)
+        : value_(v.size() == 1 ? Color(v[0]) : Color(v[0], v[1], v[2])) {}
+    Color eval(const SurfaceUv&) const override { return value_; }
+    float eval_1(const SurfaceUv&) const override { return average(value_); }
+    float mean() const override { return average(value_); }
+
+private:
+    Color value_;
+};
+
+class MeshAttributeTexture final : public Texture {
+public:
+    MeshAttributeTexture(std::string name, float scale) : name_(std::move(name)), scale_(scale) {}
+    // Mitsuba 3's Mesh::eval_attribute: a vertex attribute interpolated as
+    // the position is (b0 v0 + b1 v1 + b2 v2), a face attribute read at the
+    // triangle; 1 channel broadcast to grey. Black off a mesh that has it
+    // (the loader refuses such a scene).
+    Color eval(const SurfaceUv& uv) const override {
+        const MeshAttribute* a = uv.attributes && uv.prim >= 0 ? uv.attributes->find(name_) : nullptr;
+        if (!a) return Color(0.f);
+        auto at = [a](size_t k) {
+            const float* v = &a->data[k * size_t(a->channels)];
+            return a->channels == 1 ? Color(v[0]) : Color(v[0], v[1], v[2]);
+        };
+        if (a->per_face) return at(size_t(uv.prim)) * scale_;
+        const uint32_t* f = uv.attributes->indices + 3 * size_t(uv.prim);
+        const float b1 = uv.bary.x, b2 = uv.bary.y, b0 = 1.f - b1 - b2;
+        return (at(f[0]) * b0 + at(f[1]) * b1 + at(f[2]) * b2) * scale_;
+    }
+    float eval_1(const SurfaceUv& uv) const override { return average(eval(uv)); }
+    // Mitsuba's has none (Texture::mean() is not implemented there); the
+    // value only weighs lobe and light choices, so a mid grey stands in.
+    float mean() const override { return 0.5f * scale_; }
+
+private:
+    std::string name_;
+    float scale_;
 };
 
 }  // namespace
@@ -139,6 +201,18 @@ std::shared_ptr<const Texture> make_texture(const TextureDesc& d) {
         if (d.filter_type != "bilinear" && d.filter_type != "nearest")
             fail(d, "filter_type", "must be \"bilinear\" or \"nearest\", got \"" + d.filter_type + "\"");
         return std::make_shared<BitmapTexture>(d, map, wrap, d.filter_type == "bilinear");
+    }
+    if (d.type == "rawconstant") {
+        if (d.value.size() != 1 && d.value.size() != 3) fail(d, "value", "must hold 1 or 3 floats");
+        for (float v : d.value)
+            if (!std::isfinite(v) || v < 0.f) fail(d, "value", "must be finite and non-negative");
+        return std::make_shared<RawConstantTexture>(d.value);
+    }
+    if (d.type == "mesh_attribute") {
+        if (d.name.rfind("vertex_", 0) != 0 && d.name.rfind("face_", 0) != 0)
+            fail(d, "name", "must start with \"vertex_\" or \"face_\", got \"" + d.name + "\"");
+        if (!std::isfinite(d.scale)) fail(d, "scale", "must be finite");
+        return std::make_shared<MeshAttributeTexture>(d.name, d.scale);
     }
     throw std::invalid_argument("texture '" + d.id + "': unknown type '" + d.type + "'");
 }

@@ -14,6 +14,15 @@
 //                dr::Texture lookup: bilinear reads the four texels around
 //                uv * res - 1/2; nearest the texel floor(uv * res); each
 //                index wrapped on its own. A 1-channel image is grey.
+//  rawconstant   value (1 or 3 floats), returned as it is (Mitsuba 3
+//                src/textures/rawconstant.cpp: no colour conversion).
+//  mesh_attribute  name, scale: a mesh's attribute (Mitsuba 3
+//                src/textures/mesh_attribute.cpp; Mesh::eval_attribute):
+//                vertex_* interpolated with the hit's barycentrics,
+//                face_* constant per triangle, times scale; 1 channel
+//                reads as grey. The mesh comes with the point
+//                (SurfaceUv::attributes); the loader checks that every
+//                shape it is used on has the attribute.
 // eval_1() is a texture read as one number (Mitsuba's Texture::eval_1, which
 // roughness parameters use): a bitmap's single channel, or the luminance
 // (Rec. 709 weights) of its three; for a checkerboard, the channel mean of
@@ -32,11 +41,30 @@
 
 #include "core/math.h"
 #include "core/spectrum.h"
+#include "scene/records.h"
 
 namespace rm {
 
+// A mesh's attributes (Mitsuba's Mesh::add_attribute): per vertex or per
+// face, 1 or 3 channels, with the mesh's triangle indices to interpolate.
+struct MeshAttribute {
+    std::string name;  // vertex_* or face_*
+    bool per_face = false;
+    int channels = 1;
+    std::vector<float> data;  // vertices (or faces) x channels
+};
+struct MeshAttributes {
+    std::vector<MeshAttribute> list;
+    const uint32_t* indices = nullptr;  // the mesh's, 3 per triangle
+    const MeshAttribute* find(const std::string& name) const {
+        for (const auto& a : list)
+            if (a.name == name) return &a;
+        return nullptr;
+    }
+};
+
 struct TextureDesc {
-    std::string type = "checkerboard";  // checkerboard | bitmap
+    std::string type = "checkerboard";  // checkerboard | bitmap | rawconstant | mesh_attribute
     std::string id;                     // for error messages
     Color color0{0.4f}, color1{0.2f};   // checkerboard
     // to_uv, row-major 3x3 (the last row 0 0 1): uv' = M (u, v, 1).
@@ -45,14 +73,25 @@ struct TextureDesc {
     std::vector<float> data;                  // bitmap: height rows of width pixels, channels floats each
     std::string filter_type = "bilinear";
     std::string wrap_mode = "repeat";
+    std::vector<float> value;  // rawconstant: 1 or 3 floats
+    std::string name;          // mesh_attribute
+    float scale = 1.f;         // mesh_attribute
 };
 
 class Texture {
 public:
     virtual ~Texture() = default;
-    virtual Color eval(Vec2 uv) const = 0;
-    virtual float eval_1(Vec2 uv) const = 0;
+    virtual Color eval(const SurfaceUv& uv) const = 0;
+    virtual float eval_1(const SurfaceUv& uv) const = 0;
     virtual float mean() const = 0;
+    // Cell weights over an nx x ny grid on [0, 1]^2 (rows along v) for
+    // importance sampling uv (the projector's image plane): positive
+    // wherever eval() may be non-zero in the cell, so that sampling by
+    // them is unbiased; the default is one cell (uniform).
+    virtual void sampling_grid(int& nx, int& ny, std::vector<double>& weights) const {
+        nx = ny = 1;
+        weights.assign(1, 1.0);
+    }
 };
 
 // Throws std::invalid_argument naming the texture (desc.id) and the
@@ -70,7 +109,7 @@ struct TexturedColor {
     TexturedColor() = default;
     TexturedColor(const Color& v) : value(v) {}  // NOLINT: a plain colour converts implicitly
     bool textured() const { return texture != nullptr; }
-    Color eval(Vec2 uv) const { return texture ? texture->eval(uv) : value; }
+    Color eval(const SurfaceUv& uv) const { return texture ? texture->eval(uv) : value; }
     // Mitsuba's Texture::mean() (see above); the channel average when plain.
     float mean() const { return texture ? texture->mean() : average(value); }
 };

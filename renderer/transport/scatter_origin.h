@@ -27,7 +27,7 @@ struct ScatterOrigin {
     Vec3 p;                      // the vertex itself, not the ray's offset origin
     Frame sh;                    // its shading frame
     Vec3 wi;                     // the direction towards its predecessor, in that frame
-    Vec2 uv;                     // its texture coordinates
+    SurfaceUv uv;                // its texture coordinates
     const Bsdf* bsdf = nullptr;  // null: a medium vertex (its ray leaves p itself) or the camera
 
     void set(const Interaction& it, const Vec3& wi_local, const Bsdf* b) {

@@ -80,15 +80,24 @@ texture    checkerboard: color0 [0.4], color1 [0.2] (colours, not nested
                stored; grey images keep one channel, alpha is dropped),
                filter_type ['bilinear'|'nearest'], wrap_mode ['repeat'|
                'mirror'|'clamp'], to_uv, format, accel (accepted: storage
-               and GPU hints).
+               and GPU hints). .bmp as .png.
+           rawconstant: value (a float or a 3D vector), taken as it is.
+           mesh_attribute: name (vertex_* or face_*), scale [1]: a PLY
+               mesh's attribute (other vertex and face properties, grouped
+               as Mitsuba does: NAME_0.. -> vertex_NAME / face_NAME, r g b
+               -> vertex_color, integers as they are; 1 or 3 channels),
+               vertex attributes interpolated with the barycentrics; every
+               shape it is used on must have the attribute (else a
+               SceneError at its 'name').
            A texture is nested under the parameter's name or referenced
            (<ref name=".." id=".."/>; top-level textures are declarations).
            It takes the place of diffuse.reflectance,
            plastic/roughplastic.diffuse_reflectance,
-           conductor/roughconductor.specular_reflectance and
+           conductor/roughconductor.specular_reflectance,
            roughconductor.alpha / alpha_u / alpha_v (read as one number,
            Mitsuba's eval_1: a checkerboard's squares swap there, as in
-           Mitsuba 3.9.1) (parameters.TEXTURED);
+           Mitsuba 3.9.1), area.radiance, spot.texture and
+           projector.irradiance (parameters.TEXTURED);
            on any other parameter it is a SceneError naming the plugin, the
            parameter and the place. Evaluated at the hit's uv: OBJ/PLY
            vertex uvs (OBJ's v flipped unless flip_tex_coords is false),
@@ -101,12 +110,20 @@ colours   rgb, float, or spectrum: wavelength:value pairs or an .spd file,
            converted as Mitsuba 3's RGB variants do (spectra.py); a uniform
            spectrum is its value, except on an emitter, where it is XYZ
            (v, v, v) in sRGB as in Mitsuba.
-emitter    area (nested in a shape): radiance [1]
+emitter    area (nested in a shape): radiance [1] (a colour or a texture,
+               read at the uv of the emitting point; points are still
+               sampled uniformly by area)
            point: intensity [1], position or to_world
            spot: intensity [1], cutoff_angle [20], beam_width [3/4 cutoff],
                to_world (shines along +z), texture (a nested texture
                projected along the beam, at Mitsuba's uv 1/2 + (x, y) /
                (2 z tan cutoff), multiplying the intensity)
+           projector: irradiance [1] (a colour or a texture: the image on
+               the plane z = 1), scale [1], fov + fov_axis or focal_length
+               (as the perspective sensor's, with the texture's width /
+               height for aspect), to_world (no scale; shines along +z).
+               Mitsuba 3's intensity scale pi E(uv) / cos^3 at its
+               sample-space uv (renderer/scene/emitter.cpp).
            directional: irradiance [1], direction or to_world
            constant: radiance [1]
            envmap: filename (a latitude-longitude image: .exr through the
@@ -115,8 +132,9 @@ emitter    area (nested in a shape): radiance [1]
                to_world, mis_compensation [false] (only false). Mitsuba's
                lat-long convention and bilinear lookup; importance-sampled
                (renderer/scene/emitter.cpp).
-           The other Mitsuba 3 emitters take no 'scale' parameter (3.9.1
-           rejects it as unreferenced), so neither do we: scale the radiance.
+           The other Mitsuba 3 emitters (all but envmap and projector) take
+           no 'scale' parameter (3.9.1 rejects it as unreferenced), so
+           neither do we: scale the radiance.
 sensor     perspective: fov + fov_axis ['x'|'y'|'diagonal'|'smaller'|
                'larger'] or focal_length ['50mm', a string as in Mitsuba],
                near_clip [1e-2], far_clip [1e4], to_world (no scale); accepted

@@ -63,6 +63,7 @@ class _Builder:
         self.confine = confine
         self.warnings = []  # SceneWarning messages, given once the scene is assembled
         self.built = {}  # id(node) -> description, so refs share one object
+        self.attribute_places = {}  # id(a mesh_attribute TextureDesc) -> the place of its name parameter
         self.in_progress = set()
 
     def cached(self, node, make):
@@ -105,10 +106,34 @@ class _Builder:
         return self.cached(node, self._texture)
 
     def _texture(self, node):
-        """checkerboard and bitmap, with Mitsuba 3's parameters and defaults
-        (src/textures/checkerboard.cpp, bitmap.cpp)."""
+        """checkerboard, bitmap, rawconstant and mesh_attribute, with Mitsuba
+        3's parameters and defaults (src/textures/checkerboard.cpp,
+        bitmap.cpp, rawconstant.cpp, mesh_attribute.cpp)."""
         p, t = _Params(node), node.type
         tex = TextureDesc(type=t, id=node.id or node.place)
+        if t == "rawconstant":
+            # Mitsuba: a float or a 3D vector, taken as it is (no colour conversion).
+            prop = node.props.get("value")
+            if prop is None:
+                raise p.error("missing parameter 'value'")
+            if prop.kind in ("float", "integer"):
+                tex.value = (p.float("value", check="nonneg"),)
+            else:
+                v = p.vec3("value", what="a float or a 3D vector")
+                tex.value = tuple(float(x) for x in v)
+                if min(tex.value) < 0:  # as the bitmaps' values: colours and emission are never negative
+                    raise p.error(f"parameter 'value': negative value {min(tex.value)}", prop.place)
+            p.done()
+            return tex
+        if t == "mesh_attribute":
+            tex.name = p.string("name")
+            if not tex.name.startswith(("vertex_", "face_")):
+                raise p.error(f"parameter 'name' must start with \"vertex_\" or \"face_\" (as in Mitsuba), got "
+                              f"'{tex.name}'", node.props["name"].place)
+            tex.scale = p.float("scale", 1.0)
+            self.attribute_places[id(tex)] = node.props["name"].place
+            p.done()
+            return tex
         m = p.transform("to_uv")
         if m is not None:
             # Mitsuba 3.9.1 takes the 3x3 uv map from a 4x4 transform as its
@@ -421,12 +446,18 @@ class _Builder:
 
     def _emitter(self, node):
         p, t = _Params(node), node.type
-        if p.has("scale") and t != "envmap":
+        if p.has("scale") and t not in ("envmap", "projector"):
             raise p.error("Mitsuba 3 emitters take no 'scale' parameter; multiply the "
                           "radiance/intensity/irradiance instead",
                           node.props["scale"].place)
         e = EmitterDesc(type=t, id=node.place)
-        if t in ("area", "constant"):
+        if t == "area" and p.named_child("texture", "radiance") is not None:
+            # A textured radiance (Mitsuba 3's area emitter), read at the uv of the point.
+            node_tex = p.named_child("texture", "radiance")
+            if p.has("radiance"):
+                raise p.error("parameter 'radiance' given both as a value and as a texture", node_tex.place)
+            e.textures["radiance"] = self.texture(node_tex)
+        elif t in ("area", "constant"):
             e.radiance = p.rgb("radiance", 1.0, spectrum="emission")
         elif t == "point":
             pos = p.vec3("position")
@@ -447,6 +478,28 @@ class _Builder:
             if tex is not None:
                 e.textures["texture"] = self.texture(tex)
             m = p.transform("to_world")
+            e.to_world = np.eye(4) if m is None else m
+        elif t == "projector":
+            # Mitsuba 3's projector (src/emitters/projector.cpp): the image's
+            # aspect ratio is the texture's resolution (1 x 1 for a colour).
+            node_tex = p.named_child("texture", "irradiance")
+            if node_tex is not None:
+                if p.has("irradiance"):
+                    raise p.error("parameter 'irradiance' given both as a value and as a texture", node_tex.place)
+                tex = self.texture(node_tex)
+                e.textures["irradiance"] = tex
+                if tex.type == "mesh_attribute":
+                    raise p.error("parameter 'irradiance': a mesh_attribute texture has no value on a projector's "
+                                  "image (it reads a mesh's vertices or faces)", node_tex.place)
+                if tex.data is not None:
+                    e.aspect = tex.data.shape[1] / tex.data.shape[0]
+            else:
+                # props.texture, not texture_d65: a uniform spectrum stays grey.
+                e.irradiance = p.rgb("irradiance", 1.0, spectrum="unbounded")
+            e.scale = p.float("scale", 1.0, check="nonneg")
+            e.fov_x = self._fov_x(p, e.aspect)
+            m = p.transform("to_world")
+            _check_rigid(p, m, "the projector's")
             e.to_world = np.eye(4) if m is None else m
         elif t == "directional":
             d = p.vec3("direction", what="a vector")
@@ -498,8 +551,10 @@ class _Builder:
             face_normals = p.bool("face_normals", False)
             flip_tex = p.bool("flip_tex_coords", True) if t == "obj" else False
             quote = not self.confine
-            pos, f, n, uv = (_read_obj(path, flip_tex, where, quote) if t == "obj"
-                             else _read_ply(path, where, quote))
+            if t == "obj":
+                pos, f, n, uv = _read_obj(path, flip_tex, where, quote)
+            else:
+                pos, f, n, uv, s.attributes = _read_ply(path, where, quote)
             _mesh_shape(s, m, pos, f, n, uv, face_normals, where)
         elif t == "serialized":
             path = self.file(p, "mesh")
@@ -558,8 +613,27 @@ class _Builder:
                               f"the dipole's ({d.int_ior}, {d.ext_ior})", bsdf.place)
             if s.bsdf.type == "plastic":  # the same boundary, as the renderer's dielectric
                 s.bsdf = BsdfDesc(type="dielectric", id=s.bsdf.id, int_ior=d.int_ior, ext_ior=d.ext_ior)
+        self._check_attributes(s, node)
         p.done()
         return s
+
+    def _check_attributes(self, s, node):
+        """Every mesh_attribute texture on the shape's BSDF or emitter names
+        an attribute the shape has (Mitsuba fails at render time; here the
+        load fails, at the texture's 'name')."""
+        def textures(b):
+            yield from b.textures.values()
+            for n in b.nested:
+                yield from textures(n)
+
+        used = list(textures(s.bsdf)) if s.bsdf is not None else []
+        used += list(s.emitter.textures.values()) if s.emitter is not None else []
+        for tex in used:
+            if tex.type == "mesh_attribute" and tex.name not in s.attributes:
+                have = ", ".join(sorted(s.attributes)) or "none"
+                raise SceneError(f"{self.attribute_places[id(tex)]}: texture 'mesh_attribute': parameter 'name': "
+                                 f"the {node.label()} at {node.place} has no attribute '{tex.name}' (its "
+                                 f"attributes: {have}; only PLY meshes carry them)")
 
     # -- subsurface ----------------------------------------------------------
 
@@ -750,11 +824,7 @@ class _Builder:
             for name in ("shutter_open", "shutter_close"):
                 p.float(name)
         if t == "perspective":
-            if m is not None:
-                sv = np.linalg.svd(m[:3, :3], compute_uv=False)
-                if np.any(np.abs(sv - 1.0) > 1e-3):
-                    raise p.error("scale factors in the camera's to_world are not allowed "
-                                  "(as in Mitsuba)", node.props["to_world"].place)
+            _check_rigid(p, m, "the camera's")
             s.fov_x = self._fov_x(p, s.width / s.height)
             p.float("focus_distance")
             for name in ("principal_point_offset_x", "principal_point_offset_y"):
@@ -920,6 +990,17 @@ class _Builder:
             prop = node.props.get(named.group(1)) if named else None
             raise SceneError(f"{(prop or node).place}: {e}") from None
         return desc
+
+
+def _check_rigid(p, m, whose):
+    """A perspective camera's or a projector's to_world (None: none) has no
+    scale factors (Mitsuba refuses them for the camera; the projector's
+    image geometry assumes none either)."""
+    if m is not None:
+        sv = np.linalg.svd(m[:3, :3], compute_uv=False)
+        if np.any(np.abs(sv - 1.0) > 1e-3):
+            raise p.error(f"scale factors in {whose} to_world are not allowed (as in Mitsuba)",
+                          p.node.props["to_world"].place)
 
 
 def _resolve_refs(nodes, ids):

@@ -17,7 +17,7 @@ def _srgb_to_linear(v):
 
 
 def read_rgb(path, where, quote=True):
-    """Linear RGB of the image at `path` (.exr as stored; .png/.jpg/.jpeg
+    """Linear RGB of the image at `path` (.exr as stored; .png/.jpg/.jpeg/.bmp
     decoded from 8- or 16-bit sRGB); SceneError naming `where` otherwise.
     `quote`: False for an untrusted scene (the message says nothing the
     file's decoder said)."""
@@ -29,7 +29,7 @@ def read_rgb(path, where, quote=True):
             img = read_exr(path).image
         except (ValueError, OSError) as e:
             raise SceneError(f"{where}: cannot read the EXR image" + (f" ({e})" if quote else "")) from None
-    elif ext in (".png", ".jpg", ".jpeg"):
+    elif ext in (".png", ".jpg", ".jpeg", ".bmp"):
         try:
             from PIL import Image
 
@@ -43,7 +43,7 @@ def read_rgb(path, where, quote=True):
             raise SceneError(f"{where}: cannot read the image" + (f" ({e})" if quote else "")) from None
         img = _srgb_to_linear(a).astype(np.float32)
     else:
-        raise SceneError(f"{where}: image format '{ext or '(none)'}' is not supported (.exr, .png, .jpg)")
+        raise SceneError(f"{where}: image format '{ext or '(none)'}' is not supported (.exr, .png, .jpg, .bmp)")
     img = np.ascontiguousarray(img, dtype=np.float32)
     if img.ndim != 3 or img.shape[2] != 3:
         raise SceneError(f"{where}: expected an RGB image, got shape {img.shape}")
@@ -58,7 +58,7 @@ def read_texture(path, where, raw=False, quote=True):
     """The pixels of a `bitmap` texture, as Mitsuba 3's bitmap plugin stores
     them in its RGB variants (src/textures/bitmap.cpp): (rows, columns, 1 or
     3) float32, row 0 at the top; grey images keep one channel, alpha is
-    dropped; 8- and 16-bit PNG/JPEG are decoded from sRGB to linear unless
+    dropped; 8- and 16-bit PNG/JPEG/BMP are decoded from sRGB to linear unless
     `raw` (float32, as Mitsuba 3.9.1's scalar_rgb stores them: its format
     'auto' keeps float32 there, measured); EXR as stored. An
     image narrower or shorter than 2 pixels is repeated to 2 (Mitsuba
@@ -72,7 +72,7 @@ def read_texture(path, where, raw=False, quote=True):
             img = np.asarray(read_exr(path).image, dtype=np.float32)
         except (ValueError, OSError) as e:
             raise SceneError(f"{where}: cannot read the EXR image" + (f" ({e})" if quote else "")) from None
-    elif ext in (".png", ".jpg", ".jpeg"):
+    elif ext in (".png", ".jpg", ".jpeg", ".bmp"):
         try:
             from PIL import Image
 
@@ -89,7 +89,7 @@ def read_texture(path, where, raw=False, quote=True):
             a = _srgb_to_linear(a)
         img = a.astype(np.float32)
     else:
-        raise SceneError(f"{where}: image format '{ext or '(none)'}' is not supported (.exr, .png, .jpg)")
+        raise SceneError(f"{where}: image format '{ext or '(none)'}' is not supported (.exr, .png, .jpg, .bmp)")
     if img.ndim != 3 or img.shape[2] not in (1, 3) or img.shape[0] < 1 or img.shape[1] < 1:
         raise SceneError(f"{where}: expected an image of 1 or 3 channels, got shape {img.shape}")
     if not np.all(np.isfinite(img)):

@@ -137,9 +137,10 @@ def _read_obj(path, flip_tex_coords, err, quote=True):
 def _read_ply(path, err, quote=True):
     """PLY (ascii or binary) through plyfile; Mitsuba's names: x y z, nx ny nz,
     u v | texture_u texture_v | s t, face list vertex_indices | vertex_index.
-    Faces must be triangles (Mitsuba 3.9.1 rejects other polygons). Other
-    elements and properties (colours ...) are ignored: Mitsuba keeps them as
-    mesh attributes, which nothing in the subset reads."""
+    Faces must be triangles (Mitsuba 3.9.1 rejects other polygons). The
+    other properties of vertices and faces become Mitsuba's mesh attributes
+    (_ply_attributes); other elements are ignored. Returns positions,
+    faces, normals, uvs and the attributes."""
     try:
         from plyfile import PlyData
     except ImportError:  # pragma: no cover - plyfile is a declared dependency
@@ -182,7 +183,42 @@ def _read_ply(path, err, quote=True):
         raise SceneError(f"{err}: {path}: face index out of range")
     if not all(a is None or np.all(np.isfinite(a)) for a in (p, n, uv)):
         raise SceneError(f"{err}: {path}: non-finite vertex data")
-    return p, f.astype(np.uint32), n, uv
+    attributes = {**_ply_attributes(vert, "vertex_", {"x", "y", "z", "nx", "ny", "nz", "u", "v", "texture_u",
+                                                       "texture_v", "s", "t"}),
+                  **_ply_attributes(face, "face_", {field})}
+    for name, a in attributes.items():
+        if not np.all(np.isfinite(a)):
+            raise SceneError(f"{err}: {path}: non-finite values in attribute '{name}'")
+    return p, f.astype(np.uint32), n, uv, attributes
+
+
+def _ply_attributes(element, prefix, taken):
+    """An element's other scalar properties as Mitsuba 3's PLY reader groups
+    them into mesh attributes (src/shapes/ply.cpp): NAME_0, NAME_1, ...
+    become attribute prefix + NAME with one channel each; r, g, b (or red,
+    green, blue) become prefix + "color", integers kept as they are
+    (Mitsuba 3.9.1 warns that colours should lie in [0, 1] and keeps 255;
+    measured with mitsuba.load_dict). Only groups of 1 or 3 channels are
+    kept (mesh_attribute reads no other)."""
+    groups = {}
+    for pr in element.properties:
+        name = pr.name
+        if name in taken or not hasattr(pr, "val_dtype") or hasattr(pr, "len_dtype"):
+            continue
+        head, _, tail = name.rpartition("_")
+        if head and tail.isdigit():
+            groups.setdefault(head, {})[int(tail)] = name
+        elif name in ("r", "g", "b", "red", "green", "blue"):
+            groups.setdefault("color", {})["rgb".index(name[0])] = name
+    out = {}
+    for head, chans in groups.items():
+        if sorted(chans) not in ([0], [0, 1, 2]):
+            continue
+        cols = []
+        for k in sorted(chans):
+            cols.append(np.asarray(element[chans[k]], dtype=np.float64))
+        out[prefix + head] = np.stack(cols, axis=1).astype(np.float32)
+    return out
 
 
 def _mesh_shape(shape, m, p, f, n, uv, face_normals, err):

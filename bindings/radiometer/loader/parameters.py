@@ -83,6 +83,8 @@ TEXTURED = {
     "principledthin": ("base_color", "roughness", "anisotropic", "spec_trans", "spec_tint", "sheen", "sheen_tint",
                        "flatness", "eta", "diff_trans"),
     "blendbsdf": ("weight",),
+    "projector": ("irradiance",),
+    "area": ("radiance",),
 }
 _TEXTURED_TEXT = "; ".join(f"{t}.{', '.join(n)}" for t, n in TEXTURED.items())
 

@@ -11,7 +11,7 @@ PLUGINS = {
     "bsdf": ("diffuse", "conductor", "roughconductor", "dielectric", "roughdielectric",
              "thindielectric", "plastic", "roughplastic", "twosided", "null", "principled", "principledthin",
              "blendbsdf"),
-    "emitter": ("area", "point", "spot", "directional", "constant", "envmap"),
+    "emitter": ("area", "point", "spot", "projector", "directional", "constant", "envmap"),
     "sensor": ("perspective", "orthographic", "radiancemeter", "irradiancemeter"),
     "film": ("hdrfilm",),
     "rfilter": ("box", "tent", "gaussian"),
@@ -22,6 +22,6 @@ PLUGINS = {
     "phase": ("isotropic", "hg"),
     "volume": ("gridvolume", "constvolume"),
     "subsurface": ("dipole",),
-    "texture": ("checkerboard", "bitmap"),
+    "texture": ("checkerboard", "bitmap", "rawconstant", "mesh_attribute"),
 }
 _CATEGORY_OF = {t: c for c, types in PLUGINS.items() for t in types}

@@ -272,11 +272,16 @@ public:
                                             "': its BSDF is textured (a patch has one reflectance; use 'path' "
                                             "or 'bdpt')");
         }
-        for (const auto& e : scene.emitters)
+        for (const auto& e : scene.emitters) {
             if (e->is_delta() || e->is_infinite() || e->is_environment())
                 throw std::invalid_argument("integrator 'radiosity' cannot render emitter '" + e->id +
                                             "': only area emitters (on shapes) are patches; use 'path' or "
                                             "'bdpt'");
+            if (e->textured())
+                throw std::invalid_argument("integrator 'radiosity' cannot render emitter '" + e->id +
+                                            "': its radiance is textured (a patch has one emission; use 'path' "
+                                            "or 'bdpt')");
+        }
     }
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator 'radiosity' renders through its own driver");
