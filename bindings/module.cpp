@@ -44,6 +44,15 @@ py::array_t<double> map_channel(int ch, const DoubleArray& x, F f) {
     return out;
 }
 
+// The context of the Bsdf bindings' queries: one uv and n_base for all N.
+BsdfContext bsdf_test_context(bool adjoint, const std::array<float, 2>& uv, const std::array<float, 3>& n_base) {
+    BsdfContext ctx;
+    ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+    ctx.uv = Vec2(uv[0], uv[1]);
+    ctx.n_base = Vec3(n_base[0], n_base[1], n_base[2]);
+    return ctx;
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_core, m) {
@@ -86,6 +95,10 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("sample_visible", &BsdfDesc::sample_visible)
         .def_readwrite("nonlinear", &BsdfDesc::nonlinear)
         .def_readwrite("nested", &BsdfDesc::nested)
+        .def_readwrite("opacity", &BsdfDesc::opacity)
+        .def_readwrite("scale", &BsdfDesc::scale)
+        .def_readwrite("flip_invalid_normals", &BsdfDesc::flip_invalid_normals)
+        .def_readwrite("use_shadowing_function", &BsdfDesc::use_shadowing_function)
         .def_readwrite("textures", &BsdfDesc::textures);
 
     py::class_<EmitterDesc>(m, "EmitterDesc")
@@ -322,13 +335,13 @@ PYBIND11_MODULE(_core, m) {
         .def_property_readonly("flags", &Bsdf::flags)
         .def(
             "eval",
-            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint) {
+            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint, std::array<float, 2> uv,
+               std::array<float, 3> n_base) {
                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
                 size_t n = a.size() / 3;
                 std::vector<float> out(3 * n);
-                BsdfContext ctx;
-                ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                BsdfContext ctx = bsdf_test_context(adjoint, uv, n_base);
                 {
                     py::gil_scoped_release nogil;
                     for (size_t i = 0; i < n; ++i) {
@@ -341,26 +354,30 @@ PYBIND11_MODULE(_core, m) {
                 }
                 return to_numpy(std::move(out), {py::ssize_t(n), 3});
             },
-            py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false,
-            "f(wi, wo) |cos theta_o| for (N, 3) local directions")
+            py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, py::arg("uv") = std::array<float, 2>{0.f, 0.f},
+            py::arg("n_base") = std::array<float, 3>{0.f, 0.f, 1.f},
+            "f(wi, wo) |cos theta_o| for (N, 3) local directions; uv and n_base: the BsdfContext's (textures, "
+            "normal and bump maps)")
         .def(
             "pdf",
-            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint) {
+            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint, std::array<float, 2> uv,
+               std::array<float, 3> n_base) {
                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
                 size_t n = a.size() / 3;
                 std::vector<float> out(n);
-                BsdfContext ctx;
-                ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                BsdfContext ctx = bsdf_test_context(adjoint, uv, n_base);
                 for (size_t i = 0; i < n; ++i)
                     out[i] = b.pdf_w(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
                                      Vec3(c[3 * i], c[3 * i + 1], c[3 * i + 2]));
                 return to_numpy(std::move(out), {py::ssize_t(n)});
             },
-            py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, "solid-angle pdf of sampling wo given wi")
+            py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, py::arg("uv") = std::array<float, 2>{0.f, 0.f},
+            py::arg("n_base") = std::array<float, 3>{0.f, 0.f, 1.f}, "solid-angle pdf of sampling wo given wi")
         .def(
             "sample",
-            [](const Bsdf& b, py::object wi, py::object u1, py::object u2, bool adjoint) {
+            [](const Bsdf& b, py::object wi, py::object u1, py::object u2, bool adjoint, std::array<float, 2> uv,
+               std::array<float, 3> n_base) {
                 auto a = flat<float>(wi, 3, "wi");
                 auto uu1 = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(u1);
                 auto uu2 = flat<float>(u2, 2, "u2");
@@ -368,8 +385,7 @@ PYBIND11_MODULE(_core, m) {
                 if (!uu1 || size_t(uu1.size()) != n || uu2.size() != 2 * n)
                     throw py::value_error("u1 must be (N,) and u2 (N, 2) for N directions wi");
                 std::vector<float> wo(3 * n), weight(3 * n), pdf(n), eta(n), delta(n), flags(n);
-                BsdfContext ctx;
-                ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                BsdfContext ctx = bsdf_test_context(adjoint, uv, n_base);
                 const float* pu1 = uu1.data();
                 for (size_t i = 0; i < n; ++i) {
                     BsdfSample bs = b.sample(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]), pu1[i],
@@ -393,7 +409,8 @@ PYBIND11_MODULE(_core, m) {
                 r["sampled_flags"] = to_numpy(std::move(flags), {N});
                 return r;
             },
-            py::arg("wi"), py::arg("u1"), py::arg("u2"), py::arg("adjoint") = false);
+            py::arg("wi"), py::arg("u1"), py::arg("u2"), py::arg("adjoint") = false,
+            py::arg("uv") = std::array<float, 2>{0.f, 0.f}, py::arg("n_base") = std::array<float, 3>{0.f, 0.f, 1.f});
 
     py::class_<PhaseFunction>(m, "Phase")
         .def(py::init([](const std::string& type, float g) { return make_phase(type, g); }), py::arg("type"),

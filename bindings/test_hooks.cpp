@@ -64,8 +64,9 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
     scene
         // The closest hits of N rays (origins and directions (N, 3)), as the
         // estimators see them (tests/test_textures.py compares the uv with
-        // Mitsuba's): t (inf: miss), p, n, uv, the shading frame's tangent s,
-        // shape index (-1: miss).
+        // Mitsuba's): t (inf: miss), p, n, uv, the shading frame's tangent s
+        // and normal ns (normal and bump maps applied), n_base (the
+        // unperturbed normal in that frame), shape index (-1: miss).
         .def(
             "intersect_rays",
             [](const Scene& s, py::object o, py::object d) {
@@ -73,8 +74,8 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 auto oo = flat<float>(o, 3, "o"), dd = flat<float>(d, 3, "d");
                 if (oo.size() != dd.size()) throw py::value_error("o and d differ in length");
                 size_t n = oo.size() / 3;
-                std::vector<float> t(n, kInf), p(3 * n, 0.f), nn(3 * n, 0.f), ss(3 * n, 0.f), uv(2 * n, 0.f),
-                    shape(n, -1.f);
+                std::vector<float> t(n, kInf), p(3 * n, 0.f), nn(3 * n, 0.f), ss(3 * n, 0.f), ns(3 * n, 0.f),
+                    nb(3 * n, 0.f), uv(2 * n, 0.f), shape(n, -1.f);
                 for (size_t i = 0; i < n; ++i) {
                     Ray ray;
                     ray.o = Vec3(oo[3 * i], oo[3 * i + 1], oo[3 * i + 2]);
@@ -86,6 +87,8 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                         p[3 * i + size_t(k)] = it.p[k];
                         nn[3 * i + size_t(k)] = it.n[k];
                         ss[3 * i + size_t(k)] = it.sh.s[k];
+                        ns[3 * i + size_t(k)] = it.sh.n[k];
+                        nb[3 * i + size_t(k)] = it.n_base[k];
                     }
                     uv[2 * i] = it.uv.x;
                     uv[2 * i + 1] = it.uv.y;
@@ -98,6 +101,8 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 out["n"] = to_numpy(std::move(nn), {N, 3});
                 out["uv"] = to_numpy(std::move(uv), {N, 2});
                 out["s"] = to_numpy(std::move(ss), {N, 3});
+                out["ns"] = to_numpy(std::move(ns), {N, 3});
+                out["n_base"] = to_numpy(std::move(nb), {N, 3});
                 out["shape"] = to_numpy(std::move(shape), {N});
                 return out;
             },

@@ -67,7 +67,11 @@ class BsdfDesc:
     distribution: str = "beckmann"
     sample_visible: bool = True
     nonlinear: bool = False
-    nested: list = field(default_factory=list)  # twosided: [bsdf] or [front, back]
+    nested: list = field(default_factory=list)  # twosided: [bsdf] or [front, back]; mask, normalmap, bumpmap: [bsdf]
+    opacity: float = 0.5  # mask, when not textured
+    scale: float = 1.0  # bumpmap
+    flip_invalid_normals: bool = True  # normalmap, bumpmap
+    use_shadowing_function: bool = True  # normalmap, bumpmap
     # Textured colour parameters: name -> TextureDesc, replacing the plain
     # value of that name (reflectance, diffuse_reflectance,
     # specular_reflectance), which then holds the texture's mean colour.

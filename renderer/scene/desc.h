@@ -29,12 +29,19 @@ struct BsdfDesc {
     float alpha_u = 0.1f, alpha_v = 0.1f;   // rough*: microfacet roughness
     std::string distribution = "beckmann";  // "beckmann" | "ggx"
     bool sample_visible = true;
-    bool nonlinear = false;        // plastic
-    std::vector<BsdfDesc> nested;  // twosided: 1 (both sides) or 2 (front, back)
+    bool nonlinear = false;              // plastic
+    std::vector<BsdfDesc> nested;        // twosided: 1 (both sides) or 2 (front, back); mask, normalmap, bumpmap: 1
+    float opacity = 0.5f;                // mask, when not textured
+    float scale = 1.f;                   // bumpmap: the height texture's scale
+    bool flip_invalid_normals = true;    // normalmap, bumpmap (Mitsuba 3.7.1 on)
+    bool use_shadowing_function = true;  // normalmap, bumpmap (Mitsuba 3.7.1 on)
     // Textured colour parameters: parameter name -> its texture, which then
     // replaces the plain value above (reflectance of diffuse,
     // diffuse_reflectance of plastic and roughplastic, specular_reflectance
-    // of conductor and roughconductor).
+    // of conductor and roughconductor); and the textures that are the
+    // parameter: mask's "opacity" (read as eval_1), normalmap's "normalmap"
+    // (tangent-space normals, RGB = (n + 1) / 2), bumpmap's "bumpmap" (a
+    // height field, read as eval_1 and its uv gradient).
     std::map<std::string, TextureDesc> textures;
 };
 

@@ -7,7 +7,7 @@ Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsd
     DirectSample ds;
     if (!sample_light(scene, light_context(it), sampler, ds)) return Color(0.f);
     BsdfContext ctx;
-    ctx.uv = it.uv;
+    ctx.set(it);
     Vec3 wo = it.to_local(ds.d);
     Color f = bsdf.eval(ctx, wi_local, wo);
     if (is_black(f)) return Color(0.f);

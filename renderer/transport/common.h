@@ -175,7 +175,7 @@ void walk_specular_chain(const Scene& scene, Sampler& sampler, Ray ray, const Sp
         if (!visit(static_cast<const Interaction&>(it), bsdf, wi, static_cast<const Color&>(beta),
                    static_cast<const PathClass&>(pc), depth))
             return;
-        ctx.uv = it.uv;
+        ctx.set(it);
         BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
         if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || !bs.is_delta) return;
         beta *= bs.weight;

@@ -78,6 +78,9 @@ TEXTURED = {
     "conductor": ("specular_reflectance",),
     "roughconductor": ("specular_reflectance", "alpha", "alpha_u", "alpha_v"),
     "spot": ("texture",),
+    "mask": ("opacity",),
+    "normalmap": ("normalmap",),
+    "bumpmap": ("(any name: the height field)",),
 }
 _TEXTURED_TEXT = "; ".join(f"{t}.{', '.join(n)}" for t, n in TEXTURED.items())
 

@@ -8,7 +8,7 @@ from ..samplers import SAMPLER_NAMES
 PLUGINS = {
     "shape": ("obj", "ply", "rectangle", "cube", "disk", "sphere"),
     "bsdf": ("diffuse", "conductor", "roughconductor", "dielectric", "roughdielectric",
-             "thindielectric", "plastic", "roughplastic", "twosided", "null"),
+             "thindielectric", "plastic", "roughplastic", "twosided", "null", "mask", "normalmap", "bumpmap"),
     "emitter": ("area", "point", "spot", "directional", "constant", "envmap"),
     "sensor": ("perspective", "orthographic", "radiancemeter", "irradiancemeter"),
     "film": ("hdrfilm",),
