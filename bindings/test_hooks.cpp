@@ -44,21 +44,25 @@ py::array_t<float> per_point(const PointArray& pts, F f) {
 
 void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
     // A texture evaluated at (N, 2) uvs (tests/test_textures.py): eval (N, 3),
-    // eval_1 (N,) and mean().
+    // eval_1 (N,), mean() and eval_1_grad (N, 2).
     m.def(
         "texture_eval",
         [](const TextureDesc& d, py::object uv) {
             auto u = flat<float>(uv, 2, "uv");
             std::shared_ptr<const Texture> t = make_texture(d);
             size_t n = u.size() / 2;
-            std::vector<float> out(3 * n), one(n);
+            std::vector<float> out(3 * n), one(n), grad(2 * n);
             for (size_t i = 0; i < n; ++i) {
                 Color c = t->eval(Vec2(u[2 * i], u[2 * i + 1]));
                 for (int k = 0; k < 3; ++k) out[3 * i + size_t(k)] = c[k];
                 one[i] = t->eval_1(Vec2(u[2 * i], u[2 * i + 1]));
+                const Vec2 g = t->eval_1_grad(Vec2(u[2 * i], u[2 * i + 1]));
+                grad[2 * i] = g.x;
+                grad[2 * i + 1] = g.y;
             }
             return py::make_tuple(to_numpy(std::move(out), {py::ssize_t(n), 3}),
-                                  to_numpy(std::move(one), {py::ssize_t(n)}), t->mean());
+                                  to_numpy(std::move(one), {py::ssize_t(n)}), t->mean(),
+                                  to_numpy(std::move(grad), {py::ssize_t(n), 2}));
         },
         py::arg("desc"), py::arg("uv"));
     scene

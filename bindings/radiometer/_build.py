@@ -38,6 +38,7 @@ def _texture(t) -> "_core.TextureDesc":
     c.to_uv = [float(x) for x in np.asarray(t.to_uv, np.float64).reshape(9)]
     c.filter_type = t.filter_type
     c.wrap_mode = t.wrap_mode
+    c.channels = int(t.channels)
     if t.data is not None:
         c.height, c.width, c.channels = (int(v) for v in t.data.shape)
         c.data = np.ascontiguousarray(t.data, np.float32).reshape(-1, 1)

@@ -29,9 +29,9 @@ class SceneError(ValueError):
 
 @dataclass
 class TextureDesc:
-    """A texture (renderer/scene/texture.h): `checkerboard` (color0, color1)
-    or `bitmap` (data: (rows, columns, 1 or 3) float32, linear, row 0 at
-    v = 0); to_uv maps uv (3x3, affine)."""
+    """A texture (renderer/scene/texture.h): `checkerboard` (color0, color1),
+    `bitmap` (data: (rows, columns, 1 or 3) float32, linear, row 0 at
+    v = 0) or `rawconstant` (color0, channels); to_uv maps uv (3x3, affine)."""
     type: str = "checkerboard"
     id: str = ""  # the place it came from, for error messages
     color0: tuple = field(default_factory=lambda: _rgb(0.4))
@@ -40,6 +40,7 @@ class TextureDesc:
     data: Optional[np.ndarray] = None
     filter_type: str = "bilinear"
     wrap_mode: str = "repeat"
+    channels: int = 3  # rawconstant (a bitmap's come from data)
 
     def mean_rgb(self):
         """The channel-wise mean colour (what a plain value in its place would be)."""

@@ -56,6 +56,20 @@ private:
     UvMap map_;
 };
 
+// rawconstant: one value everywhere, as given (no colour conversion).
+class RawConstantTexture final : public Texture {
+public:
+    RawConstantTexture(const Color& v, int channels) : v_(v), one_(channels == 1) {}
+    Color eval(Vec2) const override { return v_; }
+    float eval_1(Vec2) const override { return one_ ? v_.x : luminance(v_); }
+    float mean() const override { return average(v_); }
+    Vec2 eval_1_grad(Vec2) const override { return Vec2(0.f, 0.f); }
+
+private:
+    Color v_;
+    bool one_;
+};
+
 enum class Wrap { Repeat, Mirror, Clamp };
 
 // Dr.Jit's dr::Texture::wrap(), one index: repeat is the index modulo n;
@@ -148,6 +162,11 @@ std::shared_ptr<const Texture> make_texture(const TextureDesc& d) {
         for (const auto& [name, c] : {std::pair<const char*, Color>{"color0", d.color0}, {"color1", d.color1}})
             if (!is_finite(c) || min_component(c) < 0.f) fail(d, name, "must be finite and non-negative");
         return std::make_shared<CheckerboardTexture>(d.color0, d.color1, map);
+    }
+    if (d.type == "rawconstant") {
+        if (!is_finite(d.color0)) fail(d, "value", "must be finite");
+        if (d.channels != 1 && d.channels != 3) fail(d, "value", "must have 1 or 3 channels");
+        return std::make_shared<RawConstantTexture>(d.color0, d.channels);
     }
     if (d.type == "bitmap") {
         if (d.channels != 1 && d.channels != 3) fail(d, "data", "must have 1 or 3 channels");

@@ -14,6 +14,8 @@
 //                dr::Texture lookup: bilinear reads the four texels around
 //                uv * res - 1/2; nearest the texel floor(uv * res); each
 //                index wrapped on its own. A 1-channel image is grey.
+//  rawconstant   value (a float or a 3-vector, kept as given: Mitsuba 3
+//                src/textures/rawconstant.cpp), in color0 with `channels`.
 // eval_1() is a texture read as one number (Mitsuba's Texture::eval_1, which
 // roughness parameters use): a bitmap's single channel, or the luminance
 // (Rec. 709 weights) of its three; for a checkerboard, the channel mean of
@@ -36,7 +38,7 @@
 namespace rm {
 
 struct TextureDesc {
-    std::string type = "checkerboard";  // checkerboard | bitmap
+    std::string type = "checkerboard";  // checkerboard | bitmap | rawconstant
     std::string id;                     // for error messages
     Color color0{0.4f}, color1{0.2f};   // checkerboard
     // to_uv, row-major 3x3 (the last row 0 0 1): uv' = M (u, v, 1).

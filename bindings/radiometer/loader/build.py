@@ -91,8 +91,8 @@ class _Builder:
         return self.cached(node, self._texture)
 
     def _texture(self, node):
-        """checkerboard and bitmap, with Mitsuba 3's parameters and defaults
-        (src/textures/checkerboard.cpp, bitmap.cpp)."""
+        """checkerboard, bitmap and rawconstant, with Mitsuba 3's parameters
+        and defaults (src/textures/checkerboard.cpp, bitmap.cpp, rawconstant.cpp)."""
         p, t = _Params(node), node.type
         tex = TextureDesc(type=t, id=node.id or node.place)
         m = p.transform("to_uv")
@@ -108,6 +108,15 @@ class _Builder:
                     raise p.error(f"parameter '{name}': a nested texture is not supported here (give a colour)",
                                   node.place)
                 setattr(tex, name, p.rgb(name, default))
+        elif t == "rawconstant":  # Mitsuba 3 src/textures/rawconstant.cpp: the value as given
+            prop = node.props.get("value")
+            if prop is None:
+                raise p.error("missing parameter 'value' (a float or a 3-vector)")
+            if prop.kind in ("float", "integer"):
+                v = p.float("value")
+                tex.color0, tex.channels = (v, v, v), 1
+            else:
+                tex.color0, tex.channels = tuple(float(x) for x in p.vec3("value", what="a float or a 3-vector")), 3
         elif t == "bitmap":
             path = self.file(p, "texture image")
             raw = p.bool("raw", False)
@@ -232,6 +241,8 @@ class _Builder:
         kids = p.children("bsdf")
         if len(kids) != 1:
             raise p.error(f"needs exactly one nested bsdf, got {len(kids)}")
+        if t != "mask" and kids[0].type in ("normalmap", "bumpmap"):
+            raise p.error(f"a {t} cannot nest another normalmap or bumpmap (one map per surface)", kids[0].place)
         b.nested = [self.bsdf(kids[0])]
         if t != "mask":  # Mitsuba 3.7.1 on: the fold and the terminator shadowing, both on by default
             b.flip_invalid_normals = p.bool("flip_invalid_normals", True)

@@ -20,6 +20,6 @@ PLUGINS = {
     "phase": ("isotropic", "hg"),
     "volume": ("gridvolume", "constvolume"),
     "subsurface": ("dipole",),
-    "texture": ("checkerboard", "bitmap"),
+    "texture": ("checkerboard", "bitmap", "rawconstant"),
 }
 _CATEGORY_OF = {t: c for c, types in PLUGINS.items() for t in types}
