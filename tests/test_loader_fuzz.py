@@ -63,6 +63,9 @@ PARAMS = {
         "roughplastic": {"diffuse_reflectance": "rgb", "specular_reflectance": "rgb", "int_ior": "ior",
                          "ext_ior": "ior", "nonlinear": "bool", **_MICRO},
         "twosided": {}, "null": {},
+        "mask": {"opacity": "float"},
+        "normalmap": {"flip_invalid_normals": "bool", "use_shadowing_function": "bool"},
+        "bumpmap": {"scale": "float", "flip_invalid_normals": "bool", "use_shadowing_function": "bool"},
     },
     "emitter": {
         "area": {"radiance": "rgb"}, "constant": {"radiance": "rgb"},
@@ -95,7 +98,8 @@ PARAMS = {
                "constvolume": {"value": "rgb"}},
     "texture": {"checkerboard": {"color0": "rgb", "color1": "rgb", "to_uv": "transform"},
                 "bitmap": {"filename": "img_file", "filter_type": "tex_filter", "wrap_mode": "tex_wrap",
-                           "raw": "bool", "to_uv": "transform", "format": "tex_format", "accel": "bool"}},
+                           "raw": "bool", "to_uv": "transform", "format": "tex_format", "accel": "bool"},
+                "rawconstant": {"value": "float"}},
     "subsurface": {"dipole": {"sigma_a": "rgb", "sigma_s": "rgb", "sigma_t": "rgb", "albedo": "rgb",
                               "scale": "float", "g": "g", "int_ior": "ior", "ext_ior": "ior"}},
     # The estimators' declarations in the core's registry, Mitsuba 0.6 names included.
@@ -295,6 +299,12 @@ def _node(draw, category, name=None, depth=0, types=None):
                 child("subsurface", "subsurface")
             if draw(st.integers(0, 19)) == 0:
                 child("sensor", "sensor", types=["irradiancemeter"])
+        elif category == "bsdf" and t in ("mask", "normalmap", "bumpmap"):
+            # a nested bsdf (usually one), and the texture of the map or the mask's opacity
+            for n in ("a", "b")[:draw(st.sampled_from([0, 1, 1, 1, 2]))]:
+                child("bsdf", n)
+            if t != "mask" or draw(st.booleans()):
+                child("texture", {"mask": "opacity", "normalmap": "normalmap", "bumpmap": "height"}[t])
         elif category == "bsdf" and t != "twosided" and draw(st.integers(0, 3)) == 0:
             # a texture on a colour parameter that takes one, or on one that does not
             child("texture", draw(st.sampled_from(["reflectance", "diffuse_reflectance", "specular_reflectance",
