@@ -4,13 +4,16 @@
 // check, ParamReader) rather than a copy of it.
 #include <pybind11/functional.h>
 
+#include <algorithm>
 #include <chrono>
+#include <memory>
 
 #include "bindings.h"
 #include "convert.h"
 #include "core/sampler.h"
 #include "estimators/radiosity/radiosity.h"
 #include "render/memory.h"
+#include "render/pass_loop.h"
 #include "render/registry.h"
 #include "scene/scene.h"
 #include "scene/texture.h"
@@ -65,7 +68,31 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                                   to_numpy(std::move(grad), {py::ssize_t(n), 2}));
         },
         py::arg("desc"), py::arg("uv"));
+    // The Embree-limit benchmark (benchmarks/studies/embree_limit.py): the
+    // rays of a render recorded, then traced again bare or through ours.
+    py::class_<RayLog>(m, "RayLog")
+        .def(py::init<>())
+        .def("__len__", [](const RayLog& l) { return l.rays.size(); })
+        .def_property_readonly("shadow_rays", [](const RayLog& l) {
+            size_t n = 0;
+            for (uint8_t s : l.shadow) n += s;
+            return n;
+        });
+    m.def("set_camera_packets", &set_camera_packets, py::arg("on"),
+          "camera rays in packets (default) or one at a time, for the same-bytes test");
+    m.def(
+        "attach_ray_log", [](RayLog* log) { attach_ray_log(log); }, py::arg("log").none(true),
+        "record every ray any scene traces into `log` (None: stop); one render at a time, one thread");
     scene
+        .def(
+            "replay_rays",
+            [](const Scene& s, const RayLog& log, bool bare, int repeats) {
+                py::gil_scoped_release release;
+                return s.replay(log, bare, repeats);
+            },
+            py::arg("log"), py::arg("bare"), py::arg("repeats") = 3)
+        .def("set_robust", &Scene::set_robust, py::arg("on"))
+        .def_property_readonly("robust", &Scene::robust)
         // The closest hits of N rays (origins and directions (N, 3)), as the
         // estimators see them (tests/test_textures.py compares the uv with
         // Mitsuba's): t (inf: miss), p, n, uv, the shading frame's tangent s
@@ -73,19 +100,27 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
         // unperturbed normal in that frame), shape index (-1: miss).
         .def(
             "intersect_rays",
-            [](const Scene& s, py::object o, py::object d) {
+            [](const Scene& s, py::object o, py::object d, bool packet) {
                 if (!s.committed()) throw py::value_error("scene is not committed");
                 auto oo = flat<float>(o, 3, "o"), dd = flat<float>(d, 3, "d");
                 if (oo.size() != dd.size()) throw py::value_error("o and d differ in length");
                 size_t n = oo.size() / 3;
                 std::vector<float> t(n, kInf), p(3 * n, 0.f), nn(3 * n, 0.f), ss(3 * n, 0.f), ns(3 * n, 0.f),
                     nb(3 * n, 0.f), uv(2 * n, 0.f), shape(n, -1.f);
+                std::vector<Ray> rays(n);
+                std::vector<Interaction> its(n);
+                std::unique_ptr<bool[]> hit(new bool[n]);
                 for (size_t i = 0; i < n; ++i) {
-                    Ray ray;
-                    ray.o = Vec3(oo[3 * i], oo[3 * i + 1], oo[3 * i + 2]);
-                    ray.d = Vec3(dd[3 * i], dd[3 * i + 1], dd[3 * i + 2]);
-                    Interaction it;
-                    if (!s.intersect(ray, it)) continue;
+                    rays[i].o = Vec3(oo[3 * i], oo[3 * i + 1], oo[3 * i + 2]);
+                    rays[i].d = Vec3(dd[3 * i], dd[3 * i + 1], dd[3 * i + 2]);
+                    if (!packet) hit[i] = s.intersect(rays[i], its[i]);
+                }
+                // With `packet`, as the camera driver traces: groups of kPacket rays.
+                for (size_t i = 0; packet && i < n; i += Scene::kPacket)
+                    s.intersect_packet(&rays[i], int(std::min<size_t>(Scene::kPacket, n - i)), &its[i], &hit[i]);
+                for (size_t i = 0; i < n; ++i) {
+                    const Interaction& it = its[i];
+                    if (!hit[i]) continue;
                     t[i] = it.t;
                     for (int k = 0; k < 3; ++k) {
                         p[3 * i + size_t(k)] = it.p[k];
@@ -110,7 +145,7 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 out["shape"] = to_numpy(std::move(shape), {N});
                 return out;
             },
-            py::arg("o"), py::arg("d"))
+            py::arg("o"), py::arg("d"), py::arg("packet") = false)
         // Tests of the majorant grid (tests/test_majorant_grid.py): sigma_t
         // and the local majorant at N x 3 world points, N x 3 arrays.
         .def("medium_sigma_t",

@@ -198,6 +198,14 @@ public:
         int max_light = max_depth_ < 0 ? INT_MAX : max_depth_;  // y0 .. y_{max_depth - 1}
         if (light_limit >= 0) max_light = std::min(max_light, light_limit);
         if (max_light > 0) light_subpath(scene, sampler, max_light, rr_depth_, light, es, stats);
+
+        // 3. Each vertex's effect-class code, for classify().
+        std::vector<uint8_t>& cc = tl_codes().first;
+        std::vector<uint8_t>& lc = tl_codes().second;
+        cc.resize(cam.size());
+        lc.resize(light.size());
+        for (size_t i = 0; i < cam.size(); ++i) cc[i] = class_code(cam[i]);
+        for (size_t i = 0; i < light.size(); ++i) lc[i] = class_code(light[i]);
     }
 
     // Multiplexed MLT's sample (Hachisuka, Kaplanyan and Dachsbacher 2014,
@@ -360,8 +368,6 @@ private:
     // C = alpha^L_s c_{s,t} alpha^E_t.
     Color connect(const Scene& scene, Sampler& sampler, const EmissionSample& es, int s, int t, Vec2& film, int& effect,
                   float& w, bool hidden, ThreadStats& stats) const {
-        std::vector<PathVertex>& cam = cam_ref();
-        std::vector<PathVertex>& light = light_ref();
         Color L(0.f);
         w = 0.f;
         // Random numbers for s = 1 are drawn whatever happens, so that with a
@@ -377,9 +383,27 @@ private:
             u_l = sampler.next_2d();
             u_extra = sampler.next_1d();
         }
-        effect = classify(s, t);
-        if (hidden || !mask[effect]) return L;
+        // The class decides whether the strategy is evaluated only under an
+        // `effects` subset; with every class requested it is needed only for
+        // a contribution, so it is found last (most connections are black).
+        const bool every = std::all_of(mask.begin(), mask.end(), [](bool m) { return m; });
+        if (!every) {
+            effect = classify(s, t);
+            if (!mask[effect]) return L;
+        }
+        if (hidden) return L;
+        L = evaluate(scene, sampler, es, s, t, u_pick, u_l, u_extra, film, w, stats);
+        if (every && !is_black(L)) effect = classify(s, t);
+        return L;
+    }
 
+    // connect's strategy (s, t) itself: its contribution before the MIS
+    // weight `w`, with s = 1's emitter sample drawn by connect.
+    Color evaluate(const Scene& scene, Sampler& sampler, const EmissionSample& es, int s, int t, float u_pick, Vec2 u_l,
+                   float u_extra, Vec2& film, float& w, ThreadStats& stats) const {
+        std::vector<PathVertex>& cam = cam_ref();
+        std::vector<PathVertex>& light = light_ref();
+        Color L(0.f);
         if (s == 0) {
             // The camera subpath found an emitter.
             const PathVertex& z = cam[t - 1];
@@ -459,7 +483,16 @@ private:
         return L;
     }
 
-    int classify(int s, int t) const { return classify_strategy(cam_ref(), light_ref(), s, t); }
+    // Strategy (s, t)'s effect class from the codes generate_subpaths left
+    // (classify_strategy's result; connect swaps only z0 and y0, which no
+    // class reads).
+    int classify(int s, int t) const {
+        return classify_codes(tl_codes().first.data(), t, tl_codes().second.data(), s, true);
+    }
+    static std::pair<std::vector<uint8_t>, std::vector<uint8_t>>& tl_codes() {
+        thread_local std::pair<std::vector<uint8_t>, std::vector<uint8_t>> c;
+        return c;
+    }
 
     static std::vector<PathVertex>& cam_ref() { return tl_paths().first; }
     static std::vector<PathVertex>& light_ref() { return tl_paths().second; }

@@ -75,6 +75,21 @@ public:
 
     void sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
                 ThreadStats& stats) const override {
+        trace(scene, sampler, camera_ray, false, nullptr, out, stats);
+    }
+
+    // The camera driver traces the camera rays in packets (integrator.h).
+    bool takes_camera_hits() const override { return true; }
+    void sample_from_hit(const Scene& scene, Sampler& sampler, const Ray& camera_ray, const Interaction* hit,
+                         EffectRadiance& out, ThreadStats& stats) const override {
+        trace(scene, sampler, camera_ray, true, hit, out, stats);
+    }
+
+private:
+    // The path from `camera_ray`; with `given`, its closest hit is `first`
+    // (nullptr: none), already traced by the driver.
+    void trace(const Scene& scene, Sampler& sampler, const Ray& camera_ray, bool given, const Interaction* first,
+               EffectRadiance& out, ThreadStats& stats) const {
         Ray ray = camera_ray;
         Color beta(1.f);
         float eta_scale = 1.f;  // undoes radiance scaling by eta^2 for Russian roulette
@@ -94,7 +109,13 @@ public:
             sampler.start_bounce(depth);
             Interaction it;
             ++stats.rays;
-            bool hit = scene.intersect(ray, it);
+            bool hit;
+            if (depth == 0 && given) {
+                hit = first != nullptr;
+                if (hit) it = *first;
+            } else {
+                hit = scene.intersect(ray, it);
+            }
             bool count_emission = !(depth == 0 && hide_);
             int cls = pc.classify();
 
@@ -176,7 +197,6 @@ public:
         }
     }
 
-private:
     int max_depth_, rr_depth_;
     bool hide_;
     float probe_;

@@ -6,6 +6,8 @@
 // accumulated in order by one thread, and a pass joins the film only when
 // complete.
 #include <algorithm>
+#include <atomic>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -18,6 +20,7 @@ namespace rm {
 namespace {
 
 constexpr int kTile = 16;
+std::atomic<bool> g_camera_packets{true};
 
 class CameraStep final : public PassStep {
 public:
@@ -35,7 +38,8 @@ public:
           pass_film_(W_, H_, effect_variance),
           tiles_x_((cw_ + kTile - 1) / kTile),
           tiles_y_((ch_ + kTile - 1) / kTile),
-          plan_(plan) {}
+          plan_(plan),
+          packets_(integrator.takes_camera_hits() && g_camera_packets.load()) {}
 
     int pass(PassLoop& loop, int s0, int s1) override {
         // 1. Tiles over threads, into the film of the pass in flight.
@@ -61,6 +65,11 @@ private:
         // its film index, and with it its random streams.
         int x0 = cx_ + (tile % tiles_x_) * kTile, y0 = cy_ + (tile / tiles_x_) * kTile;
         int x1 = std::min(x0 + kTile, cx_ + cw_), y1 = std::min(y0 + kTile, cy_ + ch_);
+        if (packets_) {
+            if (render_rows_in_packets(loop, x0, y0, x1, y1, s0, s1, stats))
+                loop.add_done(uint64_t(s1 - s0) * uint64_t((x1 - x0) * (y1 - y0)));
+            return;
+        }
         for (int y = y0; y < y1; ++y)
             for (int x = x0; x < x1; ++x) {
                 if (loop.cancelled()) return;
@@ -80,15 +89,65 @@ private:
         loop.add_done(uint64_t(s1 - s0) * uint64_t((x1 - x0) * (y1 - y0)));
     }
 
+    // The tile's camera rays sample by sample, row by row, kPacket
+    // neighbouring pixels traced as one packet (Scene::intersect_packet),
+    // each path then going on alone from its hit. Every pixel still
+    // receives its samples in order from its own streams, so the bytes are
+    // those of render_sample. False when cancelled.
+    bool render_rows_in_packets(PassLoop& loop, int x0, int y0, int x1, int y1, int s0, int s1, ThreadStats& stats) {
+        constexpr int kP = Scene::kPacket;
+        std::optional<PixelSampleSource> sources[kP];
+        std::optional<Sampler> samplers[kP];
+        SensorRay rays[kP];
+        Ray packet[kP];
+        Interaction hits[kP];
+        bool hit[kP];
+        for (int s = s0; s < s1; ++s)
+            for (int y = y0; y < y1; ++y) {
+                if (loop.cancelled()) return false;
+                for (int xa = x0; xa < x1; xa += kP) {
+                    const int n = std::min(kP, x1 - xa);
+                    // 1. Each pixel's stream and its filter-sampled camera ray.
+                    for (int i = 0; i < n; ++i) {
+                        const int pixel = y * W_ + xa + i;
+                        if (plan_.independent()) {
+                            samplers[i].emplace(loop.seed(), uint64_t(pixel), uint64_t(s));
+                        } else {
+                            sources[i].emplace(plan_, uint64_t(pixel), uint64_t(s));
+                            samplers[i].emplace(&*sources[i]);
+                        }
+                        rays[i] = sample_camera_ray(*scene_.sensor, filter_, pixel, *samplers[i]);
+                        packet[i] = rays[i].ray;
+                    }
+                    // 2. Their closest hits in one packet.
+                    scene_.intersect_packet(packet, n, hits, hit);
+                    // 3. Each path from its hit, into the pass's film.
+                    for (int i = 0; i < n; ++i) {
+                        EffectRadiance er;
+                        ++stats.paths;
+                        integrator_.sample_from_hit(scene_, *samplers[i], packet[i], hit[i] ? &hits[i] : nullptr, er,
+                                                    stats);
+                        add_sample(y * W_ + xa + i, rays[i].weight, er, stats);
+                    }
+                }
+            }
+        return true;
+    }
+
     void render_sample(Sampler& sampler, int pixel, ThreadStats& stats) {
         SensorRay sr = sample_camera_ray(*scene_.sensor, filter_, pixel, sampler);
         // 2. The estimator's radiance along it, by effect, times the ray's weight.
         EffectRadiance er;
         ++stats.paths;
         integrator_.sample(scene_, sampler, sr.ray, er, stats);
+        add_sample(pixel, sr.weight, er, stats);
+    }
+
+    // A sample's radiance times its camera ray's weight into the pass's film.
+    void add_sample(int pixel, const Color& weight, EffectRadiance& er, ThreadStats& stats) {
         Color total(0.f);
         for (int k = 0; k < kNumEffects; ++k) {
-            er.by_effect[k] *= sr.weight;
+            er.by_effect[k] *= weight;
             total += er.by_effect[k];
         }
         // 3. Into the pass's film, unless NaN or Inf (counted, dropped).
@@ -105,9 +164,12 @@ private:
     Film pass_film_;  // the pass in flight; merged only when complete
     const int tiles_x_, tiles_y_;
     const SamplerPlan& plan_;
+    const bool packets_;  // camera rays in packets (render_rows_in_packets)
 };
 
 }  // namespace
+
+void set_camera_packets(bool on) { g_camera_packets = on; }
 
 RenderOutput render_camera_paths(PassLoop& loop, const Integrator& integrator) {
     const Scene& scene = loop.scene();

@@ -213,6 +213,16 @@ public:
     // Radiance along one camera ray, split by effect class, into `out`.
     virtual void sample(const Scene& scene, Sampler& sampler, const Ray& ray, EffectRadiance& out,
                         ThreadStats& stats) const = 0;
+    // An estimator whose camera sample starts with the camera ray's closest
+    // hit may take that hit from the camera driver, which traces the rays
+    // of neighbouring pixels as one Embree packet (Scene::intersect_packet):
+    // sample_from_hit then gets it (nullptr: the ray escaped) instead of
+    // tracing the ray itself, with the same result bytes.
+    virtual bool takes_camera_hits() const { return false; }
+    virtual void sample_from_hit(const Scene& scene, Sampler& sampler, const Ray& ray, const Interaction* hit,
+                                 EffectRadiance& out, ThreadStats& stats) const {
+        sample(scene, sampler, ray, out, stats);
+    }
     EffectMask mask = all_effects();
     // The emitter selection of its renders (the `light_sampler` parameter;
     // render() makes it the scene's for the render's duration).

@@ -189,5 +189,9 @@ private:
 // along filter-importance-sampled camera rays, tile by tile; photonmapper
 // runs its camera passes through it after its photon passes.
 RenderOutput render_camera_paths(PassLoop& loop, const Integrator& integrator);
+// Camera rays in packets for the estimators that take their hits
+// (Integrator::takes_camera_hits); off: one ray at a time, for the test
+// that both give the same bytes (tests/test_rays.py). On by default.
+void set_camera_packets(bool on);
 
 }  // namespace rm

@@ -1,6 +1,7 @@
 #include "scene/scene.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -30,15 +31,26 @@ void check_embree() {
 }
 }  // namespace
 
+namespace {
+RayLog* g_ray_log = nullptr;
+
+std::mutex g_ray_log_mutex;  // a render on several threads records safely (in no fixed order)
+
+[[gnu::noinline, gnu::cold]] void log_ray(const Ray& ray, bool shadow) {
+    std::lock_guard<std::mutex> lock(g_ray_log_mutex);
+    g_ray_log->rays.push_back(ray);
+    g_ray_log->shadow.push_back(shadow ? 1 : 0);
+}
+}  // namespace
+
+void attach_ray_log(RayLog* log) { g_ray_log = log; }
+
 Scene::Scene() {
     device_ = rtcNewDevice(nullptr);
     if (!device_) throw std::runtime_error("could not create an Embree device");
     rtcSetDeviceErrorFunction(device_, embree_error, nullptr);
     scene_ = rtcNewScene(device_);
-    // Robust traversal and intersection: no rays slipping through shared
-    // edges and vertices (light leaks would bias every estimator). Costs
-    // ~15% of the trace time, measured on the Cornell box with callgrind.
-    rtcSetSceneFlags(scene_, RTC_SCENE_FLAG_ROBUST);
+    // Robust mode is decided at commit(), by the scene's geometry.
     rtcSetSceneBuildQuality(scene_, RTC_BUILD_QUALITY_HIGH);
 }
 
@@ -186,6 +198,18 @@ void Scene::commit() {
     if (!sensor) throw std::invalid_argument("scene has no sensor");
     if (sensor_desc.medium < -1 || sensor_desc.medium >= int(media.size()))
         throw std::invalid_argument("sensor: medium index out of range");
+    // Embree's robust mode where the scene needs it: where triangles share
+    // edges (every mesh, rectangles and cubes included), rays through those
+    // edges slip between the triangles without it (tests/test_rays.py: 0.4 %
+    // of rays aimed at a cube's edges with one direction component 0; none
+    // robust). It costs 38 % of Embree's instructions, 13 % of `path`'s
+    // (docs/performance.md), so scenes of analytic shapes alone (our own
+    // double-precision sphere and disk tests, no shared edges) go without.
+    // Any other kind of shape (a new one, or one that holds meshes) keeps it.
+    robust_ = !std::all_of(shapes.begin(), shapes.end(), [](const std::unique_ptr<Shape>& s) {
+        return dynamic_cast<const Sphere*>(s.get()) || dynamic_cast<const Disk*>(s.get());
+    });
+    rtcSetSceneFlags(scene_, robust_ ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
     rtcCommitScene(scene_);
     check_embree();
     // Refuse what float32 ray tracing cannot represent (check_ray below) before
@@ -299,6 +323,7 @@ static void check_ray(const Ray& ray) {
 
 bool Scene::intersect(const Ray& ray, Interaction& it) const {
     check_ray(ray);
+    if (__builtin_expect(g_ray_log != nullptr, 0)) log_ray(ray, false);
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRayHit rh;
@@ -320,24 +345,75 @@ bool Scene::intersect(const Ray& ray, Interaction& it) const {
         it.valid = false;
         return false;
     }
-    const Shape& s = *shapes[rh.hit.geomID];
+    fill_hit(ray, rh.hit, rh.ray.tfar, it);
+    return true;
+}
+
+void Scene::fill_hit(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const {
+    const Shape& s = *shapes[hit.geomID];
     // Every field is set here or by fill_interaction (no second zeroing).
     it.kind = VertexKind::Surface;
     it.medium_inside = s.medium_interior;
     it.medium_outside = s.medium_exterior;
     it.valid = true;
-    it.t = rh.ray.tfar;
-    it.shape = int(rh.hit.geomID);
-    it.prim = int(rh.hit.primID);
+    it.t = t;
+    it.shape = int(hit.geomID);
+    it.prim = int(hit.primID);
     it.wi = -ray.d;
-    s.fill_interaction(ray, rh.hit, rh.ray.tfar, it);
+    s.fill_interaction(ray, hit, t, it);
     it.n_base = Vec3(0.f, 0.f, 1.f);
-    if (s.frame_map) s.frame_map->perturb_frame(it);
-    return true;
+    if (s.frame_map) s.frame_map->perturb_frame(it);  // normal and bump maps (Bsdf::perturb_frame)
+}
+
+void Scene::intersect_packet(const Ray* rays, int n, Interaction* its, bool* hit) const {
+    static_assert(kPacket == 8, "rtcIntersect8 below");
+    alignas(32) int valid[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    RTCRayHit8 rh;
+    for (int i = 0; i < n; ++i) {
+        const Ray& ray = rays[i];
+        check_ray(ray);
+        if (__builtin_expect(g_ray_log != nullptr, 0)) log_ray(ray, false);
+        valid[i] = -1;
+        rh.ray.org_x[i] = ray.o.x;
+        rh.ray.org_y[i] = ray.o.y;
+        rh.ray.org_z[i] = ray.o.z;
+        rh.ray.dir_x[i] = ray.d.x;
+        rh.ray.dir_y[i] = ray.d.y;
+        rh.ray.dir_z[i] = ray.d.z;
+        rh.ray.tnear[i] = ray.tmin;
+        rh.ray.tfar[i] = ray.tmax;
+        rh.ray.mask[i] = 0xFFFFFFFFu;
+        rh.ray.flags[i] = 0;
+        rh.ray.time[i] = 0;
+        rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+    }
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    rtcIntersect8(valid, scene_, &ctx, &rh);
+    for (int i = 0; i < n; ++i) {
+        hit[i] = rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+        if (!hit[i]) {
+            its[i].valid = false;
+            continue;
+        }
+        RTCHit h;
+        h.Ng_x = rh.hit.Ng_x[i];
+        h.Ng_y = rh.hit.Ng_y[i];
+        h.Ng_z = rh.hit.Ng_z[i];
+        h.u = rh.hit.u[i];
+        h.v = rh.hit.v[i];
+        h.primID = rh.hit.primID[i];
+        h.geomID = rh.hit.geomID[i];
+        h.instID[0] = rh.hit.instID[0][i];
+        fill_hit(rays[i], h, rh.ray.tfar[i], its[i]);
+    }
 }
 
 bool Scene::occluded(const Ray& ray) const {
     check_ray(ray);
+    if (__builtin_expect(g_ray_log != nullptr, 0)) log_ray(ray, true);
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRay r;
@@ -354,6 +430,61 @@ bool Scene::occluded(const Ray& ray) const {
     r.time = 0;
     rtcOccluded1(scene_, &ctx, &r);
     return r.tfar < 0.f;
+}
+
+void Scene::set_robust(bool on) {
+    robust_ = on;
+    rtcSetSceneFlags(scene_, on ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+    if (committed_) {
+        // Embree rebuilds a committed scene only when a geometry changed,
+        // not for new flags alone: mark every geometry changed.
+        for (unsigned id = 0; id < unsigned(shapes.size()); ++id) rtcCommitGeometry(rtcGetGeometry(scene_, id));
+        rtcCommitScene(scene_);
+    }
+    check_embree();
+}
+
+double Scene::replay(const RayLog& log, bool bare, int repeats) const {
+    if (!committed_) throw std::logic_error("replay: the scene is not committed");
+    double best = kInf;
+    uint64_t hits = 0;  // read below, so the traces cannot be optimised away
+    for (int r = 0; r < std::max(repeats, 1); ++r) {
+        auto t0 = std::chrono::steady_clock::now();
+        for (size_t i = 0; i < log.rays.size(); ++i) {
+            const Ray& ray = log.rays[i];
+            if (!bare) {
+                Interaction it;
+                hits += log.shadow[i] ? occluded(ray) : intersect(ray, it);
+                continue;
+            }
+            RTCIntersectContext ctx;
+            rtcInitIntersectContext(&ctx);
+            RTCRayHit rh;
+            rh.ray.org_x = ray.o.x;
+            rh.ray.org_y = ray.o.y;
+            rh.ray.org_z = ray.o.z;
+            rh.ray.dir_x = ray.d.x;
+            rh.ray.dir_y = ray.d.y;
+            rh.ray.dir_z = ray.d.z;
+            rh.ray.tnear = ray.tmin;
+            rh.ray.tfar = ray.tmax;
+            rh.ray.mask = 0xFFFFFFFFu;
+            rh.ray.flags = 0;
+            rh.ray.time = 0;
+            if (log.shadow[i]) {
+                rtcOccluded1(scene_, &ctx, &rh.ray);
+                hits += rh.ray.tfar < 0.f;
+            } else {
+                rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+                rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+                rtcIntersect1(scene_, &ctx, &rh);
+                hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+            }
+        }
+        best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+    if (hits == uint64_t(-1)) std::fprintf(stderr, "replay: %llu\n", (unsigned long long)hits);
+    return best;
 }
 
 bool Scene::visible(const Interaction& from, const DirectSample& ds) const {

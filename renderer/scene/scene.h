@@ -40,6 +40,18 @@ struct SceneFeatures {
     bool has_incident_frame = false;
 };
 
+// Every ray a render traces, in order, for the Embree-limit benchmark
+// (benchmarks/studies/embree_limit.py): the renderer's rays replayed with
+// bare Embree calls give the throughput Embree alone would reach on them.
+// One log per process, attached by a test hook around a one-thread render
+// (a global, not a thread-local: a thread-local in a shared library costs
+// a call per access, and the unattached check must stay one load).
+struct RayLog {
+    std::vector<Ray> rays;
+    std::vector<uint8_t> shadow;  // 1: occlusion query, 0: closest hit
+};
+void attach_ray_log(RayLog* log);  // nullptr detaches
+
 class Scene {
 public:
     Scene();
@@ -75,8 +87,24 @@ public:
 
     // Closest hit in (ray.tmin, ray.tmax); fills `it` (wi = -ray.d).
     bool intersect(const Ray& ray, Interaction& it) const;
+    // The closest hits of up to kPacket coherent rays (camera rays of
+    // neighbouring pixels) as one Embree packet (rtcIntersect8, Wald et al.
+    // 2001's coherent ray tracing): hit[i] and its[i] as intersect() gives
+    // them for rays[i], on the same BVH with the same triangle test.
+    static constexpr int kPacket = 8;
+    void intersect_packet(const Ray* rays, int n, Interaction* its, bool* hit) const;
     // True when anything blocks the open segment (tmin, tmax).
     bool occluded(const Ray& ray) const;
+    // The rays of `log` traced again, one thread, `repeats` times; the
+    // fastest pass's seconds. bare: rtcIntersect1 / rtcOccluded1 alone (the
+    // limit); else through intersect() / occluded() (our ray set-up, range
+    // check and hit record).
+    double replay(const RayLog& log, bool bare, int repeats) const;
+    // Embree's robust mode (RTC_SCENE_FLAG_ROBUST) on or off, for tests and
+    // benchmarks; rebuilds the BVH of a committed scene. commit() turns it
+    // on for scenes with meshes, off for analytic shapes alone.
+    void set_robust(bool on);
+    bool robust() const { return robust_; }
     // Shadow ray from `from` to the point p (or to infinity along d).
     bool visible(const Interaction& from, const DirectSample& ds) const;
     // Shadow ray through media (volpath): the transmittance from `from` (a
@@ -136,9 +164,12 @@ private:
     mutable const LightSampler* active_lights_ = nullptr;
     mutable int lights_users_ = 0;
     int add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals);
+    // The Interaction of a closest hit (intersect, intersect_packet).
+    void fill_hit(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const;
     RTCDevice device_ = nullptr;
     RTCScene scene_ = nullptr;
     bool committed_ = false;
+    bool robust_ = true;
     int sensor_shape_ = -1;
 };
 

@@ -170,8 +170,9 @@ PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
 // ---------------------------------------------------------------- analytic shapes through Embree user geometry
 namespace {
 
-// Embree calls these with N == 1 for rtcIntersect1/rtcOccluded1, the only
-// queries the renderer makes.
+// Embree calls these with N == 1 for rtcIntersect1/rtcOccluded1 and with
+// the packet's width for Scene::intersect_packet (camera rays): user_query
+// below runs the one-ray test on each valid lane.
 template <class S>
 void user_bounds(const RTCBoundsFunctionArguments* args) {
     const S* s = static_cast<const S*>(args->geometryUserPtr);
@@ -230,17 +231,6 @@ void sphere_intersect_impl(const Sphere& s, RTCRay& ray, RTCHit* hit, unsigned g
     hit->instID[0] = RTC_INVALID_GEOMETRY_ID;
 }
 
-void sphere_intersect(const RTCIntersectFunctionNArguments* args) {
-    const Sphere* s = static_cast<const Sphere*>(args->geometryUserPtr);
-    RTCRayHit* rh = reinterpret_cast<RTCRayHit*>(args->rayhit);
-    sphere_intersect_impl<false>(*s, rh->ray, &rh->hit, args->geomID, args->valid);
-}
-void sphere_occluded(const RTCOccludedFunctionNArguments* args) {
-    const Sphere* s = static_cast<const Sphere*>(args->geometryUserPtr);
-    RTCRay* r = reinterpret_cast<RTCRay*>(args->ray);
-    sphere_intersect_impl<true>(*s, *r, nullptr, args->geomID, args->valid);
-}
-
 template <bool kOccluded>
 void disk_intersect_impl(const Disk& d, RTCRay& ray, RTCHit* hit, unsigned geom_id, int* valid) {
     if (!valid[0]) return;
@@ -270,15 +260,55 @@ void disk_intersect_impl(const Disk& d, RTCRay& ray, RTCHit* hit, unsigned geom_
     hit->geomID = geom_id;
     hit->instID[0] = RTC_INVALID_GEOMETRY_ID;
 }
-void disk_intersect(const RTCIntersectFunctionNArguments* args) {
-    const Disk* d = static_cast<const Disk*>(args->geometryUserPtr);
-    RTCRayHit* rh = reinterpret_cast<RTCRayHit*>(args->rayhit);
-    disk_intersect_impl<false>(*d, rh->ray, &rh->hit, args->geomID, args->valid);
+// A user geometry's query over Embree's N rays (SoA, RTCRayHitN) with their
+// valid mask: N == 1 in place; otherwise each valid lane gathered into one
+// RTCRay / RTCHit, tested by Impl<kOccluded> and written back when it hit.
+template <class S, bool kOccluded, void (*Impl)(const S&, RTCRay&, RTCHit*, unsigned, int*)>
+void user_query(void* user, const int* valid, unsigned geom_id, unsigned N, RTCRayN* rays, RTCHitN* hits) {
+    const S& shape = *static_cast<const S*>(user);
+    if (N == 1) {
+        int v = valid[0];
+        RTCRay& r = *reinterpret_cast<RTCRay*>(rays);
+        Impl(shape, r, kOccluded ? nullptr : reinterpret_cast<RTCHit*>(hits), geom_id, &v);
+        return;
+    }
+    for (unsigned i = 0; i < N; ++i) {
+        if (!valid[i]) continue;
+        RTCRay r;
+        r.org_x = RTCRayN_org_x(rays, N, i);
+        r.org_y = RTCRayN_org_y(rays, N, i);
+        r.org_z = RTCRayN_org_z(rays, N, i);
+        r.dir_x = RTCRayN_dir_x(rays, N, i);
+        r.dir_y = RTCRayN_dir_y(rays, N, i);
+        r.dir_z = RTCRayN_dir_z(rays, N, i);
+        r.tnear = RTCRayN_tnear(rays, N, i);
+        r.tfar = RTCRayN_tfar(rays, N, i);
+        const float before = r.tfar;
+        RTCHit h{};  // written by Impl only on a hit, read only then
+        int one = -1;
+        Impl(shape, r, kOccluded ? nullptr : &h, geom_id, &one);
+        if (r.tfar == before) continue;
+        RTCRayN_tfar(rays, N, i) = r.tfar;
+        if (kOccluded) continue;
+        RTCHitN_Ng_x(hits, N, i) = h.Ng_x;
+        RTCHitN_Ng_y(hits, N, i) = h.Ng_y;
+        RTCHitN_Ng_z(hits, N, i) = h.Ng_z;
+        RTCHitN_u(hits, N, i) = h.u;
+        RTCHitN_v(hits, N, i) = h.v;
+        RTCHitN_primID(hits, N, i) = h.primID;
+        RTCHitN_geomID(hits, N, i) = h.geomID;
+        RTCHitN_instID(hits, N, i, 0) = h.instID[0];
+    }
 }
-void disk_occluded(const RTCOccludedFunctionNArguments* args) {
-    const Disk* d = static_cast<const Disk*>(args->geometryUserPtr);
-    RTCRay* r = reinterpret_cast<RTCRay*>(args->ray);
-    disk_intersect_impl<true>(*d, *r, nullptr, args->geomID, args->valid);
+
+template <class S, void (*Impl)(const S&, RTCRay&, RTCHit*, unsigned, int*)>
+void user_intersect(const RTCIntersectFunctionNArguments* a) {
+    user_query<S, false, Impl>(a->geometryUserPtr, a->valid, a->geomID, a->N, RTCRayHitN_RayN(a->rayhit, a->N),
+                               RTCRayHitN_HitN(a->rayhit, a->N));
+}
+template <class S, void (*Impl)(const S&, RTCRay&, RTCHit*, unsigned, int*)>
+void user_occluded(const RTCOccludedFunctionNArguments* a) {
+    user_query<S, true, Impl>(a->geometryUserPtr, a->valid, a->geomID, a->N, a->ray, nullptr);
 }
 
 }  // namespace
@@ -303,8 +333,8 @@ RTCGeometry Sphere::create_geometry(RTCDevice device, unsigned geom_id) {
     rtcSetGeometryUserPrimitiveCount(g, 1);
     rtcSetGeometryUserData(g, this);
     rtcSetGeometryBoundsFunction(g, user_bounds<Sphere>, nullptr);
-    rtcSetGeometryIntersectFunction(g, sphere_intersect);
-    rtcSetGeometryOccludedFunction(g, sphere_occluded);
+    rtcSetGeometryIntersectFunction(g, user_intersect<Sphere, sphere_intersect_impl<false>>);
+    rtcSetGeometryOccludedFunction(g, user_occluded<Sphere, sphere_intersect_impl<true>>);
     rtcCommitGeometry(g);
     return g;
 }
@@ -451,8 +481,8 @@ RTCGeometry Disk::create_geometry(RTCDevice device, unsigned geom_id) {
     rtcSetGeometryUserPrimitiveCount(g, 1);
     rtcSetGeometryUserData(g, this);
     rtcSetGeometryBoundsFunction(g, user_bounds<Disk>, nullptr);
-    rtcSetGeometryIntersectFunction(g, disk_intersect);
-    rtcSetGeometryOccludedFunction(g, disk_occluded);
+    rtcSetGeometryIntersectFunction(g, user_intersect<Disk, disk_intersect_impl<false>>);
+    rtcSetGeometryOccludedFunction(g, user_occluded<Disk, disk_intersect_impl<true>>);
     rtcCommitGeometry(g);
     return g;
 }

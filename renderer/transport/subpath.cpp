@@ -191,18 +191,51 @@ int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<Path
     return classify_vertices(cam.data(), t, light.data(), s, true);
 }
 
-int classify_vertices(const PathVertex* cam, int t, const PathVertex* light, int s, bool light_end) {
+ClassCode class_code(const PathVertex& v) {
+    if (v.type == VType::Medium) return v.enclosed ? kClassSubsurface : kClassVolume;
+    if (v.null_surface()) return kClassSkip;
+    return v.delta ? kClassDelta : kClassSmooth;
+}
+
+namespace {
+// The one classification, over any vertex-code accessor: E z1 .. z_{t-1}
+// then y_{s-1} .. y1 pushed into a PathClass (a connection end as D).
+template <class CamCode, class LightCode>
+int classify_with(CamCode cam, int t, LightCode light, int s, bool light_end) {
     PathClass pc;
     int last_cam = s == 0 ? t - 2 : t - 1;
-    auto push = [&pc](const PathVertex& v, bool end) {
-        if (v.type == VType::Medium)
-            pc.push_medium(v.enclosed);
-        else if (!v.null_surface())
-            pc.push(end ? false : v.delta);
+    auto push = [&pc](ClassCode c, bool end) {
+        switch (c) {
+            case kClassVolume:
+                pc.push_medium(false);
+                break;
+            case kClassSubsurface:
+                pc.push_medium(true);
+                break;
+            case kClassSmooth:
+                pc.push(false);
+                break;
+            case kClassDelta:
+                pc.push(!end);
+                break;
+            case kClassSkip:
+                break;
+        }
     };
-    for (int i = 1; i <= last_cam; ++i) push(cam[i], i == t - 1);
-    for (int i = s - 1; i >= 1; --i) push(light[i], light_end && i == s - 1);
+    for (int i = 1; i <= last_cam; ++i) push(cam(i), i == t - 1);
+    for (int i = s - 1; i >= 1; --i) push(light(i), light_end && i == s - 1);
     return pc.classify();
+}
+}  // namespace
+
+int classify_vertices(const PathVertex* cam, int t, const PathVertex* light, int s, bool light_end) {
+    return classify_with([cam](int i) { return class_code(cam[i]); }, t,
+                         [light](int i) { return class_code(light[i]); }, s, light_end);
+}
+
+int classify_codes(const uint8_t* cam, int t, const uint8_t* light, int s, bool light_end) {
+    return classify_with([cam](int i) { return ClassCode(cam[i]); }, t, [light](int i) { return ClassCode(light[i]); },
+                         s, light_end);
 }
 
 Color scatter_value(const PathVertex& v, const Vec3& wo, TransportMode mode) {

@@ -191,5 +191,14 @@ int classify_strategy(const std::vector<PathVertex>& cam, const std::vector<Path
 // false for vertex merging, where the merge point is cam[t - 1] and
 // light[s - 1] .. light[1] are walk vertices (filed by their lobes).
 int classify_vertices(const PathVertex* cam, int t, const PathVertex* light, int s, bool light_end);
+// A vertex's part in those classes in one byte (kClassSkip: a null
+// boundary, none), so that an estimator classifying all O(n^2) strategies
+// of one pair of subpaths reads two short byte arrays instead of O(n) full
+// vertex records per strategy (bdpt on ajar_door spent 9 % of its
+// instructions in classify_vertices: docs/performance.md).
+enum ClassCode : uint8_t { kClassSkip, kClassSmooth, kClassDelta, kClassVolume, kClassSubsurface };
+ClassCode class_code(const PathVertex& v);
+// classify_vertices over the codes of the same vertices (the same result).
+int classify_codes(const uint8_t* cam, int t, const uint8_t* light, int s, bool light_end);
 
 }  // namespace rm
