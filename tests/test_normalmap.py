@@ -57,11 +57,13 @@ def _map_bsdf(kind, nested, extra=None):
     return b
 
 
-def _eval_at_hits(bsdf_dict, n_rays=150, n_dirs=6, seed=3, flip_texture=False):
+def _eval_at_hits(bsdf_dict, n_rays=150, n_dirs=6, seed=3, flip_texture=False, shape_type="obj"):
     """(ours, Mitsuba's) BSDF values for random rays onto a rotated OBJ
-    sphere and random directions on the unperturbed normal's side."""
-    shape = {"type": "obj", "filename": str(COMMON / "meshes/sphere.obj"), "bsdf": bsdf_dict,
-             "to_world": _tf().rotate([0, 0, 1], 30).rotate([0, 1, 0], 30)}
+    sphere (or analytic sphere, or disk: their dp/du, dp/dv) and random
+    directions on the unperturbed normal's side."""
+    shape = {"obj": {"type": "obj", "filename": str(COMMON / "meshes/sphere.obj")},
+             "sphere": {"type": "sphere", "radius": 0.8}, "disk": {"type": "disk"}}[shape_type]
+    shape = dict(shape, bsdf=bsdf_dict, to_world=_tf().rotate([0, 0, 1], 30).rotate([0, 1, 0], 30))
     scene = {"type": "scene", "s": shape}
     rng = np.random.default_rng(seed)
     o = rng.normal(size=(n_rays, 3))
@@ -97,27 +99,32 @@ def _eval_at_hits(bsdf_dict, n_rays=150, n_dirs=6, seed=3, flip_texture=False):
 
 
 MAP_CASES = [
-    ("normalmap", {"type": "diffuse"}, None),
-    ("normalmap", ROUGH, None),
-    ("normalmap", ROUGH, {"flip_invalid_normals": False, "use_shadowing_function": False}),
-    ("bumpmap", {"type": "diffuse"}, None),
-    ("bumpmap", {"type": "diffuse"}, {"flip_invalid_normals": False}),
-    ("bumpmap", ROUGH, {"use_shadowing_function": False}),
+    ("normalmap", {"type": "diffuse"}, None, "obj"),
+    ("normalmap", ROUGH, None, "obj"),
+    ("normalmap", ROUGH, {"flip_invalid_normals": False, "use_shadowing_function": False}, "obj"),
+    ("normalmap", ROUGH, None, "disk"),
+    ("bumpmap", {"type": "diffuse"}, None, "obj"),
+    ("bumpmap", {"type": "diffuse"}, {"flip_invalid_normals": False}, "obj"),
+    ("bumpmap", ROUGH, {"use_shadowing_function": False}, "obj"),
+    ("bumpmap", ROUGH, None, "sphere"),
+    ("bumpmap", {"type": "diffuse"}, None, "disk"),
 ]
 
 
 @needs_suite
-@pytest.mark.parametrize("kind,nested,extra", MAP_CASES,
-                         ids=[f"{k}-{n['type']}-{'default' if e is None else '-'.join(e)}" for k, n, e in MAP_CASES])
-def test_maps_match_mitsuba(kind, nested, extra):
+@pytest.mark.parametrize("kind,nested,extra,shape", MAP_CASES,
+                         ids=[f"{k}-{n['type']}-{'default' if e is None else '-'.join(e)}-{sh}"
+                              for k, n, e, sh in MAP_CASES])
+def test_maps_match_mitsuba(kind, nested, extra, shape):
     """Mitsuba 3.9's normalmap and bumpmap (the perturbed normal in the
     shading frame whose tangent follows dp/du, the fold of
     flip_invalid_normals, the terminator shadowing function): ours equals
-    its bsdf.eval at 900 (hit, direction) pairs on a rotated OBJ sphere,
-    within float rounding of the frames (measured: the 99th percentile of
+    its bsdf.eval at 900 (hit, direction) pairs on a rotated OBJ sphere
+    (an analytic sphere, a disk: their dp/du and dp/dv), within float
+    rounding of the frames (measured: the 99th percentile of
     the relative difference below 7e-4, the largest 7e-3, at grazing
     directions where the frames' 2e-4 rounding shows)."""
-    ours, ref = _eval_at_hits(_map_bsdf(kind, nested, extra))
+    ours, ref = _eval_at_hits(_map_bsdf(kind, nested, extra), shape_type=shape)
     rel = np.abs(ours - ref).max(axis=1) / np.maximum(1e-3, np.abs(ref).max(axis=1))
     assert np.quantile(rel, 0.99) < 2e-3 and rel.max() < 2e-2, (np.quantile(rel, 0.99), rel.max())
 
