@@ -374,7 +374,8 @@ def test_light_paths_agree_with_path_on_a_normal_map(mapped, estimator, spp):
 def test_masked_floor_agrees_across_estimators(tmp_path):
     """A leaf-like opacity mask (a grey bitmap, holes and partial opacity)
     over a second floor: ptracer and bdpt = path (blocked z). Power: the
-    mask's opacity 10 % higher everywhere (its bitmap scaled) is rejected."""
+    mask's opacity 2 % higher everywhere (its bitmap scaled) is rejected
+    (measured under seeds 0, 1, 2: mean block z +6.0, +7.4, +8.1)."""
     from PIL import Image
     from refcompare import blocked_z
 
@@ -387,7 +388,7 @@ def test_masked_floor_agrees_across_estimators(tmp_path):
         assert passed, f"{est}\n{msg}"
     desc = _mapped_scene(tmp_path / "m.png", mask_opacity=True)
     bsdf = next(s.bsdf for s in desc.shapes if s.bsdf is not None and s.bsdf.type == "mask")
-    bsdf.textures["opacity"].data = np.minimum(bsdf.textures["opacity"].data * 1.1 + 0.05, 1.0)
+    bsdf.textures["opacity"].data = np.minimum(bsdf.textures["opacity"].data * 1.02, 1.0)
     bad = _render(desc, "bdpt", 256)
     assert not blocked_z(bad.image, bad.variance, ref.image, ref.variance)[0]
 
