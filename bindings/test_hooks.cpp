@@ -557,6 +557,9 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
         },
         py::arg("type"), py::arg("sample_count"), py::arg("jitter"), py::arg("seed"), py::arg("width"),
         py::arg("height"), py::arg("spp"), py::arg("pixel"), py::arg("samples"), py::arg("draws"));
+    m.def(
+        "set_shading_correction_for_tests", [](bool on) { g_shading_correction.store(on, std::memory_order_relaxed); },
+        py::arg("on"), "false drops the adjoint shading-normal correction (transport/common.h), for a power check");
     m.def("sobol_u32", &sobol_u32, py::arg("i"), py::arg("dim"), "Sobol dimension dim (0, 1) of index i, unscrambled");
     m.def("owen_scramble", &owen_scramble, py::arg("v"), py::arg("seed"));
     m.def("permute_index", &permute_index, py::arg("i"), py::arg("n"), py::arg("key"));

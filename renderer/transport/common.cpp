@@ -2,6 +2,8 @@
 
 namespace rm {
 
+std::atomic<bool> g_shading_correction{true};
+
 Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsdf, const Vec3& wi_local,
                       Sampler& sampler, ThreadStats& stats, float light_frac, float bsdf_frac) {
     DirectSample ds;
