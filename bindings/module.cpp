@@ -44,13 +44,32 @@ py::array_t<double> map_channel(int ch, const DoubleArray& x, F f) {
     return out;
 }
 
-// Optional (N, 2) texture coordinates for a BSDF query (textured
-// parameters, BsdfContext::uv); None: all (0, 0).
+// Texture coordinates for a BSDF query (textured parameters,
+// BsdfContext::uv): None (all (0, 0)), one (u, v) for every direction, or
+// (N, 2), one per direction.
 std::vector<float> bsdf_uvs(const py::object& uv, size_t n) {
     if (uv.is_none()) return std::vector<float>(2 * n, 0.f);
+    auto a = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(uv);
+    if (a && a.ndim() == 1 && a.size() == 2) {
+        std::vector<float> out(2 * n);
+        for (size_t i = 0; i < n; ++i) {
+            out[2 * i] = a.data()[0];
+            out[2 * i + 1] = a.data()[1];
+        }
+        return out;
+    }
     auto u = flat<float>(uv, 2, "uv");
-    if (u.size() != 2 * n) throw py::value_error("uv must be (N, 2) for N directions wi");
+    if (u.size() != 2 * n) throw py::value_error("uv must be (2,) or (N, 2) for N directions wi");
     return std::vector<float>(u.data(), u.data() + u.size());
+}
+
+// The context of the Bsdf bindings' queries: the transport mode and n_base
+// (Interaction::n_base, normal and bump maps), one for all N.
+BsdfContext bsdf_test_context(bool adjoint, const std::array<float, 3>& n_base) {
+    BsdfContext ctx;
+    ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+    ctx.n_base = Vec3(n_base[0], n_base[1], n_base[2]);
+    return ctx;
 }
 
 }  // namespace
@@ -100,6 +119,10 @@ PYBIND11_MODULE(_core, m) {
         .def_readwrite("nested", &BsdfDesc::nested)
         .def_property("base_color", color_get(&BsdfDesc::base_color), color_set(&BsdfDesc::base_color))
         .def_readwrite("floats", &BsdfDesc::floats)
+        .def_readwrite("opacity", &BsdfDesc::opacity)
+        .def_readwrite("scale", &BsdfDesc::scale)
+        .def_readwrite("flip_invalid_normals", &BsdfDesc::flip_invalid_normals)
+        .def_readwrite("use_shadowing_function", &BsdfDesc::use_shadowing_function)
         .def_readwrite("textures", &BsdfDesc::textures);
 
     py::class_<EmitterDesc>(m, "EmitterDesc")
@@ -365,14 +388,13 @@ PYBIND11_MODULE(_core, m) {
         .def_property_readonly("flags", &Bsdf::flags)
         .def(
             "eval",
-            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint, py::object uv) {
+            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint, py::object uv, std::array<float, 3> n_base) {
                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
                 size_t n = a.size() / 3;
                 const std::vector<float> uvs = bsdf_uvs(uv, n);
                 std::vector<float> out(3 * n);
-                BsdfContext ctx;
-                ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                BsdfContext ctx = bsdf_test_context(adjoint, n_base);
                 {
                     py::gil_scoped_release nogil;
                     for (size_t i = 0; i < n; ++i) {
@@ -387,17 +409,18 @@ PYBIND11_MODULE(_core, m) {
                 return to_numpy(std::move(out), {py::ssize_t(n), 3});
             },
             py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, py::arg("uv") = py::none(),
-            "f(wi, wo) |cos theta_o| for (N, 3) local directions (at (N, 2) uvs, if given)")
+            py::arg("n_base") = std::array<float, 3>{0.f, 0.f, 1.f},
+            "f(wi, wo) |cos theta_o| for (N, 3) local directions; uv ((2,) or (N, 2)) and n_base: the "
+            "BsdfContext's (textures, normal and bump maps)")
         .def(
             "pdf",
-            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint, py::object uv) {
+            [](const Bsdf& b, py::object wi, py::object wo, bool adjoint, py::object uv, std::array<float, 3> n_base) {
                 auto a = flat<float>(wi, 3, "wi"), c = flat<float>(wo, 3, "wo");
                 if (a.size() != c.size()) throw py::value_error("wi and wo differ in length");
                 size_t n = a.size() / 3;
                 const std::vector<float> uvs = bsdf_uvs(uv, n);
                 std::vector<float> out(n);
-                BsdfContext ctx;
-                ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                BsdfContext ctx = bsdf_test_context(adjoint, n_base);
                 for (size_t i = 0; i < n; ++i) {
                     ctx.uv = Vec2(uvs[2 * i], uvs[2 * i + 1]);
                     out[i] = b.pdf_w(ctx, Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]),
@@ -406,10 +429,11 @@ PYBIND11_MODULE(_core, m) {
                 return to_numpy(std::move(out), {py::ssize_t(n)});
             },
             py::arg("wi"), py::arg("wo"), py::arg("adjoint") = false, py::arg("uv") = py::none(),
-            "solid-angle pdf of sampling wo given wi (at (N, 2) uvs, if given)")
+            py::arg("n_base") = std::array<float, 3>{0.f, 0.f, 1.f}, "solid-angle pdf of sampling wo given wi")
         .def(
             "sample",
-            [](const Bsdf& b, py::object wi, py::object u1, py::object u2, bool adjoint, py::object uv) {
+            [](const Bsdf& b, py::object wi, py::object u1, py::object u2, bool adjoint, py::object uv,
+               std::array<float, 3> n_base) {
                 auto a = flat<float>(wi, 3, "wi");
                 auto uu1 = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(u1);
                 auto uu2 = flat<float>(u2, 2, "u2");
@@ -418,8 +442,7 @@ PYBIND11_MODULE(_core, m) {
                     throw py::value_error("u1 must be (N,) and u2 (N, 2) for N directions wi");
                 const std::vector<float> uvs = bsdf_uvs(uv, n);
                 std::vector<float> wo(3 * n), weight(3 * n), pdf(n), eta(n), delta(n), flags(n);
-                BsdfContext ctx;
-                ctx.mode = adjoint ? TransportMode::Importance : TransportMode::Radiance;
+                BsdfContext ctx = bsdf_test_context(adjoint, n_base);
                 const float* pu1 = uu1.data();
                 for (size_t i = 0; i < n; ++i) {
                     ctx.uv = Vec2(uvs[2 * i], uvs[2 * i + 1]);
@@ -444,7 +467,8 @@ PYBIND11_MODULE(_core, m) {
                 r["sampled_flags"] = to_numpy(std::move(flags), {N});
                 return r;
             },
-            py::arg("wi"), py::arg("u1"), py::arg("u2"), py::arg("adjoint") = false, py::arg("uv") = py::none());
+            py::arg("wi"), py::arg("u1"), py::arg("u2"), py::arg("adjoint") = false, py::arg("uv") = py::none(),
+            py::arg("n_base") = std::array<float, 3>{0.f, 0.f, 1.f});
 
     py::class_<PhaseFunction>(m, "Phase")
         .def(py::init([](const std::string& type, float g) { return make_phase(type, g); }), py::arg("type"),

@@ -47,21 +47,25 @@ py::array_t<float> per_point(const PointArray& pts, F f) {
 
 void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
     // A texture evaluated at (N, 2) uvs (tests/test_textures.py): eval (N, 3),
-    // eval_1 (N,) and mean().
+    // eval_1 (N,), mean() and eval_1_grad (N, 2).
     m.def(
         "texture_eval",
         [](const TextureDesc& d, py::object uv) {
             auto u = flat<float>(uv, 2, "uv");
             std::shared_ptr<const Texture> t = make_texture(d);
             size_t n = u.size() / 2;
-            std::vector<float> out(3 * n), one(n);
+            std::vector<float> out(3 * n), one(n), grad(2 * n);
             for (size_t i = 0; i < n; ++i) {
                 Color c = t->eval(Vec2(u[2 * i], u[2 * i + 1]));
                 for (int k = 0; k < 3; ++k) out[3 * i + size_t(k)] = c[k];
                 one[i] = t->eval_1(Vec2(u[2 * i], u[2 * i + 1]));
+                const Vec2 g = t->eval_1_grad(Vec2(u[2 * i], u[2 * i + 1]));
+                grad[2 * i] = g.x;
+                grad[2 * i + 1] = g.y;
             }
             return py::make_tuple(to_numpy(std::move(out), {py::ssize_t(n), 3}),
-                                  to_numpy(std::move(one), {py::ssize_t(n)}), t->mean());
+                                  to_numpy(std::move(one), {py::ssize_t(n)}), t->mean(),
+                                  to_numpy(std::move(grad), {py::ssize_t(n), 2}));
         },
         py::arg("desc"), py::arg("uv"));
     // The Embree-limit benchmark (benchmarks/studies/embree_limit.py): the
@@ -91,10 +95,11 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
         .def_property_readonly("robust", &Scene::robust)
         // The closest hits of N rays (origins and directions (N, 3)), as the
         // estimators see them (tests/test_textures.py compares the uv with
-        // Mitsuba's): t (inf: miss), p, n, uv, the shading frame's tangent s,
-        // shape index (-1: miss); with `texture` (a TextureDesc), its eval
-        // at each hit's SurfaceUv, "tex" (tests/test_emitter_textures.py:
-        // mesh_attribute against Mitsuba's).
+        // Mitsuba's): t (inf: miss), p, n, uv, the shading frame's tangent s
+        // and normal ns (normal and bump maps applied), n_base (the
+        // unperturbed normal in that frame), shape index (-1: miss); with
+        // `texture` (a TextureDesc), its eval at each hit's SurfaceUv, "tex"
+        // (tests/test_emitter_textures.py: mesh_attribute against Mitsuba's).
         .def(
             "intersect_rays",
             [](const Scene& s, py::object o, py::object d, bool packet, py::object texture) {
@@ -102,8 +107,8 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 auto oo = flat<float>(o, 3, "o"), dd = flat<float>(d, 3, "d");
                 if (oo.size() != dd.size()) throw py::value_error("o and d differ in length");
                 size_t n = oo.size() / 3;
-                std::vector<float> t(n, kInf), p(3 * n, 0.f), nn(3 * n, 0.f), ss(3 * n, 0.f), uv(2 * n, 0.f),
-                    shape(n, -1.f), tex(3 * n, 0.f);
+                std::vector<float> t(n, kInf), p(3 * n, 0.f), nn(3 * n, 0.f), ss(3 * n, 0.f), ns(3 * n, 0.f),
+                    nb(3 * n, 0.f), uv(2 * n, 0.f), shape(n, -1.f), tex(3 * n, 0.f);
                 std::shared_ptr<const Texture> tx =
                     texture.is_none() ? nullptr : make_texture(texture.cast<const TextureDesc&>());
                 std::vector<Ray> rays(n);
@@ -125,6 +130,8 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                         p[3 * i + size_t(k)] = it.p[k];
                         nn[3 * i + size_t(k)] = it.n[k];
                         ss[3 * i + size_t(k)] = it.sh.s[k];
+                        ns[3 * i + size_t(k)] = it.sh.n[k];
+                        nb[3 * i + size_t(k)] = it.n_base[k];
                     }
                     uv[2 * i] = it.uv.x;
                     uv[2 * i + 1] = it.uv.y;
@@ -141,6 +148,8 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 out["n"] = to_numpy(std::move(nn), {N, 3});
                 out["uv"] = to_numpy(std::move(uv), {N, 2});
                 out["s"] = to_numpy(std::move(ss), {N, 3});
+                out["ns"] = to_numpy(std::move(ns), {N, 3});
+                out["n_base"] = to_numpy(std::move(nb), {N, 3});
                 out["shape"] = to_numpy(std::move(shape), {N});
                 if (tx) out["tex"] = to_numpy(std::move(tex), {N, 3});
                 return out;
@@ -557,6 +566,9 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
         },
         py::arg("type"), py::arg("sample_count"), py::arg("jitter"), py::arg("seed"), py::arg("width"),
         py::arg("height"), py::arg("spp"), py::arg("pixel"), py::arg("samples"), py::arg("draws"));
+    m.def(
+        "set_shading_correction_for_tests", [](bool on) { g_shading_correction.store(on, std::memory_order_relaxed); },
+        py::arg("on"), "false drops the adjoint shading-normal correction (transport/common.h), for a power check");
     m.def("sobol_u32", &sobol_u32, py::arg("i"), py::arg("dim"), "Sobol dimension dim (0, 1) of index i, unscrambled");
     m.def("owen_scramble", &owen_scramble, py::arg("v"), py::arg("seed"));
     m.def("permute_index", &permute_index, py::arg("i"), py::arg("n"), py::arg("key"));

@@ -81,6 +81,9 @@ PARAMS = {
                            "diffuse_reflectance_sampling_rate": "float",
                            "diffuse_transmittance_sampling_rate": "float"},
         "blendbsdf": {"weight": "unit"},
+        "mask": {"opacity": "float"},
+        "normalmap": {"flip_invalid_normals": "bool", "use_shadowing_function": "bool"},
+        "bumpmap": {"scale": "float", "flip_invalid_normals": "bool", "use_shadowing_function": "bool"},
     },
     "emitter": {
         "area": {"radiance": "rgb"}, "constant": {"radiance": "rgb"},
@@ -334,6 +337,12 @@ def _node(draw, category, name=None, depth=0, types=None):
                 child("subsurface", "subsurface")
             if draw(st.integers(0, 19)) == 0:
                 child("sensor", "sensor", types=["irradiancemeter"])
+        elif category == "bsdf" and t in ("mask", "normalmap", "bumpmap"):
+            # a nested bsdf (usually one), and the texture of the map or the mask's opacity
+            for n in ("a", "b")[:draw(st.sampled_from([0, 1, 1, 1, 2]))]:
+                child("bsdf", n)
+            if t != "mask" or draw(st.booleans()):
+                child("texture", {"mask": "opacity", "normalmap": "normalmap", "bumpmap": "height"}[t])
         elif category == "bsdf" and t not in ("twosided", "blendbsdf") and draw(st.integers(0, 3)) == 0:
             # a texture on a colour parameter that takes one, or on one that does not
             child("texture", draw(st.sampled_from(["reflectance", "diffuse_reflectance", "specular_reflectance",

@@ -20,6 +20,10 @@ def _bsdf(d: BsdfDesc) -> "_core.BsdfDesc":
     c.distribution = d.distribution
     c.sample_visible = bool(d.sample_visible)
     c.nonlinear = bool(d.nonlinear)
+    c.opacity = float(d.opacity)
+    c.scale = float(d.scale)
+    c.flip_invalid_normals = bool(d.flip_invalid_normals)
+    c.use_shadowing_function = bool(d.use_shadowing_function)
     c.nested = [_bsdf(n) for n in d.nested]
     c.base_color = tuple(float(x) for x in d.base_color)
     c.floats = {name: float(v) for name, v in d.floats.items()}

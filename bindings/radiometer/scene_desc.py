@@ -76,12 +76,16 @@ class BsdfDesc:
     distribution: str = "beckmann"
     sample_visible: bool = True
     nonlinear: bool = False
-    nested: list = field(default_factory=list)  # twosided: [bsdf] or [front, back]; blendbsdf: 2
+    nested: list = field(default_factory=list)  # twosided: [bsdf] or [front, back]; blendbsdf: 2; mask etc.: 1
     # principled, principledthin: base_color; their scalar parameters and
     # blendbsdf's weight by Mitsuba's names, defaults filled in (a textured
     # one holds its texture's mean and has its texture in `textures`).
     base_color: tuple = field(default_factory=lambda: _rgb(0.5))
     floats: dict = field(default_factory=dict)
+    opacity: float = 0.5  # mask, when not textured
+    scale: float = 1.0  # bumpmap
+    flip_invalid_normals: bool = True  # normalmap, bumpmap
+    use_shadowing_function: bool = True  # normalmap, bumpmap
     # Textured colour parameters: name -> TextureDesc, replacing the plain
     # value of that name (reflectance, diffuse_reflectance,
     # specular_reflectance), which then holds the texture's mean colour.

@@ -177,7 +177,7 @@ struct CachePaths {
                 gather[size_t(c)]->sample(scene, sampler, ray, er, stats);
                 return w * er.total();
             }
-            ctx.uv = h.uv;
+            ctx.set(h);
             BsdfSample bs = b.sample(ctx, h.to_local(h.wi), sampler.next_1d(), sampler.next_2d());
             if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || !bs.is_delta) return Color(0.f);
             w *= bs.weight;

@@ -78,7 +78,7 @@ private:
         const Bsdf& bsdf = *scene.bsdfs[shape.bsdf];
         Vec3 wi = it.to_local(it.wi);
         BsdfContext ctx;
-        ctx.uv = it.uv;
+        ctx.set(it);
 
         // 2. Emitter samples (smooth lobes only), each weighted 1 / n_light.
         if (bsdf.has_smooth() && mask[kDirect])

@@ -192,7 +192,7 @@ private:
     static Color albedo_over_pi(const Scene& scene, const Interaction& it) {
         const Bsdf& b = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
         BsdfContext ctx;
-        ctx.uv = it.uv;
+        ctx.set(it);
         return b.eval(ctx, it.to_local(it.wi), Vec3(0.f, 0.f, 1.f));  // f |cos| at the normal: rho / pi
     }
 

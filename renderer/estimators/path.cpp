@@ -62,6 +62,11 @@ public:
 
     const Integrator& for_scene(const Scene& scene) const override {
         if (!scene.features.has_media) return *this;
+        if (scene.features.has_masked_smooth)
+            throw std::invalid_argument(
+                "integrator '" + type +
+                "' cannot render a 'mask' BSDF over a smooth BSDF in a scene with media (its media loop samples "
+                "null lobes before next event estimation); use 'bdpt' or 'ptracer', or a scene without media");
         media_->mask = mask;
         media_->type = type;
         media_->caps = caps;
@@ -139,7 +144,7 @@ private:
             if (!pc.can_reach(mask, scene.features.has_dipole)) break;
             const Bsdf* bsdf = scene.bsdfs[shape.bsdf].get();
             Vec3 wi = it.to_local(it.wi);
-            ctx.uv = it.uv;
+            ctx.set(it);
             BsdfSample bs;
             bool sampled = false;
 

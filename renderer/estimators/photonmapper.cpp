@@ -290,7 +290,7 @@ private:
         float r2 = full ? nb.back().d2 : r2_max;
         if (!(r2 > 0.f)) r2 = r2_max;  // n photons on one point: fall back to the maximum disc
         BsdfContext ctx;
-        ctx.uv = it.uv;
+        ctx.set(it);
         Color sum(0.f), half(0.f), rim(0.f);
         const Neighbour* const found = nb.data();
         const size_t m = nb.size();
@@ -330,7 +330,7 @@ private:
         BsdfContext ctx;
         Color sum(0.f), bsum(0.f);
         for (int i = 0; i < gather_rays_; ++i) {
-            ctx.uv = x.uv;
+            ctx.set(x);
             BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
             if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || bs.is_delta) continue;
             Color w = bs.weight;
@@ -349,7 +349,7 @@ private:
                     bsum += w * b;
                 }
                 if (!(b2.flags() & kDelta)) break;
-                ctx.uv = it.uv;
+                ctx.set(it);
                 BsdfSample bs2 = b2.sample(ctx, wi2, sampler.next_1d(), sampler.next_2d());
                 if (!(bs2.pdf_w > 0.f) || is_black(bs2.weight) || !bs2.is_delta) break;
                 w *= bs2.weight;
@@ -612,7 +612,7 @@ Color PhotonMapper::gather_media(const Scene& scene, const Maps& maps, Sampler& 
     Color sum(0.f);
     const float inv_n = 1.f / float(gather_rays_);
     for (int i = 0; i < gather_rays_; ++i) {
-        ctx.uv = x.uv;
+        ctx.set(x);
         BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
         float u_hero = sampler.next_1d();
         if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || bs.is_delta) continue;
@@ -673,7 +673,7 @@ Color PhotonMapper::gather_media(const Scene& scene, const Maps& maps, Sampler& 
                 if (mask[kSubsurface]) out.add(kSubsurface, beta * th.beta * split[1] * inv_n);
             }
             if (!(b2.flags() & kDelta)) break;
-            ctx.uv = it.uv;
+            ctx.set(it);
             BsdfSample bs2 = b2.sample(ctx, wi2, sampler.next_1d(), sampler.next_2d());
             if (!(bs2.pdf_w > 0.f) || is_black(bs2.weight) || !bs2.is_delta) break;
             th.beta *= bs2.weight;
@@ -731,7 +731,7 @@ void PhotonMapper::radiance_media(const Scene& scene, const Maps& maps, Sampler&
         }
         if (max_depth_ >= 0 && cv + 1 >= max_depth_) break;
         Vec3 wi = it.to_local(it.wi);
-        ctx.uv = it.uv;
+        ctx.set(it);
         const int c = cv + 1;
         const bool via_specular = pc.scatter_vertices > 0;
         if (bsdf.has_smooth()) {

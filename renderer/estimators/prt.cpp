@@ -170,7 +170,7 @@ private:
             if (vertices >= max_vertices()) return;
             // 2. A diffuse bounce (check_scene: every BSDF is diffuse), cosine-sampled.
             const Bsdf& bsdf = *scene.bsdfs[size_t(scene.shapes[size_t(it.shape)]->bsdf)];
-            ctx.uv = it.uv;
+            ctx.set(it);
             BsdfSample bs = bsdf.sample(ctx, it.to_local(it.wi), sampler.next_1d(), sampler.next_2d());
             if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) return;
             beta *= bs.weight;

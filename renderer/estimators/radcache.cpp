@@ -201,7 +201,7 @@ public:
         own.f = it.sh;
         const Bsdf& bsdf = *scene.bsdfs[scene.shapes[it.shape]->bsdf];
         BsdfContext ctx;
-        ctx.uv = it.uv;
+        ctx.set(it);
         Vec3 wi = it.to_local(it.wi);
         if (bsdf.flags() == kDiffuseReflection) {
             // Lambertian: f times the irradiance of the reconstruction, in
@@ -238,7 +238,7 @@ private:
             return false;
         if (max_lobe_pdf_ <= 0.f) return true;
         BsdfContext ctx;
-        ctx.uv = it.uv;
+        ctx.set(it);
         return b.pdf_w(ctx, wi, Vec3(-wi.x, -wi.y, wi.z)) <= max_lobe_pdf_;
     }
 

@@ -363,7 +363,7 @@ private:
             Color phi_half(0.f);  // photons within r / sqrt(2), every class
             double m = 0;
             if (vp.bsdf && !map.empty()) {
-                ctx.uv = vp.it.uv;
+                ctx.set(vp.it);
                 int budget = sppm_.max_depth_ < 0 ? 255 : sppm_.max_depth_ - vp.c;
                 map.range(vp.it.p, float(ps.r2), nb);
                 for (const Neighbour& n : nb) {

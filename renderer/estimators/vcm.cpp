@@ -772,7 +772,7 @@ private:
                 if (conn && w.vm && !merge_idx_.empty() && (md < 0 || depth_cam + 1 <= md)) {
                     const Vec3 wi = z.it.to_local(z.it.wi);
                     BsdfContext ctx;
-                    ctx.uv = z.it.uv;
+                    ctx.set(z.it);
                     auto process = [&](uint32_t q) {
                         const uint32_t k = merge_idx_[q];
                         const PathVertex& yv = lv_[k];

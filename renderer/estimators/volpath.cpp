@@ -154,7 +154,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
             continue;
         }
         Vec3 wi = it.to_local(it.wi);
-        ctx.uv = it.uv;
+        ctx.set(it);
         const Bsdf* bsdf_at = &bsdf;
         BsdfSample bs;
         bool sampled = false;

@@ -262,7 +262,7 @@ public:
         int depth = g.depth;
         BsdfContext ctx;
         for (int level = 0; level < kMaxCompensation; ++level) {
-            ctx.uv = x.it.uv;
+            ctx.set(x.it);
             BsdfSample bs = x.bsdf->sample(ctx, x.it.to_local(x.it.wi), sampler.next_1d(), sampler.next_2d());
             if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || bs.is_delta) break;
             Ray ray = x.it.spawn(x.it.to_world(bs.wo));

@@ -35,6 +35,15 @@
 //                   (1 - weight) f_0 + weight f_1. A textured weight with a
 //                   nested null lobe is refused (null_transmission has no uv).
 //  principled, principledthin: bsdf_principled.cpp.
+//  mask             opacity (float or texture, default 0.5), nested: 1 BSDF.
+//                   Pass-through with probability 1 - opacity.
+//  normalmap        normalmap (texture of tangent-space normals), nested: 1.
+//  bumpmap          one texture (a height field, any name), scale (1),
+//                   nested: 1. Both: flip_invalid_normals (true),
+//                   use_shadowing_function (true). normalmap and bumpmap
+//                   perturb the hit's shading frame (Bsdf::perturb_frame);
+//                   neither may sit inside a twosided (it would mirror wi
+//                   first) or inside each other.
 // Textured colours (BsdfDesc::textures; scene/texture.h): reflectance
 // (diffuse), diffuse_reflectance (plastic, roughplastic) and
 // specular_reflectance (conductor, roughconductor), evaluated at the
@@ -460,7 +469,9 @@ public:
     Color eval(const BsdfContext&, const Vec3&, const Vec3&) const override { return Color(0.f); }
     float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
 
-    Color null_transmission(float cos_theta) const override { return spec_t_ * (1.f - slab_reflectance(cos_theta)); }
+    Color null_transmission(const BsdfContext&, float cos_theta) const override {
+        return spec_t_ * (1.f - slab_reflectance(cos_theta));
+    }
 
 private:
     // R' = 2R / (1 + R) at incidence |cos theta|.
@@ -816,13 +827,13 @@ public:
         return pdf;
     }
     // Only with a plain weight (make_bsdf refuses a textured one here).
-    Color null_transmission(float cos_theta) const override {
+    Color null_transmission(const BsdfContext& ctx, float cos_theta) const override {
         const float w = clamp(weight_.value, 0.f, 1.f);
-        return b0_->null_transmission(cos_theta) * (1.f - w) + b1_->null_transmission(cos_theta) * w;
+        return b0_->null_transmission(ctx, cos_theta) * (1.f - w) + b1_->null_transmission(ctx, cos_theta) * w;
     }
 
 private:
-    float weight(Vec2 uv) const { return clamp(weight_.eval(uv), 0.f, 1.f); }
+    float weight(const SurfaceUv& uv) const { return clamp(weight_.eval(uv), 0.f, 1.f); }
     void mix(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo, float w, Color* value, float* pdf) const {
         *value = b0_->eval(ctx, wi, wo) * (1.f - w) + b1_->eval(ctx, wi, wo) * w;
         *pdf = b0_->pdf_w(ctx, wi, wo) * (1.f - w) + b1_->pdf_w(ctx, wi, wo) * w;
@@ -851,6 +862,211 @@ public:
     }
     Color eval(const BsdfContext&, const Vec3&, const Vec3&) const override { return Color(0.f); }
     float pdf_w(const BsdfContext&, const Vec3&, const Vec3&) const override { return 0.f; }
+};
+
+// ---------------------------------------------------------------------------
+// mask: an opacity mask over a nested BSDF (Mitsuba 3 src/bsdfs/mask.cpp):
+// with probability 1 - opacity the surface is a forward delta of weight 1
+// (a kNull lobe, as null), else the nested BSDF scatters; eval and pdf are
+// the nested ones times opacity, and a nested sample's pdf_w carries the
+// opacity too (Mitsuba's sample() leaves it out, which makes its MIS
+// weights disagree with pdf() where 0 < opacity < 1). opacity is a float
+// or a texture read as eval_1, clamped to [0, 1] (as Mitsuba). A shadow
+// ray keeps 1 - opacity (1 - nested null transmission) where an
+// estimator lets it through null lobes (Mitsuba's eval_null_transmission).
+
+class MaskBsdf final : public Bsdf {
+public:
+    MaskBsdf(std::unique_ptr<Bsdf> nested, float opacity, std::shared_ptr<const Texture> opacity_tex)
+        : nested_(std::move(nested)), opacity_(opacity), tex_(std::move(opacity_tex)) {
+        flags_ = nested_->flags() | kNull;
+        textured_ = tex_ != nullptr || nested_->textured();
+        anisotropic_ = nested_->anisotropic();
+        perturbs_frame_ = nested_->perturbs_frame();
+        frame_follows_wi_ = nested_->frame_follows_wi();
+    }
+
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
+        const float o = opacity(ctx.uv);
+        if (u1 < o) {
+            // u1 / o reuses the lobe choice's number, kept below 1.
+            BsdfSample bs = nested_->sample(ctx, wi, std::min(u1 / o, 0x1.fffffep-1f), u2);
+            bs.pdf_w *= o;
+            return sanitize(bs);
+        }
+        BsdfSample bs;
+        bs.wo = -wi;
+        bs.weight = Color(1.f);
+        bs.pdf_w = 1.f - o;
+        bs.is_delta = true;
+        bs.sampled_flags = kNull;
+        return sanitize(bs);
+    }
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
+        const float o = opacity(ctx.uv);
+        return o > 0.f ? nested_->eval(ctx, wi, wo) * o : Color(0.f);
+    }
+    float pdf_w(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
+        const float o = opacity(ctx.uv);
+        return o > 0.f ? nested_->pdf_w(ctx, wi, wo) * o : 0.f;
+    }
+    Color null_transmission(const BsdfContext& ctx, float cos_theta) const override {
+        return Color(1.f) - (Color(1.f) - nested_->null_transmission(ctx, cos_theta)) * opacity(ctx.uv);
+    }
+    void perturb_frame(Interaction& it) const override { nested_->perturb_frame(it); }
+
+private:
+    float opacity(const SurfaceUv& uv) const {
+        const float o = tex_ ? tex_->eval_1(uv) : opacity_;
+        return std::min(std::max(o, 0.f), 1.f);
+    }
+    std::unique_ptr<Bsdf> nested_;
+    float opacity_;
+    std::shared_ptr<const Texture> tex_;
+};
+
+// ---------------------------------------------------------------------------
+// normalmap and bumpmap (Mitsuba 3.9 src/bsdfs/normalmap.cpp, bumpmap.cpp,
+// normalmap_helpers.h): the nested BSDF in a perturbed shading frame. The
+// frame is applied to the hit itself (perturb_frame, from
+// Scene::intersect), so the nested BSDF's queries arrive in it, and so do
+// the adjoint shading-normal correction of light paths and the estimators'
+// cosines. The perturbed normal n', in the local coordinates of the hit's
+// shading frame (whose tangent follows dp/du: anisotropic_):
+//  normalmap: 2 rgb - 1 of the `normalmap` texture at uv;
+//  bumpmap:   with (g_u, g_v) = scale * the height texture's uv gradient,
+//             dp_du' = dp_du + n_s (g_u - n_s . dp_du), dp_dv' likewise,
+//             n' = dp_du' x dp_dv' turned to the geometric normal's side
+//             (Blinn 1978, "Simulation of Wrinkled Surfaces").
+// flip_invalid_normals (default true): where the arriving direction wi lies
+// on different sides of the unperturbed and the perturbed normal, n' is
+// mirrored about the unperturbed one, (x, y, z) -> (-x, -y, z) (Schuessler
+// et al. 2017, "Microfacet-based Normal Mapping for Robust Monte Carlo Path
+// Tracing", as Mitsuba's fold). Then s' = normalize(e_x - n' n'_x),
+// t' = n' x s' (bumpmap: dp_du in place of e_x, see tangent_seed).
+// Directions on different sides of the unperturbed and the
+// perturbed normal carry nothing (Mitsuba checks the light-side direction;
+// we check both, which differs only for nested BSDFs that are not one-sided
+// reflectors, and keeps pdf_w the density of sample()'s non-zero results in
+// both transport modes). use_shadowing_function (default true): the value
+// is multiplied by Conty Estevez, Lecocq and Stein 2019's ("A
+// Microfacet-Based Shadowing Function to Solve the Bump Terminator
+// Problem", Ray Tracing Gems ch. 12) G = 2 / (1 + sqrt(1 + a2 tan2(w))),
+// a2 = min(1, tan2(n') / 8), angles against the unperturbed normal, w the
+// light-side direction (wo in radiance transport, wi in importance
+// transport: one integrand for both, as the adjoint needs).
+
+class FrameMapBsdf : public Bsdf {
+public:
+    FrameMapBsdf(std::unique_ptr<Bsdf> nested, bool flip, bool shadowing)
+        : nested_(std::move(nested)), flip_(flip), shadowing_(shadowing) {
+        flags_ = nested_->flags();
+        textured_ = true;
+        anisotropic_ = true;
+        perturbs_frame_ = true;
+        frame_follows_wi_ = flip;
+    }
+    BsdfSample sample(const BsdfContext& ctx, const Vec3& wi, float u1, Vec2 u2) const override {
+        if (!same_side(ctx, wi)) return BsdfSample{};
+        BsdfSample bs = nested_->sample(ctx, wi, u1, u2);
+        if (!(bs.pdf_w > 0.f) || !same_side(ctx, bs.wo)) return BsdfSample{};
+        if (shadowing_) bs.weight *= shadow(ctx, ctx.mode == TransportMode::Radiance ? bs.wo : wi);
+        return bs;
+    }
+    Color eval(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
+        if (!same_side(ctx, wi) || !same_side(ctx, wo)) return Color(0.f);
+        Color v = nested_->eval(ctx, wi, wo);
+        if (shadowing_) v *= shadow(ctx, ctx.mode == TransportMode::Radiance ? wo : wi);
+        return v;
+    }
+    float pdf_w(const BsdfContext& ctx, const Vec3& wi, const Vec3& wo) const override {
+        if (!same_side(ctx, wi) || !same_side(ctx, wo)) return 0.f;
+        return nested_->pdf_w(ctx, wi, wo);
+    }
+    Color null_transmission(const BsdfContext& ctx, float cos_theta) const override {
+        return nested_->null_transmission(ctx, cos_theta);
+    }
+    void perturb_frame(Interaction& it) const override {
+        Vec3 n = mapped_normal(it);
+        if (flip_) {
+            const Vec3 wi = it.sh.to_local(it.wi);
+            if (wi.z * dot(wi, n) <= 0.f) n = Vec3(-n.x, -n.y, n.z);
+        }
+        const float len = length(n);
+        n = len > 0.f && std::isfinite(len) ? n / len : Vec3(0.f, 0.f, 1.f);
+        Vec3 s = tangent_seed(it) - n * dot(n, tangent_seed(it));
+        const float ls = length(s);
+        s = ls > 0.f && std::isfinite(ls) ? s / ls : Vec3(0.f, 1.f, 0.f);
+        const Vec3 t = cross(n, s);
+        // The unperturbed normal e_z seen from the perturbed local frame.
+        it.n_base = Vec3(s.z, t.z, n.z);
+        Frame f;
+        f.n = it.sh.to_world(n);
+        f.s = it.sh.to_world(s);
+        f.t = it.sh.to_world(t);
+        it.sh = f;
+    }
+
+protected:
+    // n' in the local coordinates of it.sh (unnormalised).
+    virtual Vec3 mapped_normal(const Interaction& it) const = 0;
+    // The vector s' is made orthogonal to n' from: the shading tangent e_x.
+    virtual Vec3 tangent_seed(const Interaction&) const { return Vec3(1.f, 0.f, 0.f); }
+
+private:
+    // w on the same side of the unperturbed normal as of the perturbed one.
+    static bool same_side(const BsdfContext& ctx, const Vec3& w) { return w.z * dot(w, ctx.n_base) > 0.f; }
+    static float tan2(float c) { return std::max(0.f, 1.f - c * c) / (c * c); }
+    static float shadow(const BsdfContext& ctx, const Vec3& w) {
+        const float a2 = std::min(0.125f * tan2(ctx.n_base.z), 1.f);
+        return 2.f / (1.f + std::sqrt(1.f + a2 * tan2(dot(w, ctx.n_base))));
+    }
+
+    std::unique_ptr<Bsdf> nested_;
+    bool flip_, shadowing_;
+};
+
+class NormalMapBsdf final : public FrameMapBsdf {
+public:
+    NormalMapBsdf(std::unique_ptr<Bsdf> nested, bool flip, bool shadowing, std::shared_ptr<const Texture> normals)
+        : FrameMapBsdf(std::move(nested), flip, shadowing), normals_(std::move(normals)) {}
+
+protected:
+    Vec3 mapped_normal(const Interaction& it) const override {
+        const Color c = normals_->eval(it.uv);
+        return Vec3(2.f * c.x - 1.f, 2.f * c.y - 1.f, 2.f * c.z - 1.f);
+    }
+
+private:
+    std::shared_ptr<const Texture> normals_;
+};
+
+class BumpMapBsdf final : public FrameMapBsdf {
+public:
+    BumpMapBsdf(std::unique_ptr<Bsdf> nested, bool flip, bool shadowing, std::shared_ptr<const Texture> height,
+                float scale)
+        : FrameMapBsdf(std::move(nested), flip, shadowing), height_(std::move(height)), scale_(scale) {}
+
+protected:
+    Vec3 mapped_normal(const Interaction& it) const override {
+        const Vec2 g = height_->eval_1_grad(it.uv);
+        const Vec3& ns = it.sh.n;
+        const Vec3 du = it.dp_du + ns * (scale_ * g.x - dot(ns, it.dp_du));
+        const Vec3 dv = it.dp_dv + ns * (scale_ * g.y - dot(ns, it.dp_dv));
+        Vec3 n = cross(du, dv);
+        if (dot(it.n, n) < 0.f) n = -n;
+        return it.sh.to_local(n);
+    }
+    // Mitsuba 3.9.1's bumpmap seeds its tangent with dp_du as it stands, in
+    // world coordinates, beside the local n' (its normalmap uses e_x);
+    // kept, since it sets the axes of a nested anisotropic BSDF (measured
+    // against mitsuba.load_dict: with e_x its rough conductor differs by up
+    // to 200 times, with dp_du within 3e-6; tests/test_normalmap.py).
+    Vec3 tangent_seed(const Interaction& it) const override { return it.dp_du; }
+
+private:
+    std::shared_ptr<const Texture> height_;
+    float scale_;
 };
 
 }  // namespace
@@ -935,7 +1151,9 @@ std::unique_ptr<Bsdf> make_bsdf(const BsdfDesc& d) {
         return std::make_unique<RoughConductorBsdf>(make_distribution(d), d.eta, d.k, std::move(spec),
                                                     texture_of(d, "alpha_u"), texture_of(d, "alpha_v"));
     }
-    if (d.type != "plastic" && d.type != "roughplastic") check_textured_names(d, {});
+    if (d.type != "plastic" && d.type != "roughplastic" && d.type != "mask" && d.type != "normalmap" &&
+        d.type != "bumpmap")
+        check_textured_names(d, {});
     if (d.type == "dielectric" || d.type == "roughdielectric" || d.type == "thindielectric") {
         const float eta = relative_ior(d);
         check_color(d, "specular_reflectance", d.specular_reflectance);
@@ -973,9 +1191,40 @@ std::unique_ptr<Bsdf> make_bsdf(const BsdfDesc& d) {
         std::unique_ptr<Bsdf> back = d.nested.size() == 2 ? make_bsdf(d.nested[1]) : nullptr;
         if ((front->flags() & kTransmission) || (back && (back->flags() & kTransmission)))
             fail(d, "nested", "must not transmit light (only reflective BSDFs can be made two-sided)");
+        // The map perturbs the hit's frame before twosided mirrors wi, the
+        // other order from Mitsuba's: refused rather than rendered otherwise.
+        if (front->perturbs_frame() || (back && back->perturbs_frame()))
+            fail(d, "nested", "must not be a normalmap or bumpmap (put the map around the twosided BSDF)");
         return std::make_unique<TwoSidedBsdf>(std::move(front), std::move(back));
     }
     if (d.type == "null") return std::make_unique<NullBsdf>();
+    if (d.type == "mask" || d.type == "normalmap" || d.type == "bumpmap") {
+        if (d.nested.size() != 1)
+            fail(d, "nested", "must hold exactly one BSDF, got " + std::to_string(d.nested.size()));
+        std::unique_ptr<Bsdf> nested = make_bsdf(d.nested[0]);
+        if (d.type != "mask" && nested->perturbs_frame())
+            fail(d, "nested", "must not be another normalmap or bumpmap (one map per surface)");
+        if (d.type == "mask") {
+            check_textured_names(d, {"opacity"});
+            if (!std::isfinite(d.opacity)) fail(d, "opacity", "must be finite");
+            return std::make_unique<MaskBsdf>(std::move(nested), d.opacity, texture_of(d, "opacity"));
+        }
+        if (d.type == "normalmap") {
+            check_textured_names(d, {"normalmap"});
+            auto normals = texture_of(d, "normalmap");
+            if (!normals) fail(d, "normalmap", "is missing (a texture of tangent-space normals)");
+            return std::make_unique<NormalMapBsdf>(std::move(nested), d.flip_invalid_normals, d.use_shadowing_function,
+                                                   std::move(normals));
+        }
+        // bumpmap: one nested texture, whatever its name (as Mitsuba).
+        if (d.textures.size() != 1)
+            fail(d, "texture",
+                 "must be exactly one nested texture (the height field), got " + std::to_string(d.textures.size()));
+        if (!std::isfinite(d.scale)) fail(d, "scale", "must be finite");
+        auto height = texture_of(d, d.textures.begin()->first.c_str());
+        return std::make_unique<BumpMapBsdf>(std::move(nested), d.flip_invalid_normals, d.use_shadowing_function,
+                                             std::move(height), d.scale);
+    }
     throw std::invalid_argument("bsdf '" + d.id + "': unknown type '" + d.type + "'");
 }
 

@@ -10,6 +10,7 @@
 #include "core/math.h"
 #include "core/spectrum.h"
 #include "scene/desc.h"
+#include "scene/records.h"
 
 namespace rm {
 
@@ -39,6 +40,18 @@ enum class TransportMode : uint8_t { Radiance, Importance };
 struct BsdfContext {
     TransportMode mode = TransportMode::Radiance;
     SurfaceUv uv{};
+    // Interaction::n_base: where a normal or bump map perturbed the frame,
+    // the unperturbed shading normal in the (perturbed) local frame.
+    Vec3 n_base{0.f, 0.f, 1.f};
+
+    // The context of a query at the surface hit `it`.
+    static BsdfContext at(const Interaction& it, TransportMode mode = TransportMode::Radiance) {
+        return BsdfContext{mode, it.uv, it.n_base};
+    }
+    void set(const Interaction& it) {
+        uv = it.uv;
+        n_base = it.n_base;
+    }
 };
 
 struct BsdfSample {
@@ -62,10 +75,26 @@ public:
     // A kNull lobe's straight-through fraction at incidence |cos theta|
     // (Mitsuba 3's eval_null_transmission): what a shadow ray keeps when it
     // passes the surface. 0 for BSDFs without such a lobe.
-    virtual Color null_transmission(float cos_theta) const {
+    // ctx.uv: where (mask's opacity texture).
+    virtual Color null_transmission(const BsdfContext& ctx, float cos_theta) const {
+        (void)ctx;
         (void)cos_theta;
         return Color(0.f);
     }
+    // Normal and bump mapping (normalmap, bumpmap, or a BSDF nesting one):
+    // replaces the hit's shading frame it.sh by the perturbed one (and sets
+    // it.n_base), from it.uv, it.dp_du, it.dp_dv, it.n and, with
+    // flip_invalid_normals, it.wi. Scene::intersect calls it on every
+    // hit of a shape with such a BSDF, so that every estimator's local
+    // directions, and the adjoint shading-normal correction of light paths
+    // (shading_correction, Veach 1997 sec. 5.3), see the perturbed normal,
+    // as pbrt-v4 applies its normal and bump maps to the intersection's
+    // shading geometry (NormalMap, BumpMap in materials.h).
+    virtual void perturb_frame(Interaction& it) const { (void)it; }
+    bool perturbs_frame() const { return perturbs_frame_; }
+    // The perturbed frame depends on the direction the ray arrived from
+    // (flip_invalid_normals): right for camera paths, not for light paths.
+    bool frame_follows_wi() const { return frame_follows_wi_; }
     uint32_t flags() const { return flags_; }
     bool has_smooth() const { return (flags_ & kSmooth) != 0; }
     bool is_pure_delta() const { return (flags_ & kSmooth) == 0; }
@@ -80,6 +109,8 @@ protected:
     uint32_t flags_ = 0;
     bool textured_ = false;
     bool anisotropic_ = false;
+    bool perturbs_frame_ = false;
+    bool frame_follows_wi_ = false;
 };
 
 // Builds a BSDF from its description; throws std::invalid_argument naming the

@@ -30,18 +30,26 @@ struct BsdfDesc {
     float alpha_u = 0.1f, alpha_v = 0.1f;   // rough*: microfacet roughness
     std::string distribution = "beckmann";  // "beckmann" | "ggx"
     bool sample_visible = true;
-    bool nonlinear = false;        // plastic
-    std::vector<BsdfDesc> nested;  // twosided: 1 (both sides) or 2 (front, back); blendbsdf: 2
+    bool nonlinear = false;  // plastic
+    std::vector<BsdfDesc>
+        nested;  // twosided: 1 (both sides) or 2 (front, back); blendbsdf: 2; mask, normalmap, bumpmap: 1
     // principled, principledthin: base_color; their scalar parameters
     // (roughness, metallic, ..., the sampling rates) and blendbsdf's weight
     // by Mitsuba's names, defaults filled in by the loader; a textured one
     // also has its texture in `textures`, which then replaces the value.
     Color base_color{0.5f};
     std::map<std::string, float> floats;
+    float opacity = 0.5f;                // mask, when not textured
+    float scale = 1.f;                   // bumpmap: the height texture's scale
+    bool flip_invalid_normals = true;    // normalmap, bumpmap (Mitsuba 3.7.1 on)
+    bool use_shadowing_function = true;  // normalmap, bumpmap (Mitsuba 3.7.1 on)
     // Textured colour parameters: parameter name -> its texture, which then
     // replaces the plain value above (reflectance of diffuse,
     // diffuse_reflectance of plastic and roughplastic, specular_reflectance
-    // of conductor and roughconductor).
+    // of conductor and roughconductor); and the textures that are the
+    // parameter: mask's "opacity" (read as eval_1), normalmap's "normalmap"
+    // (tangent-space normals, RGB = (n + 1) / 2), bumpmap's "bumpmap" (a
+    // height field, read as eval_1 and its uv gradient).
     std::map<std::string, TextureDesc> textures;
 };
 

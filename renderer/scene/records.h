@@ -41,6 +41,15 @@ struct Interaction {
     Vec3 n;    // geometric normal, oriented as the shape declares (flip_normals applied)
     Frame sh;  // shading frame (z = shading normal, same side as n)
     SurfaceUv uv;
+    // The surface's partial derivatives in its uv parametrisation (world
+    // space, as Mitsuba 3's si.dp_du / si.dp_dv), filled only for shapes
+    // whose BSDF asks for them (Shape::uv_frame: anisotropic BSDFs, normal
+    // and bump maps); unset (stale) elsewhere.
+    Vec3 dp_du, dp_dv;
+    // The unperturbed shading normal in the local coordinates of sh: (0, 0, 1)
+    // unless a normal or bump map replaced sh (Bsdf::perturb_frame); the
+    // map's BSDF reads it through BsdfContext::n_base.
+    Vec3 n_base{0.f, 0.f, 1.f};
     Vec3 wi;         // direction towards the previous vertex, world space
     int shape = -1;  // index in Scene::shapes
     int prim = -1;

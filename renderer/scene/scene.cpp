@@ -73,6 +73,7 @@ int Scene::add_shape(std::unique_ptr<Shape> s, int bsdf, bool flip_normals, int 
     s->bsdf = bsdf;
     s->flip_normals = flip_normals;
     s->uv_frame = bsdfs[size_t(bsdf)]->anisotropic();
+    if (bsdfs[size_t(bsdf)]->perturbs_frame()) s->frame_map = bsdfs[size_t(bsdf)].get();
     Vec3 lo = s->bbox_min(), hi = s->bbox_max();
     if (!is_finite(lo) || !is_finite(hi)) throw std::invalid_argument("shape '" + s->id + "': non-finite geometry");
     if (group >= 0) {
@@ -337,7 +338,11 @@ void Scene::commit() {
     }
     for (const auto& s : shapes) {
         uint32_t f = bsdfs[s->bsdf]->flags();
-        if (f & (kDeltaReflection | kDeltaTransmission)) features.has_delta_bsdf = true;
+        // A null lobe beside others (mask) is a delta vertex of its paths.
+        if ((f & (kDeltaReflection | kDeltaTransmission)) || ((f & kNull) && f != kNull))
+            features.has_delta_bsdf = true;
+        if ((f & kNull) && (f & kSmooth)) features.has_masked_smooth = true;
+        if (bsdfs[s->bsdf]->frame_follows_wi()) features.has_incident_frame = true;
         if (f & kSmooth) features.has_smooth_bsdf = true;
         if (s->medium_interior >= 0 || s->medium_exterior >= 0) features.has_media = true;
         if (s->dipole >= 0) features.has_smooth_bsdf = true;  // the exit lobe (dipole.h)
@@ -467,6 +472,8 @@ void Scene::fill_hit(const Ray& ray, const RTCHit& hit, float t, Interaction& it
     it.prim = int(hit.primID);
     it.wi = -ray.d;
     s.fill_interaction(ray, hit, t, it);
+    it.n_base = Vec3(0.f, 0.f, 1.f);
+    if (s.frame_map) s.frame_map->perturb_frame(it);  // normal and bump maps (Bsdf::perturb_frame)
 }
 
 void Scene::intersect_packet(const Ray* rays, int n, Interaction* its, bool* hit) const {
@@ -658,7 +665,9 @@ Color Scene::transmittance(const Interaction& from, const DirectSample& ds, int 
         const Bsdf& b = *bsdfs[shapes[it.shape]->bsdf];
         if (b.flags() != kNull) {
             if (!through_null_lobes || !(b.flags() & kNull)) return Color(0.f);
-            tr *= b.null_transmission(dot(r.d, it.n));
+            BsdfContext ctx;
+            ctx.set(it);
+            tr *= b.null_transmission(ctx, dot(r.d, it.n));
         }
         if (medium >= 0) tr *= media[medium]->segment_transmittance(r.o, r.d, it.t, sampler);
         if (is_black(tr)) return tr;

@@ -30,6 +30,14 @@ struct SceneFeatures {
     bool has_environment = false;
     bool has_media = false;   // some shape or the sensor references a medium
     bool has_dipole = false;  // some shape has a dipole BSSRDF (only path/volpath render it)
+    // Some BSDF has a kNull lobe beside a smooth one (a mask over a diffuse
+    // or glossy BSDF): volpath, which samples null lobes before next event
+    // estimation, refuses it.
+    bool has_masked_smooth = false;
+    // Some normal or bump map has flip_invalid_normals: its frame follows
+    // the direction a ray arrives from, which on a light path is the light's
+    // side, not the camera's; only camera-path estimators accept it.
+    bool has_incident_frame = false;
 };
 
 // Every ray a render traces, in order, for the Embree-limit benchmark

@@ -121,14 +121,31 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     }
     it.sh = Frame(ns);
     it.uv = surface_uv(f, b1, b2);
-    if (!uvs_.empty() && uv_frame) {
-        // dp/du of the triangle's uv parametrisation (Mitsuba 3
-        // src/render/mesh.cpp, compute_surface_interaction): solve
-        // [dp0 dp1] = [dp/du dp/dv] [duv0 duv1] for dp/du.
-        auto uv = [&](uint32_t i) { return Vec2(uvs_[2 * i], uvs_[2 * i + 1]); };
-        const Vec2 duv0 = uv(i1) - uv(i0), duv1 = uv(i2) - uv(i0);
-        const float det = duv0.x * duv1.y - duv0.y * duv1.x;
-        if (det != 0.f) it.sh = tangent_frame(ns, ((p1 - p0) * duv1.y - (p2 - p0) * duv0.y) * (1.f / det));
+    if (uv_frame) {
+        if (!uvs_.empty()) {
+            // dp/du and dp/dv of the triangle's uv parametrisation (Mitsuba 3
+            // src/render/mesh.cpp, compute_surface_interaction): solve
+            // [dp0 dp1] = [dp/du dp/dv] [duv0 duv1]; a degenerate
+            // parametrisation gets coordinate_system(n), as Mitsuba's.
+            auto uv = [&](uint32_t i) { return Vec2(uvs_[2 * i], uvs_[2 * i + 1]); };
+            const Vec2 duv0 = uv(i1) - uv(i0), duv1 = uv(i2) - uv(i0);
+            const float det = duv0.x * duv1.y - duv0.y * duv1.x;
+            if (det != 0.f) {
+                const float inv = 1.f / det;
+                it.dp_du = ((p1 - p0) * duv1.y - (p2 - p0) * duv0.y) * inv;
+                it.dp_dv = ((p2 - p0) * duv0.x - (p1 - p0) * duv1.x) * inv;
+                it.sh = tangent_frame(ns, it.dp_du);
+            } else {
+                const Frame cs(n);
+                it.dp_du = cs.s;
+                it.dp_dv = cs.t;
+            }
+        } else {
+            // Mitsuba's mesh without texture coordinates: uv = (b1, b2), so
+            // dp/du and dp/dv are the triangle's edges.
+            it.dp_du = p1 - p0;
+            it.dp_dv = p2 - p0;
+        }
     }
 }
 
@@ -426,6 +443,7 @@ void Sphere::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Intera
     // to_world's inverse; rot_ is orthogonal, so its inverse is its transpose.
     const double lx = rot_[0][0] * px + rot_[1][0] * py + rot_[2][0] * pz;
     const double ly = rot_[0][1] * px + rot_[1][1] * py + rot_[2][1] * pz;
+    const double lz = rot_[0][2] * px + rot_[1][2] * py + rot_[2][2] * pz;
     it.uv = uv_of(px, py, pz);
     if (flip_normals) n = -n;
     it.n = n;
@@ -435,6 +453,16 @@ void Sphere::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Intera
         const Vec3 du(float(-rot_[0][0] * ly + rot_[0][1] * lx), float(-rot_[1][0] * ly + rot_[1][1] * lx),
                       float(-rot_[2][0] * ly + rot_[2][1] * lx));
         it.sh = tangent_frame(n, du);
+        // dp/dv = to_world (z cos phi, z sin phi, -sin theta) times pi
+        // (src/shapes/sphere.cpp), with the radius: both for bump maps.
+        const double rd = std::sqrt(lx * lx + ly * ly);
+        const double cp = rd > 0 ? lx / rd : 1.0, sp = rd > 0 ? ly / rd : 0.0;
+        const double dv_l[3] = {lz * cp, lz * sp, -rd};
+        Vec3 dv;
+        for (int i = 0; i < 3; ++i)
+            dv[i] = float((rot_[i][0] * dv_l[0] + rot_[i][1] * dv_l[1] + rot_[i][2] * dv_l[2]) * r_ * kPi);
+        it.dp_du = du * float(2.0 * kPi * r_);
+        it.dp_dv = dv;
     }
     // Reprojected in double: the error is the rounding of p to float, plus
     // the sphere's own size for the Embree-side float bounds.
@@ -559,6 +587,10 @@ void Disk::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     float r = std::sqrt(hit.u * hit.u + hit.v * hit.v);
     // Mitsuba's disk: dp/du = to_world (cos phi, sin phi, 0), radial.
     if (uv_frame && r > 0.f) it.sh = tangent_frame(n, xf_.vector(Vec3(hit.u / r, hit.v / r, 0.f)));
+    if (uv_frame) {  // dp/dv = to_world (-y, x, 0) 2 pi (src/shapes/disk.cpp)
+        it.dp_du = r > 0.f ? xf_.vector(Vec3(hit.u / r, hit.v / r, 0.f)) : xf_.vector(Vec3(1.f, 0.f, 0.f));
+        it.dp_dv = xf_.vector(Vec3(-hit.v, hit.u, 0.f)) * (2.f * kPi);
+    }
     float phi = std::atan2(hit.v, hit.u);
     if (phi < 0) phi += 2 * kPi;
     it.uv = Vec2(r, phi * kInv2Pi);

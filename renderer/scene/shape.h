@@ -39,6 +39,9 @@ public:
     // Set for shapes whose BSDF is anisotropic (Bsdf::anisotropic), so that
     // every other shape keeps its frame, and its images their bytes.
     bool uv_frame = false;
+    // The BSDF, when it perturbs the shading frame (normalmap, bumpmap):
+    // Scene::intersect applies it to every hit (Bsdf::perturb_frame).
+    const class Bsdf* frame_map = nullptr;
 
     virtual RTCGeometry create_geometry(RTCDevice device, unsigned geom_id) = 0;
     // Fills the geometric part of `it` for a hit reported by Embree.

@@ -23,6 +23,11 @@ struct UvMap {
         if (identity) return uv;
         return Vec2(m[0] * uv.x + m[1] * uv.y + m[2], m[3] * uv.x + m[4] * uv.y + m[5]);
     }
+    // A gradient with respect to the mapped uv', taken back to uv (chain rule).
+    Vec2 pull_back(Vec2 g) const {
+        if (identity) return g;
+        return Vec2(g.x * m[0] + g.y * m[3], g.x * m[1] + g.y * m[4]);
+    }
 };
 
 void check_to_uv(const TextureDesc& d) {
@@ -45,6 +50,7 @@ public:
         return mu != mv ? average(c0_) : average(c1_);
     }
     float mean() const override { return 0.5f * (average(c0_) + average(c1_)); }
+    Vec2 eval_1_grad(Vec2) const override { return Vec2(0.f, 0.f); }
 
 private:
     Color c0_, c1_;
@@ -116,7 +122,31 @@ public:
             }
     }
 
+    // The bilinear interpolant's derivatives: along x the difference of the
+    // two columns, weighted by the row weights, times the resolution (each
+    // texel spans 1 / res of uv); likewise along y.
+    Vec2 eval_1_grad(Vec2 uv) const override {
+        if (!bilinear_) return Vec2(0.f, 0.f);
+        const Vec2 p = map_.apply(uv);
+        const float fx = p.x * float(w_) - 0.5f, fy = p.y * float(h_) - 0.5f;
+        const float x0f = std::floor(fx), y0f = std::floor(fy);
+        const float w1x = fx - x0f, w1y = fy - y0f, w0x = 1.f - w1x, w0y = 1.f - w1y;
+        const int x0 = int(x0f), y0 = int(y0f);
+        const int xa = wrap_index(x0, w_, wrap_), xb = wrap_index(x0 + 1, w_, wrap_);
+        const int ya = wrap_index(y0, h_, wrap_), yb = wrap_index(y0 + 1, h_, wrap_);
+        const float f00 = value_1(xa, ya), f10 = value_1(xb, ya), f01 = value_1(xa, yb), f11 = value_1(xb, yb);
+        const Vec2 g(((f10 - f00) * w0y + (f11 - f01) * w1y) * float(w_),
+                     ((f01 - f00) * w0x + (f11 - f10) * w1x) * float(h_));
+        return map_.pull_back(g);
+    }
+
 private:
+    // A texel read as one number, as eval_1 reads the interpolated colour
+    // (luminance is linear, so interpolating it is the same).
+    float value_1(int x, int y) const {
+        const Color c = texel(x, y);
+        return ch_ == 1 ? c.x : luminance(c);
+    }
     Color texel_at(int i) const {
         const float* v = &data_[size_t(i) * size_t(ch_)];
         return ch_ == 1 ? Color(v[0]) : Color(v[0], v[1], v[2]);
@@ -138,6 +168,7 @@ public:
     Color eval(const SurfaceUv&) const override { return value_; }
     float eval_1(const SurfaceUv&) const override { return average(value_); }
     float mean() const override { return average(value_); }
+    Vec2 eval_1_grad(Vec2) const override { return Vec2(0.f, 0.f); }
 
 private:
     Color value_;
@@ -166,6 +197,9 @@ public:
     // Mitsuba's has none (Texture::mean() is not implemented there); the
     // value only weighs lobe and light choices, so a mid grey stands in.
     float mean() const override { return 0.5f * scale_; }
+    // No uv gradient: the attribute varies over the triangle's barycentrics,
+    // which a bump map's uv derivative does not see (a bumpmap over it is flat).
+    Vec2 eval_1_grad(Vec2) const override { return Vec2(0.f, 0.f); }
 
 private:
     std::string name_;

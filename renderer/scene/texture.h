@@ -92,6 +92,12 @@ public:
         nx = ny = 1;
         weights.assign(1, 1.0);
     }
+    // The uv gradient of eval_1 (Mitsuba's Texture::eval_1_grad, which
+    // bumpmap reads): d eval_1 / du, d eval_1 / dv, to_uv's Jacobian
+    // included; 0 where the texture is piecewise constant (checkerboard,
+    // a nearest-filtered bitmap, as Mitsuba's). Measured against
+    // mitsuba.load_dict in tests/test_normalmap.py.
+    virtual Vec2 eval_1_grad(Vec2 uv) const = 0;
 };
 
 // Throws std::invalid_argument naming the texture (desc.id) and the

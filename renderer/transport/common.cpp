@@ -2,12 +2,14 @@
 
 namespace rm {
 
+std::atomic<bool> g_shading_correction{true};
+
 Color estimate_direct(const Scene& scene, const Interaction& it, const Bsdf& bsdf, const Vec3& wi_local,
                       Sampler& sampler, ThreadStats& stats, float light_frac, float bsdf_frac) {
     DirectSample ds;
     if (!sample_light(scene, light_context(it), sampler, ds)) return Color(0.f);
     BsdfContext ctx;
-    ctx.uv = it.uv;
+    ctx.set(it);
     Vec3 wo = it.to_local(ds.d);
     Color f = bsdf.eval(ctx, wi_local, wo);
     if (is_black(f)) return Color(0.f);

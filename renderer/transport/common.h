@@ -1,6 +1,8 @@
 // Pieces shared by the estimators: emitter selection, Russian roulette,
 // next event estimation with MIS, emission found by BSDF sampling.
 #pragma once
+#include <atomic>
+
 #include "render/integrator.h"
 
 namespace rm {
@@ -175,7 +177,7 @@ void walk_specular_chain(const Scene& scene, Sampler& sampler, Ray ray, const Sp
         if (!visit(static_cast<const Interaction&>(it), bsdf, wi, static_cast<const Color&>(beta),
                    static_cast<const PathClass&>(pc), depth))
             return;
-        ctx.uv = it.uv;
+        ctx.set(it);
         BsdfSample bs = bsdf.sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
         if (!(bs.pdf_w > 0.f) || is_black(bs.weight) || !bs.is_delta) return;
         beta *= bs.weight;
@@ -191,7 +193,11 @@ void walk_specular_chain(const Scene& scene, Sampler& sampler, Ray ray, const Sp
 // CorrectShadingNormal): in importance transport a vertex that scatters
 // from wi (towards the light) to wo weights f |wo.ns| (what eval/sample
 // give) by |wi.ns| |wo.ng| / (|wi.ng| |wo.ns|). Used by ptracer and bdpt.
+// Test hook (bindings/test_hooks.cpp): false drops the correction, so that
+// tests/test_normalmap.py can show its light-versus-camera comparison sees it.
+extern std::atomic<bool> g_shading_correction;
 inline float shading_correction(const Interaction& it, const Vec3& wi, const Vec3& wo) {
+    if (!g_shading_correction.load(std::memory_order_relaxed)) return 1.f;
     float num = absdot(wi, it.sh.n) * absdot(wo, it.n);
     float den = absdot(wi, it.n) * absdot(wo, it.sh.n);
     return den > 0.f ? num / den : 0.f;

@@ -28,12 +28,14 @@ struct ScatterOrigin {
     Frame sh;                    // its shading frame
     Vec3 wi;                     // the direction towards its predecessor, in that frame
     SurfaceUv uv;                // its texture coordinates
+    Vec3 n_base{0.f, 0.f, 1.f};  // Interaction::n_base (normal and bump maps)
     const Bsdf* bsdf = nullptr;  // null: a medium vertex (its ray leaves p itself) or the camera
 
     void set(const Interaction& it, const Vec3& wi_local, const Bsdf* b) {
         p = it.p;
         sh = it.sh;
         uv = it.uv;
+        n_base = it.n_base;
         wi = wi_local;
         bsdf = b;
     }
@@ -46,6 +48,7 @@ struct ScatterOrigin {
         if (!(d2 > 0.f)) return sampled;
         BsdfContext ctx;
         ctx.uv = uv;
+        ctx.n_base = n_base;
         return bsdf->pdf_w(ctx, wi, sh.to_local(v / std::sqrt(d2)));
     }
 };

@@ -62,7 +62,7 @@ float pdf_to(const Scene& scene, const PathVertex& v, const PathVertex* prev, co
     if (v.type == VType::Light) return emitter_pdf_to(scene, v, next);
     if (!prev) return 0.f;
     BsdfContext ctx;
-    ctx.uv = v.it.uv;
+    ctx.set(v.it);
     Vec3 wi = normalize(prev->it.p - v.it.p);
     if (v.type == VType::Medium) return to_area(v.phase->pdf_w(wi, d), v.it.p, next);
     return to_area(v.bsdf->pdf_w(ctx, v.it.to_local(wi), v.it.to_local(d)), v.it.p, next);
@@ -177,7 +177,7 @@ Color connect_to_sensor(const Scene& scene, const PathVertex& y, ImportanceSampl
         // LightPathIntegrator connects medium vertices through p).
         f = Color(y.phase->eval(y.it.wi, is.d));
     } else {
-        BsdfContext ctx{TransportMode::Importance, y.it.uv};
+        BsdfContext ctx = BsdfContext::at(y.it, TransportMode::Importance);
         f = y.bsdf->eval(ctx, y.it.to_local(y.it.wi), y.it.to_local(is.d)) * shading_correction(y.it, y.it.wi, is.d);
         medium = Scene::medium_after(y.it, is.d, y.medium);
     }
@@ -240,7 +240,7 @@ int classify_codes(const uint8_t* cam, int t, const uint8_t* light, int s, bool 
 
 Color scatter_value(const PathVertex& v, const Vec3& wo, TransportMode mode) {
     if (v.type == VType::Medium) return Color(v.phase->eval(v.it.wi, wo));
-    BsdfContext ctx{mode, v.it.uv};
+    BsdfContext ctx = BsdfContext::at(v.it, mode);
     Color f = v.bsdf->eval(ctx, v.it.to_local(v.it.wi), v.it.to_local(wo));
     if (mode == TransportMode::Importance) f *= shading_correction(v.it, v.it.wi, wo);
     return f;

@@ -234,7 +234,7 @@ template <bool kMedia = true, class S, class Visit>
         //    correction in importance transport, common.h); the medium
         //    changes when the sample crosses a boundary.
         Vec3 wi = it.to_local(it.wi);
-        ctx.uv = it.uv;
+        ctx.set(it);
         BsdfSample bs = v.bsdf->sample(ctx, wi, sampler.next_1d(), sampler.next_2d());
         if (!(bs.pdf_w > 0.f) || is_black(bs.weight)) break;
         Vec3 wo = it.to_world(bs.wo);

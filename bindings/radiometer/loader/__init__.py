@@ -68,11 +68,21 @@ bsdf       diffuse: reflectance [0.5]
                alpha [0.1] (alpha_u + alpha_v only if equal: isotropic, as
                Mitsuba), sample_visible [true]; int_ior != ext_ior
            twosided: one or two nested reflective bsdfs (as Mitsuba: not
-               dielectric, thindielectric, roughdielectric or null); null: none.
+               dielectric, thindielectric, roughdielectric, null or mask, nor
+               a normalmap or bumpmap); null: none.
+           mask: opacity [0.5] (a float or a texture, read as eval_1) + one
+               nested bsdf: pass-through with probability 1 - opacity.
+           normalmap: normalmap (a texture of tangent-space normals, usually
+               a raw bitmap) + one nested bsdf; bumpmap: one texture of any
+               name (a height field) + scale [1] + one nested bsdf. Both:
+               flip_invalid_normals [true] (then only camera-path
+               integrators render it), use_shadowing_function [true], as
+               Mitsuba 3.9 (docs/normalmap.md).
            An IOR is a float or one of the names in NAMED_IOR (any case).
            A shape without a bsdf gets Mitsuba 3's default: diffuse 0.5, or
            diffuse 0 (black) when it carries an area emitter.
-texture    checkerboard: color0 [0.4], color1 [0.2] (colours, not nested
+texture    rawconstant: value (a float or a 3-vector, as given).
+           checkerboard: color0 [0.4], color1 [0.2] (colours, not nested
                textures), to_uv (a transform; Mitsuba's 3x3 uv map from its
                rows and columns x, y and translation).
            bitmap: filename (.png/.jpg through Pillow, decoded from sRGB to

@@ -35,7 +35,7 @@ from .volumes import _read_vol
 
 _MAX_RESOLUTION = 16384
 # BSDFs that transmit light (a null boundary included).
-_TRANSMITTING = ("dielectric", "roughdielectric", "thindielectric", "null", "principledthin")
+_TRANSMITTING = ("dielectric", "roughdielectric", "thindielectric", "null", "principledthin", "mask")
 # principled and principledthin: their scalar parameters (float or texture,
 # read with eval_1) and plain sampling rates, with Mitsuba 3's defaults
 # (src/bsdfs/principled.cpp, principledthin.cpp).
@@ -268,6 +268,9 @@ class _Builder:
             for k in kids:
                 if k.type == "twosided":
                     raise p.error("a twosided bsdf cannot nest another twosided", k.place)
+                if k.type in ("normalmap", "bumpmap"):  # it would perturb the frame before twosided mirrors wi
+                    raise p.error(f"a twosided bsdf cannot nest a '{k.type}' (put the {k.type} around the "
+                                  f"twosided instead)", k.place)
                 if k.type in _TRANSMITTING:  # as Mitsuba: a two-sided surface has no inside to transmit to
                     raise p.error(f"a twosided bsdf nests only reflective bsdfs, got '{k.type}', which "
                                   f"transmits light", k.place)
@@ -284,6 +287,8 @@ class _Builder:
             if len(kids) != 2:
                 raise p.error(f"needs two nested bsdfs, got {len(kids)}")
             b.nested = [self.bsdf(k) for k in kids]
+        elif t in ("mask", "normalmap", "bumpmap"):
+            self._bsdf_adapter(p, b, node)
         if t in ("roughconductor", "roughdielectric", "roughplastic"):
             b.distribution = p.string("distribution", "beckmann", ("beckmann", "ggx"))
             # roughconductor's alphas may be textures (read as one number, Texture::eval_1).
@@ -320,6 +325,46 @@ class _Builder:
             raise p.error("parameters 'int_ior' and 'ext_ior' must differ")
         p.done()
         return b
+
+    def _bsdf_adapter(self, p, b, node):
+        """mask, normalmap and bumpmap (Mitsuba 3 src/bsdfs/mask.cpp,
+        normalmap.cpp, bumpmap.cpp): one nested bsdf, and the opacity (float
+        or texture, default 0.5), the `normalmap` texture, or the height
+        texture (any name) and its `scale` (default 1); the maps take
+        flip_invalid_normals and use_shadowing_function (default true)."""
+        t = node.type
+        kids = p.children("bsdf")
+        if len(kids) != 1:
+            raise p.error(f"needs exactly one nested bsdf, got {len(kids)}")
+        if t != "mask" and kids[0].type in ("normalmap", "bumpmap"):
+            raise p.error(f"a {t} cannot nest another normalmap or bumpmap (one map per surface)", kids[0].place)
+        b.nested = [self.bsdf(kids[0])]
+        if t != "mask":  # Mitsuba 3.7.1 on: the fold and the terminator shadowing, both on by default
+            b.flip_invalid_normals = p.bool("flip_invalid_normals", True)
+            b.use_shadowing_function = p.bool("use_shadowing_function", True)
+        if t == "mask":
+            tex = p.named_child("texture", "opacity")
+            if tex is None:
+                b.opacity = p.float("opacity", 0.5)
+            elif p.has("opacity"):
+                raise p.error("parameter 'opacity' given both as a value and as a texture", tex.place)
+            else:
+                b.textures["opacity"] = self.texture(tex)
+        elif t == "normalmap":
+            tex = p.named_child("texture", "normalmap")
+            if p.has("normalmap"):
+                raise p.error("parameter 'normalmap' must be a texture of tangent-space normals (a bitmap, "
+                              "usually with raw = true), not a value", node.props["normalmap"].place)
+            if tex is None:
+                raise p.error("parameter 'normalmap' is missing: a texture of tangent-space normals")
+            b.textures["normalmap"] = self.texture(tex)
+        else:
+            named = [(n, c) for n, c in node.children if c.category == "texture"]
+            p.children("texture")  # any name, as Mitsuba's bumpmap
+            if len(named) != 1:
+                raise p.error(f"needs exactly one nested texture (the height field), got {len(named)}")
+            b.textures[named[0][0] or "bumpmap"] = self.texture(named[0][1])
+            b.scale = p.float("scale", 1.0)
 
     # -- media ---------------------------------------------------------------
 

@@ -85,6 +85,9 @@ TEXTURED = {
     "blendbsdf": ("weight",),
     "projector": ("irradiance",),
     "area": ("radiance",),
+    "mask": ("opacity",),
+    "normalmap": ("normalmap",),
+    "bumpmap": ("(any name: the height field)",),
 }
 _TEXTURED_TEXT = "; ".join(f"{t}.{', '.join(n)}" for t, n in TEXTURED.items())
 

@@ -10,7 +10,7 @@ PLUGINS = {
               "instance"),
     "bsdf": ("diffuse", "conductor", "roughconductor", "dielectric", "roughdielectric",
              "thindielectric", "plastic", "roughplastic", "twosided", "null", "principled", "principledthin",
-             "blendbsdf"),
+             "blendbsdf", "mask", "normalmap", "bumpmap"),
     "emitter": ("area", "point", "spot", "projector", "directional", "constant", "envmap"),
     "sensor": ("perspective", "orthographic", "radiancemeter", "irradiancemeter"),
     "film": ("hdrfilm",),

@@ -1148,7 +1148,7 @@ void RadiosityIntegrator::shade(const Scene& scene, const Solution& sol, Sampler
     if (mask[kDirect]) out.add(kDirect, direct / float(c_.direct_samples));
     if (!(c_.max_depth < 0 || c_.max_depth >= 3)) return;
     BsdfContext ctx;
-    ctx.uv = it.uv;
+    ctx.set(it);
     Color acc(0.f);
     for (int g = 0; g < c_.gather_rays; ++g) {
         float u1 = sampler.next_1d();
