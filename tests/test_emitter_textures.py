@@ -305,7 +305,7 @@ def test_rawconstant_matches_mitsuba(value):
     desc = load_dict({"type": "scene", "s": {"type": "sphere", "bsdf": {
         "type": "diffuse", "reflectance": {"type": "rawconstant", "value": value}}}})
     t = desc.shapes[0].bsdf.textures["reflectance"]
-    ev, ev1, mean = _core.texture_eval(_texture(t), np.random.default_rng(0).random((5, 2), dtype=np.float32))
+    ev, ev1, mean, _ = _core.texture_eval(_texture(t), np.random.default_rng(0).random((5, 2), dtype=np.float32))
     ref = mi.load_dict({"type": "rawconstant", "value": value})
     si = mi.SurfaceInteraction3f()
     np.testing.assert_allclose(ev, np.broadcast_to(np.array(ref.eval(si)), ev.shape), rtol=1e-7)

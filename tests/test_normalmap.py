@@ -470,7 +470,7 @@ def _flip_maps(d):
                 if t.type == "bitmap":
                     t.data = np.ascontiguousarray(t.data[::-1])
                 elif t.type == "rawconstant":
-                    t.color0 = (0.85, 0.5, 0.85)  # the identity map tilted by 45 degrees
+                    t.value = (0.85, 0.5, 0.85)  # the identity map tilted by 45 degrees
             b = b.nested[0] if b.type in ("mask", "normalmap", "bumpmap") and b.nested else None
     return d
 
