@@ -173,7 +173,7 @@ XML = [
     ("unknown_shape", '<shape type="teapot"/>' + MARK, ["shape type 'teapot' is not supported"]),
     ("unknown_bsdf", '<shape type="sphere"><bsdf type="hair"/></shape>' + MARK,
      ["bsdf type 'hair' is not supported"]),
-    ("unknown_emitter", '<emitter type="projector"/>' + MARK, ["emitter type 'projector' is not supported"]),
+    ("unknown_emitter", '<emitter type="sunsky"/>' + MARK, ["emitter type 'sunsky' is not supported"]),
     ("unknown_sensor", '<sensor type="thinlens"/>' + MARK, ["sensor type 'thinlens' is not supported"]),
     ("unknown_film", '<sensor type="perspective"><film type="specfilm"/></sensor>' + MARK,
      ["film type 'specfilm'"]),

@@ -19,6 +19,23 @@ void check_color(const Color& c, const std::string& id, const char* name) {
         throw std::invalid_argument("emitter '" + id + "': " + name + " must be finite and non-negative");
 }
 
+// Next event estimation towards a light at the point `pos` from `ref`: the
+// direction, distance and delta density (the radiance is the light's to
+// set, from `d2`, the squared distance); an empty sample (is_delta false)
+// when ref is at pos.
+DirectSample towards_point(const Vec3& pos, const Vec3& ref, float& d2) {
+    DirectSample ds;
+    const Vec3 v = pos - ref;
+    d2 = length_sq(v);
+    if (!(d2 > 0.f)) return ds;
+    ds.dist = std::sqrt(d2);
+    ds.d = v / ds.dist;
+    ds.p = pos;
+    ds.pdf_w = 1.f;
+    ds.is_delta = true;
+    return ds;
+}
+
 // The texture given for parameter `name` (null: none); any other textured
 // parameter is refused by name.
 std::shared_ptr<const Texture> texture_param(const EmitterDesc& d, const char* name) {
@@ -140,16 +157,9 @@ public:
         delta_ = true;
     }
     DirectSample sample_direct(const Vec3& ref, Vec2, float) const override {
-        DirectSample ds;
-        Vec3 v = pos_ - ref;
-        float d2 = length_sq(v);
-        if (!(d2 > 0.f)) return ds;
-        ds.dist = std::sqrt(d2);
-        ds.d = v / ds.dist;
-        ds.p = pos_;
-        ds.pdf_w = 1.f;
-        ds.is_delta = true;
-        ds.radiance = intensity_ / d2;
+        float d2;
+        DirectSample ds = towards_point(pos_, ref, d2);
+        if (ds.is_delta) ds.radiance = intensity_ / d2;
         return ds;
     }
     // Delta position, direction uniform on the sphere: weight = I 4 pi.
@@ -185,16 +195,9 @@ private:
 class LocalDeltaEmitter : public Emitter {
 public:
     DirectSample sample_direct(const Vec3& ref, Vec2, float) const override {
-        DirectSample ds;
-        Vec3 v = pos_ - ref;
-        float d2 = length_sq(v);
-        if (!(d2 > 0.f)) return ds;
-        ds.dist = std::sqrt(d2);
-        ds.d = v / ds.dist;
-        ds.p = pos_;
-        ds.pdf_w = 1.f;
-        ds.is_delta = true;
-        ds.radiance = intensity_over(normalize(xf_.inv_vector(-ds.d)), d2);
+        float d2;
+        DirectSample ds = towards_point(pos_, ref, d2);
+        if (ds.is_delta) ds.radiance = intensity_over(normalize(xf_.inv_vector(-ds.d)), d2);
         return ds;
     }
     Color emitted_towards(const EmissionSample&, const Vec3& w) const override {

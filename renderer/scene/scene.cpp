@@ -429,23 +429,29 @@ static void check_ray(const Ray& ray) {
     if (!ray_in_range(ray)) ray_out_of_range(ray);
 }
 
+// Embree's one-ray record of `ray` (intersect, occluded and the replay of
+// the Embree-limit benchmark set it up alike).
+static void to_rtc(const Ray& ray, RTCRay& r) {
+    r.org_x = ray.o.x;
+    r.org_y = ray.o.y;
+    r.org_z = ray.o.z;
+    r.dir_x = ray.d.x;
+    r.dir_y = ray.d.y;
+    r.dir_z = ray.d.z;
+    r.tnear = ray.tmin;
+    r.tfar = ray.tmax;
+    r.mask = 0xFFFFFFFFu;
+    r.flags = 0;
+    r.time = 0;
+}
+
 bool Scene::intersect(const Ray& ray, Interaction& it) const {
     check_ray(ray);
     if (__builtin_expect(g_ray_log != nullptr, 0)) log_ray(ray, false);
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRayHit rh;
-    rh.ray.org_x = ray.o.x;
-    rh.ray.org_y = ray.o.y;
-    rh.ray.org_z = ray.o.z;
-    rh.ray.dir_x = ray.d.x;
-    rh.ray.dir_y = ray.d.y;
-    rh.ray.dir_z = ray.d.z;
-    rh.ray.tnear = ray.tmin;
-    rh.ray.tfar = ray.tmax;
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.flags = 0;
-    rh.ray.time = 0;
+    to_rtc(ray, rh.ray);
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
     rtcIntersect1(scene_, &ctx, &rh);
@@ -528,17 +534,7 @@ bool Scene::occluded(const Ray& ray) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRay r;
-    r.org_x = ray.o.x;
-    r.org_y = ray.o.y;
-    r.org_z = ray.o.z;
-    r.dir_x = ray.d.x;
-    r.dir_y = ray.d.y;
-    r.dir_z = ray.d.z;
-    r.tnear = ray.tmin;
-    r.tfar = ray.tmax;
-    r.mask = 0xFFFFFFFFu;
-    r.flags = 0;
-    r.time = 0;
+    to_rtc(ray, r);
     rtcOccluded1(scene_, &ctx, &r);
     return r.tfar < 0.f;
 }
@@ -573,17 +569,7 @@ double Scene::replay(const RayLog& log, bool bare, int repeats) const {
             RTCIntersectContext ctx;
             rtcInitIntersectContext(&ctx);
             RTCRayHit rh;
-            rh.ray.org_x = ray.o.x;
-            rh.ray.org_y = ray.o.y;
-            rh.ray.org_z = ray.o.z;
-            rh.ray.dir_x = ray.d.x;
-            rh.ray.dir_y = ray.d.y;
-            rh.ray.dir_z = ray.d.z;
-            rh.ray.tnear = ray.tmin;
-            rh.ray.tfar = ray.tmax;
-            rh.ray.mask = 0xFFFFFFFFu;
-            rh.ray.flags = 0;
-            rh.ray.time = 0;
+            to_rtc(ray, rh.ray);
             if (log.shadow[i]) {
                 rtcOccluded1(scene_, &ctx, &rh.ray);
                 hits += rh.ray.tfar < 0.f;
