@@ -350,9 +350,19 @@ def _roll_vertex_attributes(d):
     return d
 
 
+def _invert_face_weights(d):
+    """1_face's blendbsdf weights (a one-channel face attribute) read as 1 - w."""
+    for s in d.shapes:
+        for name, a in s.attributes.items():
+            if name.startswith("face_") and a.shape[1] == 1:
+                s.attributes[name] = np.ascontiguousarray(1.0 - a)
+    return d
+
+
 @pytest.mark.skipif(not SUITE.is_dir(), reason="../shared/peers/mitsuba-data absent")
 @pytest.mark.parametrize("scene,spoil", [
     ("projector/test_projector_constant_direct.xml", _dim_projector),
+    ("mesh_attributes/test_mesh_attributes_1_face_direct.xml", _invert_face_weights),
     ("projector/test_projector_textured_direct.xml", _flip_textures),
     ("mesh_attributes/test_mesh_attributes_3_face_direct.xml", _swap_attribute_channels),
     ("mesh_attributes/test_mesh_attributes_3_vertex_direct.xml", _roll_vertex_attributes),

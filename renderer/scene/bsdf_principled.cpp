@@ -276,7 +276,7 @@ protected:
 
     // Mitsuba's get_flag: the parameter is a texture or non-zero.
     bool has(Param p) const { return has_[size_t(p)]; }
-    Values at(Vec2 uv) const {
+    Values at(const SurfaceUv& uv) const {
         Values v;
         v.base = base_.eval(uv);
         for (size_t i = 0; i < kNumParams; ++i) v.v[i] = params_[i].eval(uv);

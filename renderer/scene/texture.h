@@ -129,7 +129,7 @@ struct TexturedFloat {
     TexturedFloat() = default;
     TexturedFloat(float v) : value(v) {}  // NOLINT: a plain value converts implicitly
     bool textured() const { return texture != nullptr; }
-    float eval(Vec2 uv) const { return texture ? texture->eval_1(uv) : value; }
+    float eval(const SurfaceUv& uv) const { return texture ? texture->eval_1(uv) : value; }
 };
 
 }  // namespace rm
