@@ -85,13 +85,9 @@ public:
             const int y = wrap_index(int(std::floor(p.y * float(h_))), h_, wrap_);
             return texel(x, y);
         }
-        // Texel centres at (i + 1/2) / res: the four around p and their weights.
-        const float fx = p.x * float(w_) - 0.5f, fy = p.y * float(h_) - 0.5f;
-        const float x0f = std::floor(fx), y0f = std::floor(fy);
-        const float w1x = fx - x0f, w1y = fy - y0f, w0x = 1.f - w1x, w0y = 1.f - w1y;
-        const int x0 = int(x0f), y0 = int(y0f);
-        const int xa = wrap_index(x0, w_, wrap_), xb = wrap_index(x0 + 1, w_, wrap_);
-        const int ya = wrap_index(y0, h_, wrap_), yb = wrap_index(y0 + 1, h_, wrap_);
+        const Footprint b = footprint(p);
+        const int xa = b.xa, xb = b.xb, ya = b.ya, yb = b.yb;
+        const float w0x = b.w0x, w1x = b.w1x, w0y = b.w0y, w1y = b.w1y;
         const Color f0 = texel(xa, ya) * w0x + texel(xb, ya) * w1x;
         const Color f1 = texel(xa, yb) * w0x + texel(xb, yb) * w1x;
         return f0 * w0y + f1 * w1y;
@@ -127,13 +123,9 @@ public:
     // texel spans 1 / res of uv); likewise along y.
     Vec2 eval_1_grad(Vec2 uv) const override {
         if (!bilinear_) return Vec2(0.f, 0.f);
-        const Vec2 p = map_.apply(uv);
-        const float fx = p.x * float(w_) - 0.5f, fy = p.y * float(h_) - 0.5f;
-        const float x0f = std::floor(fx), y0f = std::floor(fy);
-        const float w1x = fx - x0f, w1y = fy - y0f, w0x = 1.f - w1x, w0y = 1.f - w1y;
-        const int x0 = int(x0f), y0 = int(y0f);
-        const int xa = wrap_index(x0, w_, wrap_), xb = wrap_index(x0 + 1, w_, wrap_);
-        const int ya = wrap_index(y0, h_, wrap_), yb = wrap_index(y0 + 1, h_, wrap_);
+        const Footprint b = footprint(map_.apply(uv));
+        const int xa = b.xa, xb = b.xb, ya = b.ya, yb = b.yb;
+        const float w0x = b.w0x, w1x = b.w1x, w0y = b.w0y, w1y = b.w1y;
         const float f00 = value_1(xa, ya), f10 = value_1(xb, ya), f01 = value_1(xa, yb), f11 = value_1(xb, yb);
         const Vec2 g(((f10 - f00) * w0y + (f11 - f01) * w1y) * float(w_),
                      ((f01 - f00) * w0x + (f11 - f10) * w1x) * float(h_));
@@ -141,6 +133,29 @@ public:
     }
 
 private:
+    // A bilinear lookup's four texels (columns xa, xb, rows ya, yb, wrapped)
+    // and their weights, texel centres at (i + 1/2) / res: eval and
+    // eval_1_grad read the same footprint.
+    struct Footprint {
+        int xa, xb, ya, yb;
+        float w0x, w1x, w0y, w1y;
+    };
+    Footprint footprint(const Vec2& p) const {
+        const float fx = p.x * float(w_) - 0.5f, fy = p.y * float(h_) - 0.5f;
+        const float x0f = std::floor(fx), y0f = std::floor(fy);
+        Footprint b;
+        b.w1x = fx - x0f;
+        b.w1y = fy - y0f;
+        b.w0x = 1.f - b.w1x;
+        b.w0y = 1.f - b.w1y;
+        const int x0 = int(x0f), y0 = int(y0f);
+        b.xa = wrap_index(x0, w_, wrap_);
+        b.xb = wrap_index(x0 + 1, w_, wrap_);
+        b.ya = wrap_index(y0, h_, wrap_);
+        b.yb = wrap_index(y0 + 1, h_, wrap_);
+        return b;
+    }
+
     // A texel read as one number, as eval_1 reads the interpolated colour
     // (luminance is linear, so interpolating it is the same).
     float value_1(int x, int y) const {
