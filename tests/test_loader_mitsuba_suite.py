@@ -404,3 +404,81 @@ def test_thindielectric_medium_boundaries_as_mitsuba(scene):
 
     bad = ms.protocol(path, threads=2, change=brighter)
     assert not bad["passes"], bad
+
+
+# -- Mitsuba's protocol on every scene, and the second test ------------------------
+
+SCENES = (sorted(str(p.relative_to(SUITE / "tests" / "scenes")) for p in (SUITE / "tests" / "scenes").glob("*/*.xml"))
+          if (SUITE / "tests" / "scenes").is_dir() else [])
+NOT_LOADING = {"various_shapes/test_various_shapes_path.xml"}  # test_suite_scenes_get_past_the_format
+# Fails Mitsuba's protocol because our estimator is noisier there, not
+# because it is wrong: test_second_test_counts_both_variances.
+NOISIER = {"participating_media/test_hetero_sigmat_albedo_volpath.xml"}
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_every_suite_scene_passes_mitsubas_protocol(scene, request):
+    """Every scene of Mitsuba 3's render test suite that loads, rendered with
+    its own integrator at 2,000,000 / pixels spp, seed 0, passes Mitsuba's
+    own test (benchmarks/studies/mitsuba_suite.py: Sidak alpha 0.01 over
+    pixels, at most 0.75 % rejected). The power of each scene's protocol is
+    checked where that scene's feature is tested (test_textures,
+    test_normalmap, test_principled, test_roughplastic, test_shapes,
+    test_emitter_textures, test_envmap, above)."""
+    from radiometer.benchmarks.studies import mitsuba_suite as ms
+
+    if scene in NOT_LOADING:
+        pytest.skip("does not load: sdfgrid refused by name, and its meshes are not in the copied data")
+    if scene in NOISIER:
+        request.applymarker(pytest.mark.xfail(reason="our volpath is noisier here; the second test passes",
+                                              strict=False))
+    r = ms.protocol(SUITE / "tests" / "scenes" / scene, threads=2)
+    assert r["passes"], r
+
+
+@pytest.mark.skipif(not (SUITE / "tests" / "scenes").is_dir(), reason="../shared/peers/mitsuba-data absent")
+def test_second_test_counts_both_variances(tmp_path):
+    """The one loading scene that fails Mitsuba's protocol,
+    hetero_sigmat_albedo_volpath (49 of 17.3 allowed pixel-channels
+    rejected, 2026-12-06), fails it because our estimator is noisier there,
+    not because it is wrong. Its medium has a grey sigma_t grid and an RGB
+    albedo grid (means 0.80, 0.25, 0.15): our volpath absorbs by the hero
+    channel's albedo and combines the channels by spectral MIS, so red
+    light, which survives many more scatterings than the hero's green or
+    blue, carries up to 3x weights; Mitsuba's volpath never absorbs and
+    weighs each channel by its albedo. Measured at 8192 spp against a fresh
+    Mitsuba render of 8 x 1024: our per-sample variance 3.7x Mitsuba's in
+    red over the image (2-17x at the rejected pixels), 1.3x in green; the
+    two images agree (z variance 1.03-1.06 per channel, mean z -0.03).
+    Mitsuba's protocol divides every difference by Mitsuba's per-sample
+    variance, so it rejects us there; Mitsuba itself passes it (1, 0, 0
+    rejected at seeds 0, 1, 2).
+
+    The second test counts both variances, each measured: a fresh Mitsuba
+    render made by `radiometer refs --suite` (here 4 runs x 868 spp; the
+    variance of its mean from the runs' spread) and ours (res.variance).
+    It passes (2026-12-06: 0 rejected against a 8 x 1736 reference), and
+    rejects the scene with its envmap 10 % darker (633 rejected)."""
+    pytest.importorskip("mitsuba", reason="the fresh reference is a Mitsuba 3 render")
+    from radiometer.benchmarks.studies import mitsuba_suite as ms
+    from radiometer.cli import main
+    from radiometer.exr import read_exr
+
+    scene = next(iter(NOISIER))
+    path = SUITE / "tests" / "scenes" / scene
+    assert main(["refs", "--suite", "--runs", "4", "--spp", "868", "--results", str(tmp_path), scene]) == 0
+    ref = ms.fresh_path(tmp_path, path)
+    meta = read_exr(ref).metadata
+    assert int(meta["total_spp"]) == 4 * 868 and meta["seeds"] == "1000..1003", meta
+    res = ms._render(path, threads=2)
+    r = ms.both_variances(path, ref, res=res)
+    assert r["passes"], r
+    assert r["variance_ratio"] > 1.1, r  # ours noisier than Mitsuba's (1.44, median over pixel-channels)
+
+    def darker(d):
+        for e in d.emitters:
+            if e.env is not None:
+                e.env = e.env * np.float32(0.9)
+
+    bad = ms.both_variances(path, ref, res=ms._render(path, threads=2, change=darker))
+    assert not bad["passes"], bad

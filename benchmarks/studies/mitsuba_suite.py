@@ -9,7 +9,7 @@ blocks it. A static scan of each scene (its <include>s followed) lists every
 plugin type the loader's plugin table lacks, so the table also counts what
 blocks beyond the first error.
 
-    python -m radiometer.benchmarks.studies.mitsuba_suite [PATH] [--json [OUT]] [--render]
+    python -m radiometer.benchmarks.studies.mitsuba_suite [PATH] [--json [OUT]] [--render [--fresh]]
 
 With --render, every scene that loads is rendered with its own integrator
 at spp = 2,000,000 // pixels, seed 0, and judged by Mitsuba's test
@@ -19,6 +19,9 @@ both back with the linear sRGB-to-XYZ matrix, which makes the variances
 those of XYZ again), z = |ours - ref| sqrt(spp / max(ref_var, 1e-4)) per
 pixel and channel, two-sided p, Sidak level 1 - 0.99^(1 / pixels); it
 passes when the rejected pixel-channels number at most 0.75 % of the pixels.
+With --fresh, each rendered scene also gets the second test, which counts
+both renderers' variances against a fresh Mitsuba render (`radiometer refs
+--suite` makes them; see "the second test" below).
 
 PATH defaults to ../shared/peers/mitsuba-data beside the repository. Prints
 a table per scene and the feature counts; with --json writes them in the
@@ -108,17 +111,13 @@ def _load(path: Path):
         return load_file(path)  # the file does not take $integrator
 
 
-def protocol(path: Path, threads: int = 0, change=None) -> dict:
-    """Mitsuba's test on one scene (see the module docstring). `change`
-    (a power check): a function that alters the loaded scene description
-    in place before it is rendered."""
+def _render(path: Path, threads: int = 0, change=None, spp=None):
+    """Our render of a suite scene at Mitsuba's test budget (spp =
+    2,000,000 // pixels, seed 0), or at `spp`. `change` (a power check): a
+    function that alters the loaded scene description in place first."""
     import warnings
 
-    import numpy as np
-    from scipy import stats
-
     import radiometer as rm
-    from radiometer.exr import read_exr
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -126,24 +125,139 @@ def protocol(path: Path, threads: int = 0, change=None) -> dict:
         if change is not None:
             change(desc)
         h, w = desc.sensor.height, desc.sensor.width
-        spp = 2_000_000 // (h * w)
-        res = rm.render(rm.Scene(desc), spp=spp, seed=0, threads=threads)
+        spp = spp or 2_000_000 // (h * w)
+        return rm.render(rm.Scene(desc), spp=spp, seed=0, threads=threads)
+
+
+def _sidak(z, pixels: int) -> dict:
+    """Mitsuba's decision on |z| per pixel and channel: two-sided p, Sidak
+    level 1 - 0.99^(1 / pixels), pass when at most 0.75 % of the pixels'
+    worth of pixel-channels are rejected."""
+    from scipy import stats
+
+    level = 1 - 0.99 ** (1 / pixels)
+    rejected = int((2 * stats.norm.sf(z) < level).sum())
+    allowed = 0.0075 * pixels
+    return {"rejected": rejected, "allowed": allowed, "passes": bool(rejected <= allowed)}
+
+
+# Linear sRGB (Rec. 709 primaries, D65) to CIE XYZ, as Mitsuba's Bitmap converts.
+_RGB_TO_XYZ = ((0.412453, 0.357580, 0.180423), (0.212671, 0.715160, 0.072169), (0.019334, 0.119193, 0.950227))
+
+
+def protocol(path: Path, threads: int = 0, change=None, res=None) -> dict:
+    """Mitsuba's test on one scene (see the module docstring) of our render
+    (made here unless `res` is given). `change` (a power check): a function
+    that alters the loaded scene description in place before it is
+    rendered."""
+    import numpy as np
+
+    from radiometer.exr import read_exr
+
+    res = res if res is not None else _render(path, threads, change)
+    h, w = res.image.shape[:2]
+    spp = res.spp
     name = path.stem.rsplit("_", 1)[0]
     ref = read_exr(path.parent / "refs" / f"{name}_ref_rgb.exr").image
     var = read_exr(path.parent / "refs" / f"{name}_ref_rgb_var.exr").image
-    # Linear sRGB (Rec. 709 primaries, D65) to CIE XYZ, as Mitsuba's Bitmap converts.
-    m = np.array([[0.412453, 0.357580, 0.180423], [0.212671, 0.715160, 0.072169], [0.019334, 0.119193, 0.950227]])
+    m = np.array(_RGB_TO_XYZ)
     ours, ref, var = (a.astype(np.float64) @ m.T for a in (res.image, ref, var))
     z = np.abs(ours - ref) * np.sqrt(spp / np.maximum(var, 1e-4))
-    level = 1 - 0.99 ** (1 / (h * w))
-    rejected = int((2 * stats.norm.sf(z) < level).sum())
-    allowed = 0.0075 * h * w
-    return {"spp": spp, "seconds": round(res.seconds, 1), "rejected": rejected, "allowed": allowed,
-            "passes": bool(rejected <= allowed), "mean_ratio": float(ours[..., 1].mean() / ref[..., 1].mean()),
+    return {"spp": spp, "seconds": round(res.seconds, 1), **_sidak(z, h * w),
+            "mean_ratio": float(ours[..., 1].mean() / ref[..., 1].mean()),
             "negative_ref_var": int((var < 0).sum())}
 
 
-def survey(root: Path, render: bool = False, threads: int = 0) -> list:
+# -- the second test: both variances, against a fresh Mitsuba render ------------
+#
+# Mitsuba's protocol scales each difference by the reference's per-sample
+# variance, which presumes that the renderer under test has Mitsuba's
+# variance: an estimator that is right but noisier (another sampling
+# strategy) fails it, and a reference whose variance file is itself noisy
+# (32,000 samples of a heavy-tailed estimator; negative "variances" where
+# XYZ was stored as RGB) misjudges either way. The second test counts both
+# variances, each measured: ours (res.variance, the variance of our
+# pixel mean) and a fresh Mitsuba render's (`radiometer refs --suite`: the
+# mean of R independent renders and the variance of that mean from their
+# spread, reference_scenes/make_reference.py), per pixel and channel in
+# linear RGB, z = (ours - ref) / sqrt(var_ours + var_ref), with Mitsuba's
+# Sidak level and 0.75 % rule (_sidak).
+
+FRESH_RUNS, FRESH_SPP_FACTOR = 4, 2  # default fresh reference: 4 runs, together 8x the test's spp
+
+
+def fresh_path(results, path: Path) -> Path:
+    """Where `radiometer refs --suite` keeps the fresh reference of a suite
+    scene: RESULTS/refs/mitsuba_suite/<folder>/<scene>.exr."""
+    return Path(results) / "refs" / "mitsuba_suite" / path.parent.name / f"{path.stem}.exr"
+
+
+def suite_spp(path: Path) -> int:
+    """Mitsuba's test budget for the scene: 2,000,000 // pixels."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        desc = _load(path)
+    return 2_000_000 // (desc.sensor.height * desc.sensor.width)
+
+
+def make_fresh(path: Path, out: Path, runs: int = FRESH_RUNS, spp: int | None = None,
+               variant: str = "llvm_ad_rgb", first_seed: int = 1000, progress: bool = False) -> dict:
+    """A fresh Mitsuba 3 reference of one suite scene, rendered as its test
+    renders it (its own integrator as $integrator), `runs` renders of
+    `spp` (default: FRESH_SPP_FACTOR x the test's spp) from seed
+    `first_seed` on; writes `out` and returns its metadata."""
+    from radiometer.reference_scenes.make_reference import make_mitsuba_reference
+
+    spp = spp or FRESH_SPP_FACTOR * suite_spp(path)
+    params = {}
+    if "$integrator" in path.read_text():
+        params["integrator"] = path.stem.rsplit("_", 1)[-1]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    _, _, meta = make_mitsuba_reference(path, out, runs=runs, spp=spp, variant=variant, progress=progress,
+                                        scene_note=f"Mitsuba's render test suite scene {path.parent.name}/"
+                                                   f"{path.name}", first_seed=first_seed, **params)
+    return meta
+
+
+def both_variances(path: Path, ref_exr: Path, threads: int = 0, change=None, res=None) -> dict:
+    """The second test (above) of our render (made here unless `res` is
+    given) against the fresh reference `ref_exr`. Also reports the ratio of
+    our per-sample variance to Mitsuba's (median over pixel-channels where
+    both are positive): what our estimator costs in samples for the same
+    noise on this scene."""
+    import numpy as np
+
+    from radiometer.exr import read_exr
+
+    res = res if res is not None else _render(path, threads, change)
+    ref = read_exr(ref_exr)
+    m = ref.metadata
+    ours, vo = res.image.astype(np.float64), np.asarray(res.variance, np.float64)
+    if vo.ndim == 2:
+        vo = vo[..., None]
+    mean, vr = ref.image.astype(np.float64), ref.variance.astype(np.float64)
+    if mean.shape != ours.shape:
+        raise ValueError(f"{ref_exr}: reference is {mean.shape[1]} x {mean.shape[0]}, our render "
+                         f"{ours.shape[1]} x {ours.shape[0]}")
+    # Mitsuba's floor on the per-sample variance (1e-4), as a variance of our mean.
+    z = np.abs(ours - mean) / np.sqrt(np.maximum(vo + vr, 1e-4 / res.spp))
+    ref_spp = int(m.get("total_spp", 0))
+    both = (vo > 0) & (vr > 0)
+    ratio = float(np.median((vo * res.spp)[both] / (vr * ref_spp)[both])) if both.any() and ref_spp else None
+    h, w = ours.shape[:2]
+    return {"spp": res.spp, "ref_spp": ref_spp, "ref_variant": m.get("variant"), **_sidak(z, h * w),
+            "mean_ratio": float(ours.mean() / max(mean.mean(), 1e-30)),
+            "variance_ratio": None if ratio is None else round(ratio, 3)}
+
+
+def survey(root: Path, render: bool = False, threads: int = 0, fresh=None, fresh_runs: int = FRESH_RUNS,
+           fresh_spp=None, variant: str = "llvm_ad_rgb") -> list:
+    """A row per scene: loads or the first error, the static blockers; with
+    `render`, Mitsuba's test of our render; with `fresh` (a results folder)
+    also the second test against the fresh reference kept there (made
+    first when missing: `fresh_runs` Mitsuba renders of `fresh_spp`)."""
     import warnings
 
     from radiometer.loader import PLUGINS, SceneError
@@ -164,7 +278,14 @@ def survey(root: Path, render: bool = False, threads: int = 0) -> list:
         rows.append({"scene": str(path.relative_to(root / "tests" / "scenes")), "status": status,
                      "blockers": blockers})
         if render and status == "loads":
-            rows[-1]["protocol"] = protocol(path, threads)
+            res = _render(path, threads)
+            rows[-1]["protocol"] = protocol(path, res=res)
+            if fresh is not None:
+                ref = fresh_path(fresh, path)
+                if not ref.exists():
+                    print(f"{rows[-1]['scene']}: fresh Mitsuba reference -> {ref}", file=sys.stderr, flush=True)
+                    make_fresh(path, ref, fresh_runs, fresh_spp, variant)
+                rows[-1]["both_variances"] = both_variances(path, ref, res=res)
     return rows
 
 
@@ -177,6 +298,12 @@ def _print(rows: list) -> None:
             print(f"{'':<{w}}    Mitsuba's test: {'passes' if p['passes'] else 'FAILS'}, rejected {p['rejected']} / "
                   f"allowed {p['allowed']:.2f} pixel-channels, {p['spp']} spp, {p['seconds']} s, mean Y ours / ref "
                   f"{p['mean_ratio']:.4f}")
+        if "both_variances" in r:
+            b = r["both_variances"]
+            print(f"{'':<{w}}    both variances, fresh Mitsuba ({b['ref_spp']} spp, {b['ref_variant']}): "
+                  f"{'passes' if b['passes'] else 'FAILS'}, rejected {b['rejected']} / allowed {b['allowed']:.2f}, "
+                  f"mean ours / ref {b['mean_ratio']:.4f}, per-sample variance ours / Mitsuba "
+                  f"{b['variance_ratio']}")
     n_ok = sum(r["status"] == "loads" for r in rows)
     print(f"\n{n_ok} of {len(rows)} scenes load")
     first = collections.Counter(r["status"] for r in rows if r["status"] != "loads")
@@ -198,12 +325,22 @@ def main(argv=None) -> int:
     ap.add_argument("--render", action="store_true", help="also render each scene that loads under Mitsuba's "
                     "test protocol")
     ap.add_argument("--threads", type=int, default=0, help="render threads (0: all cores)")
+    ap.add_argument("--fresh", nargs="?", const="out/results", help="with --render: also the second test "
+                    "(both variances) against fresh Mitsuba references kept under FRESH/refs/mitsuba_suite "
+                    "(made where missing, as `radiometer refs --suite` makes them; default out/results)")
+    ap.add_argument("--fresh-runs", type=int, default=FRESH_RUNS, help="Mitsuba renders per fresh reference")
+    ap.add_argument("--fresh-spp", type=int, help="spp per render (default: "
+                    f"{FRESH_SPP_FACTOR} x the test's)")
     a = ap.parse_args(argv)
     a.path = a.path or default_path()
     if not (a.path / "tests" / "scenes").is_dir():
         print(f"mitsuba_suite: {a.path} holds no tests/scenes folder", file=sys.stderr)
         return 2
-    rows = survey(a.path, render=a.render, threads=a.threads)
+    if a.fresh and not a.render:
+        print("mitsuba_suite: --fresh needs --render", file=sys.stderr)
+        return 2
+    rows = survey(a.path, render=a.render, threads=a.threads, fresh=a.fresh and Path(a.fresh),
+                  fresh_runs=a.fresh_runs, fresh_spp=a.fresh_spp)
     _print(rows)
     if a.json:
         from radiometer.benchmarks.studies import record

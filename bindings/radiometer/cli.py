@@ -156,6 +156,8 @@ def cmd_refs(a) -> int:
     """Regenerates the Mitsuba 3 references of the canonical scenes."""
     if a.effects:
         return _effect_refs(a)
+    if a.suite:
+        return _suite_refs(a)
     from .reference_scenes.make_reference import make_scene_reference
     from .reference_scenes.registry import mitsuba_scenes
 
@@ -194,6 +196,49 @@ def cmd_refs(a) -> int:
         out = (out_dir / n / committed.name) if out_dir else None
         out, var, meta = make_scene_reference(spec, res, a.runs, a.spp, a.variant, out)
         print(f"  wrote {out} in {meta['seconds']:.0f} s ({meta['variant']}); mean variance {var.mean():.3g}")
+    return 0
+
+
+def _suite_refs(a) -> int:
+    """Fresh Mitsuba 3 references of scenes of Mitsuba's own render test
+    suite, for the second test (both variances; benchmarks/studies/
+    mitsuba_suite.py): kept under RESULTS/refs/mitsuba_suite."""
+    from .benchmarks.studies import mitsuba_suite as ms
+
+    root = Path(a.suite_data) if a.suite_data else ms.default_path()
+    if not (root / "tests" / "scenes").is_dir():
+        raise SceneError(f"refs --suite: {root} holds no tests/scenes folder (Mitsuba's mitsuba-data)")
+    every = {str(p.relative_to(root / "tests" / "scenes")): p for p in ms.scenes(root)}
+    names = a.scenes or sorted(every)
+    unknown = [n for n in names if n not in every]
+    if unknown:
+        raise SceneError(f"refs --suite: no scene {', '.join(unknown)} in {root / 'tests' / 'scenes'} "
+                         f"(e.g. {next(iter(sorted(every)), 'none')})")
+    if a.res is not None:
+        raise SceneError("refs --suite: --res does not apply (a suite scene renders at its own film size)")
+    for n in names:
+        path, out = every[n], ms.fresh_path(a.results, every[n])
+        if a.list:
+            state = "missing"
+            if out.exists():
+                from . import read_exr
+
+                m = read_exr(out).metadata
+                state = f"{m.get('total_spp', '?')} spp, Mitsuba {m.get('mitsuba_version', '?')} {m.get('variant', '?')}"
+            print(f"{n}: {state} ({out})")
+            continue
+        if out.exists() and not a.force:
+            print(f"{n}: kept {out} (--force remakes it)")
+            continue
+        try:
+            runs = a.runs or ms.FRESH_RUNS
+            spp = a.spp or ms.FRESH_SPP_FACTOR * ms.suite_spp(path)
+        except SceneError as e:
+            print(f"{n}: skipped, the scene does not load here ({str(e).splitlines()[0]})")
+            continue
+        print(f"{n}: {runs} runs x {spp} spp -> {out}", file=sys.stderr)
+        meta = ms.make_fresh(path, out, runs=runs, spp=spp, variant=a.variant, progress=True)
+        print(f"  wrote {out} in {meta['seconds']:.0f} s ({meta['variant']})")
     return 0
 
 
@@ -378,7 +423,8 @@ def main(argv=None) -> int:
                         "and errors quote nothing from them")
     r.set_defaults(func=cmd_render)
     f = sub.add_parser("refs", help="regenerate the Mitsuba 3 references of the canonical scenes")
-    f.add_argument("scenes", nargs="*", help="scene folders (default: every scene with a Mitsuba reference)")
+    f.add_argument("scenes", nargs="*", help="scene folders (default: every scene with a Mitsuba reference); with "
+                                             "--suite, suite scenes as FOLDER/FILE.xml (default: all)")
     f.add_argument("--res", type=int, help="resolution (default: each scene's own; another only where the "
                                            "registry declares a reference at it, reference_RES.exr)")
     f.add_argument("--runs", type=int, help="independent Mitsuba renders (default: the scene's)")
@@ -389,7 +435,12 @@ def main(argv=None) -> int:
     f.add_argument("--effects", action="store_true",
                    help="per-effect references for the benchmark instead (long runs of our path tracer, accepted "
                         "when their total passes the z-test against Mitsuba; cached under RESULTS/refs)")
-    f.add_argument("--force", action="store_true", help="with --effects: remake existing ones")
+    f.add_argument("--suite", action="store_true",
+                   help="fresh Mitsuba references of Mitsuba's own render test suite for the second test (both "
+                        "variances), under RESULTS/refs/mitsuba_suite")
+    f.add_argument("--suite-data", metavar="PATH", help="with --suite: the mitsuba-data folder (default: "
+                                                        "../shared/peers/mitsuba-data beside the repository)")
+    f.add_argument("--force", action="store_true", help="with --effects or --suite: remake existing ones")
     f.add_argument("--threads", type=int, default=0, help="with --effects: render threads (0 = all cores)")
     _add_results_arg(f)
     f.set_defaults(func=cmd_refs)
