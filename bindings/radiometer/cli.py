@@ -224,7 +224,8 @@ def _suite_refs(a) -> int:
                 from . import read_exr
 
                 m = read_exr(out).metadata
-                state = f"{m.get('total_spp', '?')} spp, Mitsuba {m.get('mitsuba_version', '?')} {m.get('variant', '?')}"
+                state = (f"{m.get('total_spp', '?')} spp, Mitsuba {m.get('mitsuba_version', '?')} "
+                         f"{m.get('variant', '?')}")
             print(f"{n}: {state} ({out})")
             continue
         if out.exists() and not a.force:
