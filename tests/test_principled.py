@@ -87,6 +87,11 @@ CASES = [
                   "b": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2}}, id="blendbsdf-constant"),
     pytest.param({"type": "blendbsdf", "weight": 1.7, "a": {"type": "diffuse"},
                   "b": {"type": "principled", "spec_trans": 0.5}}, id="blendbsdf-clamped"),
+    # A colour where Mitsuba reads a float (eval_1): the channels' mean.
+    pytest.param({"type": "blendbsdf", "weight": rgb(0.2, 0.5, 0.9), "a": {"type": "diffuse"},
+                  "b": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2}}, id="blendbsdf-rgb-weight"),
+    pytest.param({"type": "principled", "roughness": rgb(0.1, 0.2, 0.6), "metallic": rgb(0.9, 0.1, 0.5)},
+                 id="principled-rgb-floats"),
 ]
 # Every texturable parameter as a checkerboard (float colours, as the suite's
 # scenes give them), evaluated at random uvs.
@@ -329,7 +334,9 @@ BAD = [
     ({"type": "principled", "specular": 2.0}, r"\['specular'\].*'specular' must lie in \[0, 1\]"),
     ({"type": "principled", "eta": {"type": "checkerboard"}}, r"parameter 'eta' cannot take a texture"),
     ({"type": "principled", "diff_trans": 0.5}, r"\['diff_trans'\].*unknown parameter 'diff_trans'"),
-    ({"type": "principled", "roughness": rgb(0.1, 0.2, 0.3)}, r"'roughness' must be a float"),
+    ({"type": "principled", "roughness": rgb(0.1, 0.2, 1.3)}, r"'roughness': a colour here is a reflectance"),
+    ({"type": "blendbsdf", "weight": rgb(0.2, 0.5, 1.5), "a": {"type": "diffuse"}, "b": {"type": "diffuse"}},
+     r"\['weight'\].*blendbsdf.*'weight': a colour here is a reflectance, its values must lie in \[0, 1\]"),
     ({"type": "principledthin", "diff_trans": 2.5}, r"\['diff_trans'\].*must lie in \[0.0, 2.0\]"),
     ({"type": "principledthin", "clearcoat": 0.5}, r"unknown parameter 'clearcoat'"),
     ({"type": "principledthin", "eta": 0.0}, r"\['eta'\].*'eta' must be > 0"),

@@ -178,6 +178,22 @@ class _Builder:
         the value is the texture's mean; otherwise p.float, within [lo, hi]
         when given (a texture's range is the renderer's to check)."""
         node = p.named_child("texture", name)
+        prop = p.node.props.get(name)
+        if node is None and prop is not None and prop.kind in ("rgb", "spectrum"):
+            # Mitsuba 3 reads such a parameter with eval_1, which of a colour
+            # in its RGB variants is the mean of the channels (measured with
+            # blendbsdf in scalar_rgb: weight rgb (0.2, 0.5, 0.9) blends as
+            # 0.5333); the colour must be a reflectance, as Mitsuba's srgb
+            # texture requires.
+            c = p.rgb(name, default)
+            if not all(0.0 <= v <= 1.0 for v in c):
+                raise p.error(f"parameter '{name}': a colour here is a reflectance, its values must lie in "
+                              f"[0, 1], got {c}", prop.place)
+            x = float(np.mean(c))
+            if (lo is not None and not x >= lo) or (hi is not None and not x <= hi):
+                raise p.error(f"parameter '{name}' must lie in [{lo}, {hi}], got {x} (the colour's mean)",
+                              prop.place)
+            return x
         if node is None:
             x = p.float(name, default)
             if p.has(name) and ((lo is not None and not x >= lo) or (hi is not None and not x <= hi)):
