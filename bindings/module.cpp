@@ -269,15 +269,16 @@ PYBIND11_MODULE(_core, m) {
             py::arg("uvs") = py::none(), py::arg("bsdf"), py::arg("flip_normals") = false, py::arg("group") = -1)
         .def(
             "add_mesh_attribute",
-            [](Scene& s, int shape, const std::string& name, bool per_face, int channels, py::object data) {
+            [](Scene& s, int shape, const std::string& name, bool per_face, int channels, py::object data, int group) {
                 MeshAttribute a;
                 a.name = name;
                 a.per_face = per_face;
                 a.channels = channels;
                 a.data = flat<float>(data, 1, "attribute data");
-                s.add_mesh_attribute(shape, a);
+                s.add_mesh_attribute(shape, a, group);
             },
-            py::arg("shape"), py::arg("name"), py::arg("per_face"), py::arg("channels"), py::arg("data"))
+            py::arg("shape"), py::arg("name"), py::arg("per_face"), py::arg("channels"), py::arg("data"),
+            py::arg("group") = -1)
         .def(
             "add_sphere",
             [](Scene& s, const std::string& id, py::object c, float r, int bsdf, bool flip, py::object m4, int group) {

@@ -47,12 +47,14 @@ def _set_variant(mi, variant: str):
 
 def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 1024, variant: str = "llvm_ad_rgb",
                            progress: bool = True, integrator: dict | None = None, scene_note: str = "",
-                           first_seed: int = 0, **scene_params):
+                           first_seed: int = 0, xml_params: dict | None = None, **scene_params):
     """Renders `scene_xml` with Mitsuba 3 `runs` times (seed = first_seed ..
     first_seed + runs-1,
     `spp` samples per pixel each) and writes to `out_exr` the mean image and
     the variance of that mean (sample variance across runs / runs).
-    `scene_params` override the XML's <default> parameters; `integrator`, a
+    `scene_params` (and `xml_params`, for names that clash with this
+    function's, such as $integrator) override the XML's <default>
+    parameters; `integrator`, a
     Mitsuba plugin dict, replaces the XML's integrator; `scene_note`, when
     given, says in the metadata what Mitsuba rendered. Returns the
     ExrImage-like tuple (mean, var_mean, metadata)."""
@@ -64,6 +66,7 @@ def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 102
 
     used, note = _set_variant(mi, variant)
     scene_xml = Path(scene_xml)
+    scene_params = {**(xml_params or {}), **scene_params}
     scene = mi.load_file(str(scene_xml), **scene_params)
     integ = mi.load_dict(dict(integrator)) if integrator else scene.integrator()
 

@@ -211,13 +211,11 @@ def make_fresh(path: Path, out: Path, runs: int = FRESH_RUNS, spp: int | None = 
     from radiometer.reference_scenes.make_reference import make_mitsuba_reference
 
     spp = spp or FRESH_SPP_FACTOR * suite_spp(path)
-    params = {}
-    if "$integrator" in path.read_text():
-        params["integrator"] = path.stem.rsplit("_", 1)[-1]
     out.parent.mkdir(parents=True, exist_ok=True)
     _, _, meta = make_mitsuba_reference(path, out, runs=runs, spp=spp, variant=variant, progress=progress,
                                         scene_note=f"Mitsuba's render test suite scene {path.parent.name}/"
-                                                   f"{path.name}", first_seed=first_seed, **params)
+                                                   f"{path.name}", first_seed=first_seed,
+                                        xml_params={"integrator": path.stem.rsplit("_", 1)[-1]})
     return meta
 
 

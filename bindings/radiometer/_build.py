@@ -144,6 +144,13 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
             scene.set_shape_media(idx, _medium_index(scene, media, s.interior, desc.source),
                                   _medium_index(scene, media, s.exterior, desc.source))
 
+    def add_attributes(s, idx, group=-1):
+        """The mesh attributes (PLY vertex_* / face_*) of ShapeDesc s, shape
+        idx (of shapegroup `group` when >= 0: its instances read them)."""
+        for name, a in s.attributes.items():
+            scene.add_mesh_attribute(idx, name, name.startswith("face_"), int(a.shape[1]),
+                                     np.ascontiguousarray(a, np.float32).reshape(-1, 1), group)
+
     def group_of(g):
         """The C++ shapegroup of ShapeDesc g, made (with its members) on first use."""
         if id(g) not in groups:
@@ -152,6 +159,7 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
                 where = m.id or f"{g.id} member #{k}"
                 try:
                     mi = add_geometry(m, where, gi)
+                    add_attributes(m, mi, gi)
                 except (ValueError, RuntimeError) as e:
                     if isinstance(e, SceneError):
                         raise
@@ -173,9 +181,7 @@ def build_scene(desc: SceneDesc) -> "_core.Scene":
                 scene.add_instance(where, group_of(s.group), np.asarray(s.to_world, np.float64))
                 continue
             idx = add_geometry(s, where)
-            for name, a in s.attributes.items():
-                scene.add_mesh_attribute(idx, name, name.startswith("face_"), int(a.shape[1]),
-                                         np.ascontiguousarray(a, np.float32).reshape(-1, 1))
+            add_attributes(s, idx)
             if s.emitter is not None:
                 scene.add_area_emitter(idx, _emitter(s.emitter))
             if s.sensor is not None:

@@ -118,11 +118,25 @@ int Scene::add_mesh(const std::string& id, std::vector<float> positions, std::ve
     return add_shape(std::move(m), bsdf, flip_normals, group);
 }
 
-void Scene::add_mesh_attribute(int shape, const MeshAttribute& attribute) {
-    if (shape < 0 || size_t(shape) >= shapes.size()) throw std::invalid_argument("add_mesh_attribute: no such shape");
-    auto* mesh = dynamic_cast<Mesh*>(shapes[size_t(shape)].get());
+void Scene::add_mesh_attribute(int shape, const MeshAttribute& attribute, int group) {
+    if (committed_) throw std::logic_error("scene is already committed");
+    Shape* target = nullptr;
+    if (group >= 0) {  // `shape` is a member of that shapegroup (its instances read the member's attributes)
+        if (group >= int(groups_.size()))
+            throw std::invalid_argument("add_mesh_attribute: shapegroup index out of range");
+        ShapeGroup& g = groups_[size_t(group)];
+        if (shape < 0 || size_t(shape) >= g.members.size())
+            throw std::invalid_argument("shapegroup '" + g.id + "': member index out of range");
+        if (g.scene) throw std::invalid_argument("shapegroup '" + g.id + "' is already instanced");
+        target = g.members[size_t(shape)].get();
+    } else {
+        if (shape < 0 || size_t(shape) >= shapes.size())
+            throw std::invalid_argument("add_mesh_attribute: no such shape");
+        target = shapes[size_t(shape)].get();
+    }
+    auto* mesh = dynamic_cast<Mesh*>(target);
     if (!mesh)
-        throw std::invalid_argument("shape '" + shapes[size_t(shape)]->id + "': attribute '" + attribute.name +
+        throw std::invalid_argument("shape '" + target->id + "': attribute '" + attribute.name +
                                     "': only meshes carry attributes");
     for (float v : attribute.data)
         if (!std::isfinite(v))

@@ -89,7 +89,8 @@ public:
     void set_member_media(int group, int member, int interior, int exterior);
     // A vertex_* or face_* attribute of mesh `shape` (Mesh::add_attribute):
     // vertices (or triangles) x channels floats.
-    void add_mesh_attribute(int shape, const MeshAttribute& attribute);
+    // group >= 0: `shape` is a member index of that shapegroup.
+    void add_mesh_attribute(int shape, const MeshAttribute& attribute, int group = -1);
     void add_area_emitter(int shape, const EmitterDesc& desc);
     void add_emitter(const EmitterDesc& desc);
     void set_sensor(const SensorDesc& desc);
