@@ -35,6 +35,8 @@ export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 "$B/venv/bin/python" -c "import radiometer, sys; p = radiometer.__file__; print('instrumented radiometer:', p); sys.exit(0 if '/out/asan/' in p else 1)"
 if [ "$#" -eq 0 ]; then
   set -- tests/test_loader.py tests/test_stress.py tests/test_render.py tests/test_float_range.py tests/test_effects.py \
-    tests/test_textures.py tests/test_roughplastic.py tests/test_radiosity.py tests/test_radiosity_hierarchical.py
+    tests/test_textures.py tests/test_roughplastic.py tests/test_radiosity.py tests/test_radiosity_hierarchical.py \
+    tests/test_rays.py tests/test_shapes.py tests/test_normalmap.py tests/test_principled.py \
+    tests/test_emitter_textures.py
 fi
 "$B/venv/bin/python" -m pytest -q -p no:cacheprovider "$@"
