@@ -368,7 +368,7 @@ def _invert_face_weights(d):
     ("mesh_attributes/test_mesh_attributes_3_vertex_direct.xml", _roll_vertex_attributes),
     ("various_emitters/test_various_emitters_ptracer.xml", _flip_textures),
 ])
-def test_suite_emitter_texture_scenes_pass_mitsubas_test(scene, spoil, monkeypatch):
+def test_suite_emitter_texture_scenes_pass_mitsubas_test(scene, spoil):
     """Mitsuba 3's own scenes with projectors (a constant one and a PNG),
     face and vertex colours (PLY attributes through mesh_attribute) and
     various_emitters (textured area lights on a rectangle, an OBJ quad and
@@ -384,9 +384,7 @@ def test_suite_emitter_texture_scenes_pass_mitsubas_test(scene, spoil, monkeypat
 
     r = ms.protocol(SUITE / scene, threads=2)
     assert r["passes"], r
-    load = ms._load
-    monkeypatch.setattr(ms, "_load", lambda path: spoil(load(path)))
-    assert not ms.protocol(SUITE / scene, threads=2)["passes"]
+    assert not ms.protocol(SUITE / scene, threads=2, change=spoil)["passes"]
 
 
 # ---------------------------------------------------------------------------

@@ -530,7 +530,7 @@ def _fill_cube(d):
     ("instancing/test_instancing_path.xml", _drop_last_instance),
     ("participating_media/test_hetero_spectral_sigmat_no_scattering_volpath.xml", _fill_cube),
 ])
-def test_suite_shape_scenes_pass_mitsubas_test(scene, spoil, monkeypatch):
+def test_suite_shape_scenes_pass_mitsubas_test(scene, spoil):
     """Mitsuba 3's own scenes with a shapegroup instanced three times (an
     OBJ sphere, an analytic sphere and a rectangle; rotations and scales)
     and with a heterogeneous medium whose sigma_t is a constvolume placed
@@ -547,15 +547,7 @@ def test_suite_shape_scenes_pass_mitsubas_test(scene, spoil, monkeypatch):
 
     r = ms.protocol(SUITE / scene, threads=2)
     assert r["passes"], r
-    load = ms._load
-
-    def spoiled(path):
-        d = load(path)
-        spoil(d)
-        return d
-
-    monkeypatch.setattr(ms, "_load", spoiled)
-    assert not ms.protocol(SUITE / scene, threads=2)["passes"]
+    assert not ms.protocol(SUITE / scene, threads=2, change=spoil)["passes"]
 
 
 # -- 6. errors ------------------------------------------------------------------------

@@ -466,7 +466,7 @@ def _swap_checkers(d):
     ("participating_media/test_surf_area_light_volpath.xml", _swap_checkers),
     ("bsdf_spheres/test_textured_roughconductor_path.xml", _swap_checkers),
 ])
-def test_suite_texture_scenes_pass_mitsubas_test(scene, spoil, monkeypatch):
+def test_suite_texture_scenes_pass_mitsubas_test(scene, spoil):
     """Mitsuba 3's own scenes with textures (a JPEG bitmap on an OBJ sphere;
     a PNG bitmap in repeat, mirror and clamp mode with bilinear lookups;
     a checkerboard on an OBJ floor; checkerboard roughness alpha_u, alpha_v
@@ -481,9 +481,7 @@ def test_suite_texture_scenes_pass_mitsubas_test(scene, spoil, monkeypatch):
 
     r = ms.protocol(SUITE / scene, threads=2)
     assert r["passes"], r
-    load = ms._load
-    monkeypatch.setattr(ms, "_load", lambda path: spoil(load(path)))
-    assert not ms.protocol(SUITE / scene, threads=2)["passes"]
+    assert not ms.protocol(SUITE / scene, threads=2, change=spoil)["passes"]
 
 
 # ---------------------------------------------------------------------------
@@ -545,7 +543,7 @@ def test_spot_texture_matches_mitsuba(spot_setup, estimator, spp):
 
 
 @pytest.mark.skipif(not SUITE.is_dir(), reason="../shared/peers/mitsuba-data absent")
-def test_suite_spot_texture_scene(monkeypatch):
+def test_suite_spot_texture_scene():
     """Mitsuba's spot_light/test_spot_direct (a de Bruijn pattern projected
     by a spot) under Mitsuba's protocol (measured: 0 rejected of 17.3);
     fails with the pattern mirrored left to right (it is symmetric top to
@@ -554,14 +552,9 @@ def test_suite_spot_texture_scene(monkeypatch):
 
     scene = SUITE / "spot_light" / "test_spot_direct.xml"
     assert ms.protocol(scene, threads=2)["passes"]
-    load = ms._load
-
-    def flipped(path):
-        desc = load(path)
+    def flipped(desc):
         for e in desc.emitters:
             for t in e.textures.values():
                 t.data = np.ascontiguousarray(t.data[:, ::-1])
-        return desc
 
-    monkeypatch.setattr(ms, "_load", flipped)
-    assert not ms.protocol(scene, threads=2)["passes"]
+    assert not ms.protocol(scene, threads=2, change=flipped)["passes"]

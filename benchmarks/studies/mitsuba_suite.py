@@ -147,11 +147,27 @@ def _sidak(z, pixels: int, df=None) -> dict:
 _RGB_TO_XYZ = ((0.412453, 0.357580, 0.180423), (0.212671, 0.715160, 0.072169), (0.019334, 0.119193, 0.950227))
 
 
+_PROTOCOL_CACHE = {}  # (path, threads) -> protocol's row of the scene as it is: renders are deterministic
+
+
 def protocol(path: Path, threads: int = 0, change=None, res=None) -> dict:
     """Mitsuba's test on one scene (see the module docstring) of our render
     (made here unless `res` is given). `change` (a power check): a function
     that alters the loaded scene description in place before it is
-    rendered."""
+    rendered. The row of an unchanged scene rendered here is kept for the
+    process (a seed's render is the same bytes whatever the thread count),
+    so the tests that check one scene's feature and the test of the whole
+    suite share one render."""
+    key = (str(Path(path).resolve()), threads)
+    if change is None and res is None and key in _PROTOCOL_CACHE:
+        return dict(_PROTOCOL_CACHE[key])
+    row = _protocol(path, threads, change, res)
+    if change is None and res is None:
+        _PROTOCOL_CACHE[key] = dict(row)
+    return row
+
+
+def _protocol(path: Path, threads: int, change, res) -> dict:
     import numpy as np
 
     from radiometer.exr import read_exr
