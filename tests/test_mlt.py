@@ -113,9 +113,20 @@ def test_clean_effects_sum_and_stats(variant):
     assert 0 < s["mlt_acceptance"] < 1 and s["mlt_b"] > 0 and s["mlt_b_variance"] > 0
     assert s["mlt_bootstrap_samples"] == boot and s["mlt_dead_chains"] == 0
     assert len(s["mlt_max_rejections_per_chain"]) == 64
-    if variant == "mmlt":  # depths 1 .. 5, each proposed (the light is seen: depth 1 accepts too)
+    if variant == "mmlt":  # depths 2 .. 5 have chains, each accepts; depth 1 is the camera pass (NaN)
         acc = s["mlt_acceptance_per_depth"]
-        assert len(acc) == 5 and all(0 < a <= 1 for a in acc), acc
+        assert len(acc) == 5 and np.isnan(acc[0]) and all(0 < a <= 1 for a in acc[1:]), acc
+        chains = s["mlt_chains_per_depth"]
+        assert chains[0] == 0 and sum(chains) == 64 and min(chains[1:]) >= 2, chains
+        b_d, v_d = s["mlt_b_per_depth"], s["mlt_b_per_depth_variance"]
+        assert len(b_d) == 5 and all(b > 0 for b in b_d) and all(v > 0 for v in v_d), (b_d, v_d)
+        assert abs(sum(b_d) - s["mlt_b"]) <= 1e-9 * s["mlt_b"] and abs(sum(v_d) - s["mlt_b_variance"]) <= 1e-9 * sum(v_d)
+
+
+def test_mmlt_refuses_too_few_chains():
+    """Every depth 2 .. max_depth with light gets two chains (pssmlt.cpp's head)."""
+    with pytest.raises(rm.SceneError, match="chains"):
+        rm.render(rm.load_file(CORNELL, res=8), integrator={"type": "mmlt", "max_depth": 6, "chains": 9}, spp=1)
 
 
 def test_time_budget_and_cancel():
@@ -360,7 +371,8 @@ def test_mmlt_strategies_match_bdpt_strategy_images():
     scene = ms.load("cornell_box", 16, 5, {"rfilter": "box"})
     mm, mm_var = ms.mmlt_shares(scene, 5, 16, 1 << 17)
     bd = ms.bdpt_shares(scene, 5, 16, 128)
-    live = (bd.mean(0) > 0) | (mm.mean(0) > 0)
+    # Depth 1 is mmlt's camera pass, not sampled by strategy (NaN shares).
+    live = np.isfinite(mm.mean(0)) & ((bd.mean(0) > 0) | (mm.mean(0) > 0))
     limit = st.chi2.ppf(1 - ALPHA_STRATEGIES, int(live.sum()))
 
     def chi2(b, m=mm):

@@ -127,7 +127,6 @@ namespace rm {
 namespace {
 
 constexpr int kMaxBatches = 32;
-constexpr int kMaxBatchesMmlt = 64;  // mmlt: batches over all depths (each depth at least 2)
 constexpr uint32_t kStrategyDim = 2;                     // mmlt's coordinates: pixel (0, 1), strategy (2)
 // mmlt's depth-1 sums per pixel: [effect][rgb], then the sample total's squares (rgb, luminance).
 constexpr size_t kDirectSlots = size_t(kNumEffects) * 3 + 4;
@@ -227,7 +226,7 @@ public:
           stuck_(p.get_int("stuck_rejections")) {
         // mmlt gives every depth 2 .. max_depth with light two chains at least (the head).
         if (multiplexed && chains_ < 2 * (max_depth_ - 1))
-            throw std::invalid_argument("mmlt: chains (" + std::to_string(chains_) + ") must be at least 2 (max_depth - 1) = " +
+            throw ParamError("mmlt", "chains", "mmlt: chains (" + std::to_string(chains_) + ") must be at least 2 (max_depth - 1) = " +
                                         std::to_string(2 * (max_depth_ - 1)) + ": two chains for each depth 2 .. max_depth");
     }
 
@@ -405,6 +404,7 @@ public:
             depth_b(b_depth, b_depth_var);
             b = 0, b_var = 0, n_f = 0;
             for (size_t k = 0; k < b_depth.size(); ++k) b += b_depth[k], b_var += b_depth_var[k];
+            n_f = double(pilot_);
             for (const Depth& dp : depths_) n_f += double(dp.n);
         }
         auto& st = out.estimator_stats;
@@ -531,6 +531,7 @@ private:
     struct BootBlock {
         int d = 0;
         uint64_t i0 = 0, i1 = 0;
+        bool pilot = false;
         double f_sum = 0, f_sq = 0;
         std::vector<double> fs_sum, fs_sq;
     };
@@ -660,25 +661,110 @@ private:
         }
     }
 
-    // mmlt's bootstrap (the head): every depth's points in blocks on the
-    // threads, summed in block order; b_d; the chains dealt to the depths;
-    // each chain's start. False when cancelled.
+    // mmlt's bootstrap (the head): a pilot that deals the points to the
+    // depths, then every depth's points; each in blocks on the threads,
+    // summed in block order; b_d; the chains dealt to the depths; each
+    // chain's start. False when cancelled.
     bool bootstrap_depths(PassLoop& loop) {
-        constexpr uint64_t kBlock = 1024;
-        std::vector<BootBlock> blocks;
-        for (int d = 2; d <= m_.max_depth_; ++d) {
-            Depth& dp = depths_[size_t(d)];
-            dp.cdf.assign(size_t(dp.n) + 1, 0.0);
-            for (uint64_t i0 = 0; i0 < dp.n; i0 += kBlock) {
-                BootBlock bb;
-                bb.d = d, bb.i0 = i0, bb.i1 = std::min(dp.n, i0 + kBlock);
-                blocks.push_back(bb);
-            }
+        const int D = m_.max_depth_;
+        if (D < 2) return true;  // depth 1 alone: the camera pass, every chain dead
+        const uint64_t nd = uint64_t(D - 1), total = uint64_t(m_.bootstrap_);
+        pilot_ = std::min(total, std::max(nd, total / 8));
+        std::vector<BootBlock> pilot;
+        for (int d = 2; d <= D; ++d) add_blocks(pilot, d, chain_share(pilot_, nd, uint64_t(d - 2)), true);
+        if (!run_blocks(loop, pilot)) return false;
+        std::vector<double> sd(size_t(D) + 1, 0.0), n_p(size_t(D) + 1, 0.0), s1(size_t(D) + 1, 0.0),
+            s2(size_t(D) + 1, 0.0);
+        for (const BootBlock& bb : pilot) {
+            n_p[size_t(bb.d)] += double(bb.i1 - bb.i0);
+            s1[size_t(bb.d)] += bb.f_sum;
+            s2[size_t(bb.d)] += bb.f_sq;
         }
+        double sd_sum = 0;
+        for (int d = 2; d <= D; ++d) {
+            const double n = n_p[size_t(d)];
+            sd[size_t(d)] = n > 1 ? std::sqrt(std::max(0.0, (s2[size_t(d)] - s1[size_t(d)] * s1[size_t(d)] / n) / (n - 1.0))) : 0.0;
+            sd_sum += sd[size_t(d)];
+        }
+        // Neyman allocation (Cochran, "Sampling Techniques", sec. 5.5): b's
+        // variance sum_d var(F_d) / n_d is least with n_d in proportion to
+        // sd(F_d); an eighth of the points is spread evenly, as the pilot's
+        // sd is itself an estimate. The pilot's points are not reused, so
+        // n_d is independent of the points b_d averages (b_d stays unbiased).
+        const uint64_t rest = total - pilot_, even = rest / (8 * nd);
+        std::vector<double> weight(size_t(D) + 1, 0.0);
+        for (int d = 2; d <= D; ++d) weight[size_t(d)] = sd_sum > 0 ? sd[size_t(d)] : 1.0;
+        std::vector<uint64_t> share = largest_remainders(rest - even * nd, weight);
+        std::vector<BootBlock> blocks;
+        for (int d = 2; d <= D; ++d) {
+            Depth& dp = depths_[size_t(d)];
+            dp.n = std::max<uint64_t>(1, even + share[size_t(d)]);
+            dp.cdf.assign(size_t(dp.n) + 1, 0.0);
+            add_blocks(blocks, d, dp.n, false);
+        }
+        if (!run_blocks(loop, blocks)) return false;
+        std::vector<double> root_b(size_t(D) + 1, 0.0);
+        int live = 0;
+        for (int d = 2; d <= D; ++d) {
+            Depth& dp = depths_[size_t(d)];
+            dp.fs_sum.assign(size_t(d) + 1, 0.0);
+            dp.fs_sq.assign(size_t(d) + 1, 0.0);
+            for (size_t i = 1; i < dp.cdf.size(); ++i) dp.cdf[i] += dp.cdf[i - 1];
+        }
+        for (const BootBlock& bb : blocks) {
+            Depth& dp = depths_[size_t(bb.d)];
+            dp.f_sum += bb.f_sum;
+            dp.f_sq += bb.f_sq;
+            for (size_t s = 0; s < bb.fs_sum.size(); ++s) dp.fs_sum[s] += bb.fs_sum[s], dp.fs_sq[s] += bb.fs_sq[s];
+        }
+        for (int d = 2; d <= D; ++d) {
+            Depth& dp = depths_[size_t(d)];
+            dp.b = dp.f_sum / double(dp.n);
+            if (dp.b > 0) ++live, root_b[size_t(d)] = std::sqrt(dp.b);
+        }
+        allocate_chains(root_b, live);
+        auto start = [&](size_t c, int th) { start_chain(loop, c, loop.stats(th)); };
+        return loop.parallel_for(size_t(C_), start);
+    }
+
+    // `n` split in proportion to `weight` (largest remainders, ties to the
+    // lower index).
+    static std::vector<uint64_t> largest_remainders(uint64_t n, const std::vector<double>& weight) {
+        std::vector<uint64_t> out(weight.size(), 0);
+        double sum = 0;
+        for (double w : weight) sum += w;
+        if (!(sum > 0)) return out;
+        std::vector<std::pair<double, size_t>> frac;
+        uint64_t given = 0;
+        for (size_t k = 0; k < weight.size(); ++k) {
+            if (!(weight[k] > 0)) continue;
+            const double q = double(n) * weight[k] / sum;
+            out[k] = std::min<uint64_t>(n - given, uint64_t(std::floor(q)));
+            given += out[k];
+            frac.push_back({q - double(out[k]), k});
+        }
+        std::stable_sort(frac.begin(), frac.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+        for (size_t k = 0; given < n && k < frac.size(); ++k, ++given) ++out[frac[k].second];
+        return out;
+    }
+
+    // Depth d's points [0, n) in blocks (`pilot`: the pilot's stream).
+    static void add_blocks(std::vector<BootBlock>& blocks, int d, uint64_t n, bool pilot) {
+        constexpr uint64_t kBlock = 1024;
+        for (uint64_t i0 = 0; i0 < n; i0 += kBlock) {
+            BootBlock bb;
+            bb.d = d, bb.i0 = i0, bb.i1 = std::min(n, i0 + kBlock), bb.pilot = pilot;
+            blocks.push_back(bb);
+        }
+    }
+
+    // The blocks' points on the threads: their sums, and each point's F_i
+    // into its depth's cdf (not the pilot's). False when cancelled.
+    bool run_blocks(PassLoop& loop, std::vector<BootBlock>& blocks) {
         auto run = [&](size_t k, int th) {
             BootBlock& bb = blocks[k];
             Depth& dp = depths_[size_t(bb.d)];
-            const uint64_t stream = depth_stream(loop, bb.d);
+            const uint64_t stream = bb.pilot ? mix64(depth_stream(loop, bb.d) ^ 0x70696c6f74ULL) : depth_stream(loop, bb.d);
             PssSampler pss(m_.sigma_, m_.large_p_);
             std::vector<Splat> tmp;
             std::vector<double> f;
@@ -695,64 +781,33 @@ private:
                     bb.fs_sum[s] += share;
                     bb.fs_sq[s] += share * share;
                 }
-                dp.cdf[size_t(i) + 1] = F;  // the point's F_i; prefix sums below
+                if (!bb.pilot) dp.cdf[size_t(i) + 1] = F;  // the point's F_i; prefix sums after
                 bb.f_sum += F;
                 bb.f_sq += F * F;
             }
         };
-        if (!loop.parallel_for(blocks.size(), run)) return false;
-        double total = 0;
-        int live = 0;
-        for (int d = 2; d <= m_.max_depth_; ++d) {
-            Depth& dp = depths_[size_t(d)];
-            dp.fs_sum.assign(size_t(d) + 1, 0.0);
-            dp.fs_sq.assign(size_t(d) + 1, 0.0);
-            for (size_t i = 1; i < dp.cdf.size(); ++i) dp.cdf[i] += dp.cdf[i - 1];
-        }
-        for (const BootBlock& bb : blocks) {
-            Depth& dp = depths_[size_t(bb.d)];
-            dp.f_sum += bb.f_sum;
-            dp.f_sq += bb.f_sq;
-            for (size_t s = 0; s < bb.fs_sum.size(); ++s) dp.fs_sum[s] += bb.fs_sum[s], dp.fs_sq[s] += bb.fs_sq[s];
-        }
-        for (int d = 2; d <= m_.max_depth_; ++d) {
-            Depth& dp = depths_[size_t(d)];
-            dp.b = dp.f_sum / double(dp.n);
-            if (dp.b > 0) total += dp.b, ++live;
-        }
-        allocate_chains(total, live);
-        auto start = [&](size_t c, int th) { start_chain(loop, c, loop.stats(th)); };
-        return loop.parallel_for(size_t(C_), start);
+        return loop.parallel_for(blocks.size(), run);
     }
 
     // mmlt: the chains dealt to the depths with b_d > 0: two each, the rest
-    // in proportion to b_d by largest remainders (ties to the lower depth);
-    // chains in depth order, each depth's batches next to each other.
-    void allocate_chains(double total, int live) {
+    // in proportion to sqrt(b_d) (largest_remainders), in depth order, each
+    // depth's batches next to each other. In proportion to b_d (the time
+    // Hachisuka 2014's one chain spends at each depth) would be best for the
+    // image mean, but starves the pixels a deep, dim depth lights most
+    // (docs/mlt.md); sqrt(b_d) lies between that and an even split.
+    void allocate_chains(const std::vector<double>& root_b, int live) {
         if (live == 0) return;  // no light at any depth: every chain dead
-        const uint64_t rest = C_ - 2 * uint64_t(live);  // chains >= 2 (max_depth - 1): checked by the factory
-        std::vector<std::pair<double, int>> frac;
-        uint64_t given = 0;
-        for (int d = 2; d <= m_.max_depth_; ++d) {
-            Depth& dp = depths_[size_t(d)];
-            if (!(dp.b > 0)) continue;
-            const double q = double(rest) * dp.b / total;
-            const uint64_t whole = std::min<uint64_t>(rest, uint64_t(std::floor(q)));
-            dp.chains = int(2 + whole);
-            given += whole;
-            frac.push_back({q - double(whole), d});
-        }
-        std::stable_sort(frac.begin(), frac.end(), [](auto& a, auto& b) { return a.first > b.first; });
-        for (size_t k = 0; given < rest && k < frac.size(); ++k, ++given) ++depths_[size_t(frac[k].second)].chains;
+        // chains >= 2 (max_depth - 1): checked by the factory
+        const std::vector<uint64_t> extra = largest_remainders(C_ - 2 * uint64_t(live), root_b);
         int next_chain = 0;
         size_t next_batch = 0;
         for (int d = 2; d <= m_.max_depth_; ++d) {
             Depth& dp = depths_[size_t(d)];
-            if (dp.chains == 0) continue;
+            if (!(dp.b > 0)) continue;
+            dp.chains = int(2 + extra[size_t(d)]);
             dp.first_chain = next_chain;
             dp.first_batch = next_batch;
-            const uint64_t share = uint64_t(kMaxBatchesMmlt) * uint64_t(dp.chains) / C_;
-            dp.batches = size_t(std::min<uint64_t>(uint64_t(dp.chains), std::max<uint64_t>(2, share)));
+            dp.batches = size_t(std::min(dp.chains, kMaxBatches));
             for (int j = 0; j < dp.chains; ++j) {
                 Chain& ch = chains_[size_t(next_chain + j)];
                 ch.depth = d;
@@ -1044,6 +1099,7 @@ private:
     // [pixel][kDirectSlots].
     std::vector<Depth> depths_;
     size_t nb_ = 0;
+    uint64_t pilot_ = 0;  // the pilot's bootstrap points
     std::vector<double> direct_sums_, direct_chunk_;
     int committed_ = 0;  // samples per pixel in the sums
     int stripes_ = 1;
@@ -1053,10 +1109,12 @@ private:
 RenderOutput PssmltIntegrator::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
     const int W = scene.sensor->width, H = scene.sensor->height;
     const double px = double(W) * double(H);
-    if (multiplexed_)  // batches: at most 64 M_d / C per depth, at least 2; depth 1's sums twice; the bootstrap's F_i
+    if (multiplexed_)  // batches: min(32, M_d) per depth; depth 1's sums twice; the bootstrap's F_i
         check_memory(type, W, H,
                      {{"per-pixel sums",
-                       px * 8.0 * (3.0 * (kNumEffects + kMaxBatchesMmlt + 2.0 * max_depth_) + 2.0 * kDirectSlots),
+                       px * 8.0 *
+                           (3.0 * (kNumEffects + std::min(chains_, kMaxBatches * std::max(max_depth_ - 1, 1))) +
+                            2.0 * kDirectSlots),
                        "the resolution (film width, height)"},
                       {"chains", double(chains_) * 512.0, "chains"},
                       {"bootstrap", double(bootstrap_) * 8.0, "bootstrap_samples"},
