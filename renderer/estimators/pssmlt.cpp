@@ -69,17 +69,24 @@
 // vertices (bdpt_internal.h), its MIS-weighted contribution times d + 1, so
 // f_d's expectation b_d is depth d's share of bdpt's image. A chain never
 // leaves its depth (small steps may change the strategy).
-//   Bootstrap: bootstrap_samples points dealt to the depths 2 .. max_depth
-// in equal shares n_d; each point u_i is evaluated with every strategy of
-// its depth (the strategy coordinate moved into each strategy's interval
-// at the same relative place), F_i = (1 / (d + 1)) sum_s f_d(u_i^s) and
-// b_d = (1 / n_d) sum_i F_i, without the variance of the strategy choice.
+//   Bootstrap: each point u_i of depth d is evaluated with every strategy
+// of its depth (the strategy coordinate moved into each strategy's
+// interval at the same relative place), F_i = (1 / (d + 1)) sum_s
+// f_d(u_i^s) and b_d = (1 / n_d) sum_i F_i, without the variance of the
+// strategy choice. An eighth of bootstrap_samples is a pilot, dealt evenly
+// to the depths on streams of its own, that only sets the n_d: the rest go
+// an eighth evenly, seven eighths in proportion to the pilot's sd(F_d)
+// (Neyman allocation, which minimises sum_d var(F_d) / n_d, b's variance;
+// Cochran, "Sampling Techniques", sec. 5.5). The pilot's points are not
+// averaged, so given the pilot n_d is fixed and b_d unbiased.
 //   Chains: every depth with b_d > 0 gets two chains, the rest of `chains`
-// go in proportion to b_d (largest remainders; Hachisuka 2014's one chain
-// spends its time at depth d in proportion to b_d too). Every chain of
-// depth d starts at a (point, strategy) drawn from depth d's bootstrap
-// with probability f_d(u_i^s) / ((d + 1) sum_i F_i), and splats
-// g / f_d with weight b_d C / M_d (C chains, M_d at depth d). Unbiased at
+// go in proportion to sqrt(b_d) (largest remainders; in proportion to b_d,
+// the time Hachisuka 2014's one chain spends at depth d, is best for the
+// image mean but left the pixels a dim deep depth lights most to a few
+// chains: docs/mlt.md). Every chain of depth d starts at a (point,
+// strategy) drawn from depth d's bootstrap with probability f_d(u_i^s) /
+// ((d + 1) sum_i F_i), and splats g / f_d with weight b_d C / M_d (C
+// chains, M_d at depth d; chains < 2 (max_depth - 1) is refused). Unbiased at
 // any length: given the bootstrap, E[b_d h(x_0)] = (1 / n_d) sum_i
 // (1 / (d + 1)) sum_s f_d(u_i^s) h(u_i^s), whose expectation is
 // E[f_d h] = b_d E_pi_d[h] (for u uniform the moved point is uniform given
@@ -90,8 +97,8 @@
 // sum_{c, k} h(x_k^c) has the conditional mean b_d (1 / K) sum_k
 // E[h(x_k) | bootstrap] whatever M_d: the allocation cannot bias it.
 //   Variance: depth d's chains share b_d, so its batch means (over its own
-// chains, at most min(M_d, 64 M_d / C) batches and at least 2) see the
-// chains' correlation, not b_d's error; that is added per pixel as
+// chains: min(M_d, 32) batches, the depth's chain j in batch j mod B_d)
+// see the chains' correlation, not b_d's error; that is added per pixel as
 // I_{d,p}^2 var(F) / (n_d b_d^2) (the delta method on b_d's relative
 // error, var(F) the spread of the depth's n_d bootstrap points), and the
 // camera pass's variance for d = 1. The depths are independent (own
@@ -127,7 +134,7 @@ namespace rm {
 namespace {
 
 constexpr int kMaxBatches = 32;
-constexpr uint32_t kStrategyDim = 2;                     // mmlt's coordinates: pixel (0, 1), strategy (2)
+constexpr uint32_t kStrategyDim = 2;  // mmlt's coordinates: pixel (0, 1), strategy (2)
 // mmlt's depth-1 sums per pixel: [effect][rgb], then the sample total's squares (rgb, luminance).
 constexpr size_t kDirectSlots = size_t(kNumEffects) * 3 + 4;
 constexpr uint64_t kChunkMutations = uint64_t(1) << 19;  // mutations of all chains between commits (bounds memory)
@@ -226,8 +233,9 @@ public:
           stuck_(p.get_int("stuck_rejections")) {
         // mmlt gives every depth 2 .. max_depth with light two chains at least (the head).
         if (multiplexed && chains_ < 2 * (max_depth_ - 1))
-            throw ParamError("mmlt", "chains", "mmlt: chains (" + std::to_string(chains_) + ") must be at least 2 (max_depth - 1) = " +
-                                        std::to_string(2 * (max_depth_ - 1)) + ": two chains for each depth 2 .. max_depth");
+            throw ParamError("mmlt", "chains",
+                             "mmlt: chains (" + std::to_string(chains_) + ") must be at least 2 (max_depth - 1) = " +
+                                 std::to_string(2 * (max_depth_ - 1)) + ": two chains for each depth 2 .. max_depth");
     }
 
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
@@ -503,27 +511,27 @@ private:
     struct Chain {
         Chain(float sigma, float large_p) : pss(sigma, large_p) {}
         PssSampler pss;
-        double b = 0;                // the chain's bootstrap estimate of b
-        double f_sum = 0, f_sq = 0;  // its bootstrap samples' f: sum, sum of squares
-        uint64_t n_f = 0;            // and their count
-        int depth = 0;               // mmlt: the chain's depth (0: none, a dead chain)
-        size_t batch = 0;            // the variance's batch it belongs to
+        double b = 0;                         // the chain's bootstrap estimate of b
+        double f_sum = 0, f_sq = 0;           // its bootstrap samples' f: sum, sum of squares
+        uint64_t n_f = 0;                     // and their count
+        int depth = 0;                        // mmlt: the chain's depth (0: none, a dead chain)
+        size_t batch = 0;                     // the variance's batch it belongs to
         std::vector<Splat> cur, prop;         // the current state's splats, the proposal's
         float f_cur = 0;                      // f of the current state
         double pending = 0;                   // expected-value weight the current state has gathered
         std::vector<Splat> out;               // this chunk's splats, values weighted
         uint64_t accepted = 0, proposed = 0;  // acceptance counts
         uint64_t large_accepted = 0, large_proposed = 0;
-        uint64_t run = 0, max_run = 0;        // consecutive rejections: now, longest
+        uint64_t run = 0, max_run = 0;  // consecutive rejections: now, longest
     };
 
     // mmlt: one depth's bootstrap and chains.
     struct Depth {
-        uint64_t n = 0;                // bootstrap points
-        std::vector<double> cdf;       // prefix sums of the points' F_i (n + 1 entries)
-        double f_sum = 0, f_sq = 0;    // sum of F_i, of F_i^2
+        uint64_t n = 0;                     // bootstrap points
+        std::vector<double> cdf;            // prefix sums of the points' F_i (n + 1 entries)
+        double f_sum = 0, f_sq = 0;         // sum of F_i, of F_i^2
         std::vector<double> fs_sum, fs_sq;  // per strategy s: sum of f_d(u_i^s) / (d + 1), of its square
-        double b = 0;                  // b_d = f_sum / n
+        double b = 0;                       // b_d = f_sum / n
         int first_chain = 0, chains = 0;
         size_t first_batch = 0, batches = 0;
     };
@@ -683,7 +691,8 @@ private:
         double sd_sum = 0;
         for (int d = 2; d <= D; ++d) {
             const double n = n_p[size_t(d)];
-            sd[size_t(d)] = n > 1 ? std::sqrt(std::max(0.0, (s2[size_t(d)] - s1[size_t(d)] * s1[size_t(d)] / n) / (n - 1.0))) : 0.0;
+            sd[size_t(d)] =
+                n > 1 ? std::sqrt(std::max(0.0, (s2[size_t(d)] - s1[size_t(d)] * s1[size_t(d)] / n) / (n - 1.0))) : 0.0;
             sd_sum += sd[size_t(d)];
         }
         // Neyman allocation (Cochran, "Sampling Techniques", sec. 5.5): b's
@@ -764,7 +773,8 @@ private:
         auto run = [&](size_t k, int th) {
             BootBlock& bb = blocks[k];
             Depth& dp = depths_[size_t(bb.d)];
-            const uint64_t stream = bb.pilot ? mix64(depth_stream(loop, bb.d) ^ 0x70696c6f74ULL) : depth_stream(loop, bb.d);
+            const uint64_t stream =
+                bb.pilot ? mix64(depth_stream(loop, bb.d) ^ 0x70696c6f74ULL) : depth_stream(loop, bb.d);
             PssSampler pss(m_.sigma_, m_.large_p_);
             std::vector<Splat> tmp;
             std::vector<double> f;
