@@ -4,12 +4,13 @@ against bdpt's").
 
     python -m radiometer.benchmarks.studies.mmlt_strategies [--scene veach_mis] [--seeds 16]
 
-mmlt's sample is one strategy (s, t) of one depth d = s + t - 1, its
-MIS-weighted contribution times max_depth (d + 1); its bootstrap evaluates
-every point with every strategy of the point's depth, and
+mmlt's sample is one strategy (s, t) of its chain's depth d = s + t - 1
+(2 .. max_depth), its MIS-weighted contribution times d + 1; its bootstrap
+evaluates every point of a depth with every strategy of that depth, and
 res.stats["mlt_b_per_strategy"] holds each strategy's share of b, the mean
 of f / (d + 1) over the points of its depth (with its variance,
-"mlt_b_per_strategy_variance"). Its expectation is the luminance sum of
+"mlt_b_per_strategy_variance"). Depth 1 is mmlt's camera pass, not
+sampled by strategy: its shares are NaN and are left out. Its expectation is the luminance sum of
 bdpt's MIS-weighted strategy image (s, t) (both are E[L w] of that
 strategy over the same paths), so a strategy whose share differs from it
 by more than the two errors allow is biased in mmlt (or in bdpt's
@@ -133,13 +134,14 @@ def main(argv=None):
                           args.bdpt_spp, args.threads, extra, args.bdpt_mis)
     print(f"{'d':>3}{'s':>3}{'t':>3}{'bdpt':>12}{'+-':>10}{'mmlt':>12}{'+- seeds':>10}{'+- own':>10}{'z':>8}")
     for r in rows:
-        if r["bdpt"] == 0 and r["mmlt"] == 0:
+        if (r["bdpt"] == 0 and r["mmlt"] == 0) or not np.isfinite(r["mmlt"]):
             continue
         print(f"{r['depth']:>3}{r['s']:>3}{r['t']:>3}{r['bdpt']:>12.5g}{r['bdpt_se']:>10.2g}{r['mmlt']:>12.5g}"
               f"{r['mmlt_se_seeds']:>10.2g}{r['mmlt_se_own']:>10.2g}{r['z']:>8.2f}")
-    tot_b = sum(r["bdpt"] for r in rows)
-    tot_m = sum(r["mmlt"] for r in rows)
-    z = np.array([r["z"] for r in rows if r["bdpt"] > 0 or r["mmlt"] > 0])
+    rows_m = [r for r in rows if np.isfinite(r["mmlt"])]  # depths 2 .. max_depth
+    tot_b = sum(r["bdpt"] for r in rows_m)
+    tot_m = sum(r["mmlt"] for r in rows_m)
+    z = np.array([r["z"] for r in rows_m if r["bdpt"] > 0 or r["mmlt"] > 0])
     print(f"chi-square {float((z ** 2).sum()):.1f} over {len(z)} strategies, max |z| {float(np.abs(z).max()):.2f}")
     print(f"total: bdpt {tot_b:.5g}, mmlt {tot_m:.5g} (ratio {tot_m / tot_b:.4f}); "
           f"bdpt {times['bdpt_seconds']:.0f} s, mmlt {times['mmlt_seconds']:.0f} s")

@@ -57,19 +57,59 @@
 // whose run exceeds `stuck_rejections`, a threshold that is only reported),
 // "mlt_dead_chains" (chains whose bootstrap found no light: they add 0).
 //
-// `mmlt`: multiplexed MLT (Hachisuka, Kaplanyan and Dachsbacher 2014) on
-// the same chains: after the pixel, two more coordinates choose a depth d
-// in 1..max_depth and one strategy (s, t) of bdpt with s + t = d + 1, each
+// `mmlt`: multiplexed MLT (Hachisuka, Kaplanyan and Dachsbacher 2014) with
+// a normalisation per depth, as pbrt-v4's MLTIntegrator bootstraps per
+// depth. Depth d = 1 (the emitters the camera sees, s + t = 2) is a
+// separate estimator (Hachisuka 2014, sec. 4, allows it for direct light):
+// one camera ray per pixel and sample per pixel through the path tracer
+// with max_depth 1, filter importance sampled, its variance per pixel from
+// its samples. Depths d = 2 .. max_depth each have chains of their own:
+// after the pixel, one coordinate chooses a strategy (s, t), s + t = d + 1,
 // uniformly; the sample is that strategy alone on subpaths of s and t
-// vertices (bdpt_internal.h), its MIS-weighted contribution times
-// max_depth (d + 1), so its expectation is bdpt's image truncated at
-// max_depth. Its bootstrap evaluates each point with every strategy of
-// its depth (bootstrap(), below): b's variance without the strategy
-// choice's. Small steps keep the strategy mostly fixed, large steps
-// change it; "mlt_acceptance_per_depth" in res.stats, and
-// "mlt_b_per_strategy" (each strategy's share of b, with its variance: the
-// check against bdpt's strategy images, docs/mlt.md). pbrt-v4's
-// MLTIntegrator runs separate chains per depth instead.
+// vertices (bdpt_internal.h), its MIS-weighted contribution times d + 1, so
+// f_d's expectation b_d is depth d's share of bdpt's image. A chain never
+// leaves its depth (small steps may change the strategy).
+//   Bootstrap: each point u_i of depth d is evaluated with every strategy
+// of its depth (the strategy coordinate moved into each strategy's
+// interval at the same relative place), F_i = (1 / (d + 1)) sum_s
+// f_d(u_i^s) and b_d = (1 / n_d) sum_i F_i, without the variance of the
+// strategy choice. An eighth of bootstrap_samples is a pilot, dealt evenly
+// to the depths on streams of its own, that only sets the n_d: the rest go
+// an eighth evenly, seven eighths in proportion to the pilot's sd(F_d)
+// (Neyman allocation, which minimises sum_d var(F_d) / n_d, b's variance;
+// Cochran, "Sampling Techniques", sec. 5.5). The pilot's points are not
+// averaged, so given the pilot n_d is fixed and b_d unbiased.
+//   Chains: every depth with b_d > 0 gets two chains, the rest of `chains`
+// go in proportion to sqrt(b_d) (largest remainders; in proportion to b_d,
+// the time Hachisuka 2014's one chain spends at depth d, is best for the
+// image mean but left the pixels a dim deep depth lights most to a few
+// chains: docs/mlt.md). Every chain of depth d starts at a (point,
+// strategy) drawn from depth d's bootstrap with probability f_d(u_i^s) /
+// ((d + 1) sum_i F_i), and splats g / f_d with weight b_d C / M_d (C
+// chains, M_d at depth d; chains < 2 (max_depth - 1) is refused). Unbiased at
+// any length: given the bootstrap, E[b_d h(x_0)] = (1 / n_d) sum_i
+// (1 / (d + 1)) sum_s f_d(u_i^s) h(u_i^s), whose expectation is
+// E[f_d h] = b_d E_pi_d[h] (for u uniform the moved point is uniform given
+// its strategy), and the kernel keeps pi_d, so E[b_d h(x_k)] = b_d
+// E_pi_d[h] for every k. M_d depends on the bootstrap, but every chain runs
+// the same number of mutations K (mmlt rounds a sample per pixel up to a
+// multiple of `chains` mutations), so depth d's estimate b_d (1 / (M_d K))
+// sum_{c, k} h(x_k^c) has the conditional mean b_d (1 / K) sum_k
+// E[h(x_k) | bootstrap] whatever M_d: the allocation cannot bias it.
+//   Variance: depth d's chains share b_d, so its batch means (over its own
+// chains: min(M_d, 32) batches, the depth's chain j in batch j mod B_d)
+// see the chains' correlation, not b_d's error; that is added per pixel as
+// I_{d,p}^2 var(F) / (n_d b_d^2) (the delta method on b_d's relative
+// error, var(F) the spread of the depth's n_d bootstrap points), and the
+// camera pass's variance for d = 1. The depths are independent (own
+// points, own chains, own streams), so the three parts sum. A depth's tail
+// (the tiny lights of veach_mis seen directly: depth 1) thus reaches only
+// its own share of the image and its own variance.
+//   res.stats: "mlt_b_per_depth" (d = 1: the camera pass's luminance sum)
+// with "mlt_b_per_depth_variance", "mlt_chains_per_depth",
+// "mlt_acceptance_per_depth" (NaN for d = 1), "mlt_b_per_strategy" (each
+// (d, s)'s share of b with its variance, NaN for d = 1: the check against
+// bdpt's strategy images, docs/mlt.md).
 //
 // Limits: no participating media, no dipole (refused by name: caps); no
 // per-strategy images; the path tracer's samples reach only their pixel
@@ -79,6 +119,8 @@
 #include <limits>
 #include <memory>
 #include <numeric>
+#include <stdexcept>
+#include <string>
 
 #include "estimators/bdpt_internal.h"
 #include "estimators/mlt_sampler.h"
@@ -92,7 +134,9 @@ namespace rm {
 namespace {
 
 constexpr int kMaxBatches = 32;
-constexpr uint32_t kStrategyDim = 3;                     // mmlt's coordinates: pixel (0, 1), depth (2), strategy (3)
+constexpr uint32_t kStrategyDim = 2;  // mmlt's coordinates: pixel (0, 1), strategy (2)
+// mmlt's depth-1 sums per pixel: [effect][rgb], then the sample total's squares (rgb, luminance).
+constexpr size_t kDirectSlots = size_t(kNumEffects) * 3 + 4;
 constexpr uint64_t kChunkMutations = uint64_t(1) << 19;  // mutations of all chains between commits (bounds memory)
 
 // The chains' parameters, shared by pssmlt and mmlt (`bootstrap`: the default sample count).
@@ -186,7 +230,13 @@ public:
           mpp_(p.get_int("mutations_per_pixel")),
           large_p_(p.get_float("large_step_probability")),
           sigma_(p.get_float("sigma")),
-          stuck_(p.get_int("stuck_rejections")) {}
+          stuck_(p.get_int("stuck_rejections")) {
+        // mmlt gives every depth 2 .. max_depth with light two chains at least (the head).
+        if (multiplexed && chains_ < 2 * (max_depth_ - 1))
+            throw ParamError("mmlt", "chains",
+                             "mmlt: chains (" + std::to_string(chains_) + ") must be at least 2 (max_depth - 1) = " +
+                                 std::to_string(2 * (max_depth_ - 1)) + ": two chains for each depth 2 .. max_depth");
+    }
 
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
         throw std::logic_error("integrator '" + type + "' renders through its own driver");
@@ -205,16 +255,18 @@ private:
 
 class PssmltIntegrator::Passes final : public PassStep {
 public:
-    Passes(const PssmltIntegrator& m, const Scene& scene, const Integrator& inner)
+    // `direct`: mmlt's estimator of depth 1 (the path tracer, max_depth 1); null for pssmlt.
+    Passes(const PssmltIntegrator& m, const Scene& scene, const Integrator& inner, const Integrator* direct)
         : m_(m),
           scene_(scene),
           inner_(inner),
+          direct_(direct),
           filter_(scene.sensor_desc.rfilter, scene.sensor_desc.filter_radius, scene.sensor_desc.filter_stddev),
           W_(scene.sensor->width),
           H_(scene.sensor->height),
           C_(uint64_t(m.chains_)),
           B_(int(std::min<uint64_t>(kMaxBatches, C_))),
-          per_spp_(uint64_t(m.mpp_) * uint64_t(scene.sensor->crop_w) * uint64_t(scene.sensor->crop_h)),
+          per_spp_(mutations_per_spp(m, *scene.sensor)),
           n_boot_(std::max<uint64_t>(1, (uint64_t(m.bootstrap_) + C_ - 1) / C_)) {
         const Sensor& sn = *scene.sensor;
         cx0_ = sn.crop_x, cx1_ = sn.crop_x + sn.crop_w, cy0_ = sn.crop_y, cy1_ = sn.crop_y + sn.crop_h;
@@ -222,16 +274,40 @@ public:
         norm_y_ = splat_norms(filter_, H_, cy0_, cy1_);
         const size_t px = size_t(W_) * size_t(H_);
         sums_.assign(px * kNumEffects * 3, 0.0);
-        batches_.assign(px * size_t(B_) * 3, 0.0);
         chains_.reserve(size_t(C_));
         for (uint64_t c = 0; c < C_; ++c) chains_.emplace_back(m.sigma_, m.large_p_);
         stripes_ = std::max(1, std::min(H_, 64));
+        if (!m.multiplexed_) {
+            batches_.assign(px * size_t(B_) * 3, 0.0);
+            for (uint64_t c = 0; c < C_; ++c) chains_[size_t(c)].batch = size_t(c % uint64_t(B_));
+            return;
+        }
+        depths_.resize(size_t(m.max_depth_) + 1);
+        const uint64_t nd = uint64_t(std::max(m.max_depth_ - 1, 1));
+        for (int d = 2; d <= m.max_depth_; ++d)
+            depths_[size_t(d)].n = std::max<uint64_t>(1, chain_share(uint64_t(m.bootstrap_), nd, uint64_t(d - 2)));
+        direct_sums_.assign(px * kDirectSlots, 0.0);
+        direct_chunk_.assign(px * kDirectSlots, 0.0);
+    }
+
+    // Mutations in one sample per pixel: mutations_per_pixel x the crop
+    // window's pixels; mmlt rounds it up to a multiple of `chains`, so that
+    // all chains run equally long (the head's unbiasedness argument).
+    static uint64_t mutations_per_spp(const PssmltIntegrator& m, const Sensor& sn) {
+        const uint64_t n = uint64_t(m.mpp_) * uint64_t(sn.crop_w) * uint64_t(sn.crop_h);
+        if (!m.multiplexed_) return n;
+        const uint64_t c = uint64_t(m.chains_);
+        return (n + c - 1) / c * c;
     }
 
     int pass(PassLoop& loop, int s0, int s1) override {
         if (!started_) {
-            auto boot = [&](size_t c, int th) { bootstrap(loop, c, loop.stats(th)); };
-            if (!loop.parallel_for(size_t(C_), boot)) return s0;
+            if (m_.multiplexed_) {
+                if (!bootstrap_depths(loop)) return s0;
+            } else {
+                auto boot = [&](size_t c, int th) { bootstrap(loop, c, loop.stats(th)); };
+                if (!loop.parallel_for(size_t(C_), boot)) return s0;
+            }
             started_ = true;
         }
         const int step = int(std::max<uint64_t>(1, kChunkMutations / std::max<uint64_t>(per_spp_, 1)));
@@ -249,12 +325,18 @@ public:
                 flush(ch);
             };
             if (!loop.parallel_for(size_t(C_), run)) return a;
+            if (direct_) {
+                std::fill(direct_chunk_.begin(), direct_chunk_.end(), 0.0);
+                auto row = [&](size_t y, int th) { direct_row(loop, int(y), a, b, loop.stats(th)); };
+                if (!loop.parallel_for(size_t(H_), row)) return a;
+            }
             auto merge = [&](size_t i, int) {
                 int y0 = int(int64_t(H_) * int64_t(i) / stripes_), y1 = int(int64_t(H_) * int64_t(i + 1) / stripes_);
                 merge_rows(y0, y1);
             };
             loop.parallel_commit(size_t(stripes_), merge);
             loop.add_done(uint64_t(b - a) * uint64_t(scene_.sensor->crop_w) * uint64_t(scene_.sensor->crop_h));
+            committed_ = b;
             a = b;
         }
         return s1;
@@ -262,6 +344,7 @@ public:
 
     void develop(int spp, std::vector<float>& image, std::vector<float>& variance,
                  std::vector<std::vector<float>>* effects) const override {
+        if (m_.multiplexed_) return develop_mmlt(spp, image, variance, effects);
         const size_t px = size_t(W_) * size_t(H_);
         image.assign(3 * px, 0.f);
         variance.assign(3 * px, std::numeric_limits<float>::quiet_NaN());
@@ -318,12 +401,23 @@ public:
         };
         // b: the mean of the chains' b_c (each the mean of an equal share of
         // the bootstrap), its variance from the bootstrap samples' spread.
-        const double b = started_ ? b_sum / double(C_) : 0.0;
+        // mmlt: the sum of the depths' b_d (d = 1: the camera pass's), the
+        // sum of their variances (independent depths).
+        double b = started_ ? b_sum / double(C_) : 0.0;
         const double mean_f = n_f > 0 ? f_sum / n_f : 0.0;
         const double var_f = n_f > 1 ? std::max(0.0, (f_sq - n_f * mean_f * mean_f) / (n_f - 1.0)) : 0.0;
+        double b_var = n_f > 0 ? var_f / n_f : std::numeric_limits<double>::quiet_NaN();
+        std::vector<double> b_depth, b_depth_var;
+        if (m_.multiplexed_) {
+            depth_b(b_depth, b_depth_var);
+            b = 0, b_var = 0, n_f = 0;
+            for (size_t k = 0; k < b_depth.size(); ++k) b += b_depth[k], b_var += b_depth_var[k];
+            n_f = double(pilot_);
+            for (const Depth& dp : depths_) n_f += double(dp.n);
+        }
         auto& st = out.estimator_stats;
         st.push_back({"mlt_b", {b}});
-        st.push_back({"mlt_b_variance", {n_f > 0 ? var_f / n_f : std::numeric_limits<double>::quiet_NaN()}});
+        st.push_back({"mlt_b_variance", {b_var}});
         st.push_back({"mlt_bootstrap_samples", {n_f}});
         st.push_back({"mlt_chains", {double(C_)}});
         st.push_back({"mlt_dead_chains", {dead}});
@@ -336,39 +430,44 @@ public:
         st.push_back({"mlt_longest_rejection_run", {longest}});
         st.push_back({"mlt_stuck_rejections", {double(m_.stuck_)}});
         st.push_back({"mlt_stuck_chains", {stuck}});
-        image_mean_variance(st);
-        if (m_.multiplexed_) {
-            // Acceptance by the proposal's depth 1 .. max_depth.
-            std::vector<double> per_depth;
-            for (int d = 1; d <= m_.max_depth_; ++d) {
-                uint64_t a = 0, p = 0;
-                for (const Chain& ch : chains_)
-                    if (size_t(d) < ch.depth_proposed.size()) {
-                        a += ch.depth_accepted[size_t(d)];
-                        p += ch.depth_proposed[size_t(d)];
-                    }
-                per_depth.push_back(ratio(a, p));
-            }
-            st.push_back({"mlt_acceptance_per_depth", per_depth});
-            // b by strategy: each (d, s)'s share of b (their sum is mlt_b)
-            // and the variance of that share's mean, from all bootstrap
-            // points (independent across chains). A strategy's share is the
-            // expectation of its MIS-weighted contribution, the luminance sum
-            // of bdpt's strategy image (s, d + 1 - s): the check that each
-            // strategy is unbiased, which b alone cannot localise.
-            std::vector<double> share(strategy_slots(), 0.0), share_var(strategy_slots(), 0.0);
-            std::vector<double> sq(strategy_slots(), 0.0);
-            for (const Chain& ch : chains_)
-                for (size_t k = 0; k < ch.fs_sum.size(); ++k) share[k] += ch.fs_sum[k], sq[k] += ch.fs_sq[k];
-            for (size_t k = 0; k < share.size(); ++k) {
-                const double m = n_f > 0 ? share[k] / n_f : 0.0;
-                share_var[k] = n_f > 1 ? std::max(0.0, (sq[k] - n_f * m * m) / (n_f - 1.0)) / n_f
-                                       : std::numeric_limits<double>::quiet_NaN();
-                share[k] = m;
-            }
-            st.push_back({"mlt_b_per_strategy", share});
-            st.push_back({"mlt_b_per_strategy_variance", share_var});
+        if (!m_.multiplexed_) {
+            image_mean_variance(st);
+            return;
         }
+        st.push_back({"mlt_image_mean_variance", mmlt_image_mean_variance()});
+        st.push_back({"mlt_b_per_depth", b_depth});
+        st.push_back({"mlt_b_per_depth_variance", b_depth_var});
+        // Chains and acceptance by depth 1 .. max_depth (depth 1: no chains, NaN).
+        std::vector<double> per_depth, chains_d;
+        for (int d = 1; d <= m_.max_depth_; ++d) {
+            uint64_t a = 0, p = 0;
+            for (const Chain& ch : chains_)
+                if (ch.depth == d) a += ch.accepted, p += ch.proposed;
+            per_depth.push_back(ratio(a, p));
+            chains_d.push_back(double(depths_[size_t(d)].chains));
+        }
+        st.push_back({"mlt_acceptance_per_depth", per_depth});
+        st.push_back({"mlt_chains_per_depth", chains_d});
+        // b by strategy: each (d, s)'s share of b_d and the variance of that
+        // share's mean, from the depth's bootstrap points. A strategy's
+        // share is the expectation of its MIS-weighted contribution, the
+        // luminance sum of bdpt's strategy image (s, d + 1 - s): the check
+        // that each strategy is unbiased, which b alone cannot localise.
+        // Depth 1 is the camera pass's, not by strategy: NaN.
+        const double nan = std::numeric_limits<double>::quiet_NaN();
+        std::vector<double> share(strategy_slots(), nan), share_var(strategy_slots(), nan);
+        for (int d = 2; d <= m_.max_depth_; ++d) {
+            const Depth& dp = depths_[size_t(d)];
+            const double n = double(dp.n);
+            for (int s = 0; s <= d && s < int(dp.fs_sum.size()); ++s) {
+                const double m = dp.fs_sum[size_t(s)] / n;
+                share[strategy_slot(d, s)] = m;
+                share_var[strategy_slot(d, s)] =
+                    n > 1 ? std::max(0.0, (dp.fs_sq[size_t(s)] - n * m * m) / (n - 1.0)) / n : nan;
+            }
+        }
+        st.push_back({"mlt_b_per_strategy", share});
+        st.push_back({"mlt_b_per_strategy_variance", share_var});
     }
 
 private:
@@ -412,25 +511,43 @@ private:
     struct Chain {
         Chain(float sigma, float large_p) : pss(sigma, large_p) {}
         PssSampler pss;
-        double b = 0;                // the chain's bootstrap estimate of b
-        double f_sum = 0, f_sq = 0;  // its bootstrap samples' f: sum, sum of squares
-        uint64_t n_f = 0;            // and their count
-        // mmlt: per strategy (d, s) (strategy_slot), the sum and the sum of
-        // squares of its share f / (d + 1) of each bootstrap point's f_mean.
-        std::vector<double> fs_sum, fs_sq;
+        double b = 0;                         // the chain's bootstrap estimate of b
+        double f_sum = 0, f_sq = 0;           // its bootstrap samples' f: sum, sum of squares
+        uint64_t n_f = 0;                     // and their count
+        int depth = 0;                        // mmlt: the chain's depth (0: none, a dead chain)
+        size_t batch = 0;                     // the variance's batch it belongs to
         std::vector<Splat> cur, prop;         // the current state's splats, the proposal's
         float f_cur = 0;                      // f of the current state
         double pending = 0;                   // expected-value weight the current state has gathered
         std::vector<Splat> out;               // this chunk's splats, values weighted
         uint64_t accepted = 0, proposed = 0;  // acceptance counts
         uint64_t large_accepted = 0, large_proposed = 0;
-        uint64_t run = 0, max_run = 0;                         // consecutive rejections: now, longest
-        std::vector<uint64_t> depth_accepted, depth_proposed;  // mmlt: by the proposal's depth
+        uint64_t run = 0, max_run = 0;  // consecutive rejections: now, longest
+    };
+
+    // mmlt: one depth's bootstrap and chains.
+    struct Depth {
+        uint64_t n = 0;                     // bootstrap points
+        std::vector<double> cdf;            // prefix sums of the points' F_i (n + 1 entries)
+        double f_sum = 0, f_sq = 0;         // sum of F_i, of F_i^2
+        std::vector<double> fs_sum, fs_sq;  // per strategy s: sum of f_d(u_i^s) / (d + 1), of its square
+        double b = 0;                       // b_d = f_sum / n
+        int first_chain = 0, chains = 0;
+        size_t first_batch = 0, batches = 0;
+    };
+    // The sums of a block of bootstrap points.
+    struct BootBlock {
+        int d = 0;
+        uint64_t i0 = 0, i1 = 0;
+        bool pilot = false;
+        double f_sum = 0, f_sq = 0;
+        std::vector<double> fs_sum, fs_sq;
     };
 
     // The sample of the point `pss` holds: its splats inside the crop
     // window (finite ones; the others are counted) and f, their luminance.
-    float evaluate(PssSampler& pss, std::vector<Splat>& out, ThreadStats& stats, int* depth = nullptr) const {
+    // mmlt: at depth `depth` (2 .. max_depth).
+    float evaluate(PssSampler& pss, std::vector<Splat>& out, ThreadStats& stats, int depth = 0) const {
         out.clear();
         Sampler sampler(&pss);
         const Vec2 u = sampler.next_2d();
@@ -438,14 +555,12 @@ private:
         const int pixel = y * W_ + x;
         const float film_scale = float(W_) * float(H_);
         if (m_.multiplexed_) {
-            // mmlt (Hachisuka et al. 2014, sec. 4): a depth d in 1..D and a
-            // strategy (s, t), s + t = d + 1, each chosen uniformly by a
-            // coordinate of its own; the contribution times D (d + 1).
-            const int D = m_.max_depth_;
-            const int d = 1 + std::min(int(sampler.next_1d() * float(D)), D - 1);
+            // mmlt (Hachisuka et al. 2014, sec. 4) at the chain's depth d: a
+            // strategy (s, t), s + t = d + 1, chosen uniformly by a
+            // coordinate of its own; the contribution times d + 1.
+            const int d = depth;
             const int s = std::min(int(sampler.next_1d() * float(d + 1)), d);
-            if (depth) *depth = d;
-            bdpt_trace_strategy(inner_, scene_, sampler, pixel, s, d + 1 - s, float(D) * float(d + 1), out, stats);
+            bdpt_trace_strategy(inner_, scene_, sampler, pixel, s, d + 1 - s, float(d + 1), out, stats);
         } else if (m_.bidir_) {
             // bdpt's camera splats (pixel >= 0) are already scaled by W H:
             // its samples pick their pixel uniformly, as here.
@@ -484,60 +599,22 @@ private:
         return std::isfinite(f) ? float(f) : 0.f;
     }
 
-    // Chain c's bootstrap: its share of independent points, b_c, and its
-    // start drawn from them in proportion to f (replayed from its stream).
-    // mmlt: each point is evaluated with every strategy of its depth (the
-    // strategy coordinate moved into each strategy's interval at the same
-    // relative place), b_c the mean over points of their strategies' mean f
-    // and the start drawn among all (point, strategy) pairs in proportion
-    // to f / (d + 1). For u uniform, the moved point is uniform given its
-    // strategy, so E[(1/n) sum_i (1/(d_i+1)) sum_s f(u_i^s) h(u_i^s)] =
-    // E[f h] = b E_pi[h]: the chains stay unbiased, while b loses the
-    // variance of the strategy choice (a strategy alone times d + 1).
+    // pssmlt: chain c's bootstrap: its share of independent points, b_c,
+    // and its start drawn from them in proportion to f (replayed from its
+    // stream).
     void bootstrap(PassLoop& loop, size_t c, ThreadStats& stats) {
         Chain& ch = chains_[c];
         const uint64_t stream = mix64(loop.seed() ^ mix64(uint64_t(c) + 0x6d6c74626f6f7473ULL));
         std::vector<double> cdf(1, 0.0);
-        std::vector<std::pair<uint64_t, float>> point;  // per cdf entry: bootstrap point, strategy coordinate
         cdf.reserve(size_t(n_boot_) + 1);
-        point.reserve(size_t(n_boot_));
         std::vector<Splat> tmp;
         for (uint64_t i = 0; i < n_boot_; ++i) {
             if (loop.cancelled()) return;
             ch.pss.restart(stream, i);
-            int d = 0;
-            const double f0 = evaluate(ch.pss, tmp, stats, &d);
-            double f_mean = f0;
-            if (!m_.multiplexed_) {
-                cdf.push_back(cdf.back() + f0);
-                point.push_back({i, -1.f});
-            } else {
-                const int n = d + 1;
-                const float v = ch.pss.value(kStrategyDim);
-                const int s0 = std::min(int(v * float(n)), d);
-                const float xi = std::min(std::max(v * float(n) - float(s0), 0.f), 1.f);
-                double sum = 0;
-                if (ch.fs_sum.empty()) ch.fs_sum.assign(strategy_slots(), 0.0), ch.fs_sq.assign(strategy_slots(), 0.0);
-                for (int st = 0; st < n; ++st) {
-                    const float vs = st == s0 ? v : strategy_coordinate(st, n, xi);
-                    double f = f0;
-                    if (st != s0) {
-                        ch.pss.restart(stream, i, int(kStrategyDim), vs);
-                        f = evaluate(ch.pss, tmp, stats);
-                    }
-                    sum += f;
-                    const double share = f / double(n);
-                    if (d >= 1 && d <= m_.max_depth_) {
-                        ch.fs_sum[strategy_slot(d, st)] += share;
-                        ch.fs_sq[strategy_slot(d, st)] += share * share;
-                    }
-                    cdf.push_back(cdf.back() + f / double(n));
-                    point.push_back({i, vs});
-                }
-                f_mean = sum / double(n);
-            }
-            ch.f_sum += f_mean;
-            ch.f_sq += f_mean * f_mean;
+            const double f = evaluate(ch.pss, tmp, stats);
+            cdf.push_back(cdf.back() + f);
+            ch.f_sum += f;
+            ch.f_sq += f * f;
         }
         ch.n_f = n_boot_;
         ch.b = ch.f_sum / double(n_boot_);
@@ -548,16 +625,266 @@ private:
             return;  // no light found: the chain adds 0 (its mutations still count)
         }
         Pcg32 pick(own, uint64_t(c) ^ 0x5bd1e995ULL);
-        const double target = double(pick.next_float()) * cdf.back();
-        size_t j = size_t(std::upper_bound(cdf.begin() + 1, cdf.end(), target) - cdf.begin()) - 1;
-        while (j + 1 < cdf.size() && !(cdf[j + 1] > cdf[j])) ++j;  // never a point with f = 0
-        j = std::min(j, point.size() - 1);
-        if (point[j].second < 0.f)
-            ch.pss.restart(stream, point[j].first);
-        else
-            ch.pss.restart(stream, point[j].first, int(kStrategyDim), point[j].second);
+        const size_t j = pick_index(cdf, double(pick.next_float()) * cdf.back());
+        ch.pss.restart(stream, uint64_t(j));
         ch.f_cur = evaluate(ch.pss, ch.cur, stats);
         ch.pss.reseed(own, uint64_t(c));
+    }
+
+    // The entry j of prefix sums `cdf` (cdf[0] = 0) whose interval
+    // [cdf[j], cdf[j + 1]) holds `target`, never one of weight 0.
+    static size_t pick_index(const std::vector<double>& cdf, double target) {
+        size_t j = size_t(std::upper_bound(cdf.begin() + 1, cdf.end(), target) - cdf.begin()) - 1;
+        while (j + 1 < cdf.size() && !(cdf[j + 1] > cdf[j])) ++j;
+        return std::min(j, cdf.size() - 2);
+    }
+
+    // mmlt's bootstrap stream of depth d.
+    uint64_t depth_stream(const PassLoop& loop, int d) const {
+        return mix64(loop.seed() ^ mix64(uint64_t(d) + 0x6d6d6c7464657074ULL));
+    }
+
+    // mmlt: bootstrap point i of depth d evaluated with each of its d + 1
+    // strategies: f[s] = f_d(u_i^s), v[s] the strategy coordinate of u_i^s
+    // (the point's own for its own strategy, the others moved into their
+    // intervals at the same relative place, strategy_coordinate).
+    void point_strategies(PssSampler& pss, uint64_t stream, uint64_t i, int d, std::vector<Splat>& tmp,
+                          ThreadStats& stats, std::vector<double>& f, std::vector<float>& v) const {
+        const int n = d + 1;
+        f.assign(size_t(n), 0.0);
+        v.assign(size_t(n), 0.f);
+        pss.restart(stream, i);
+        const double f0 = evaluate(pss, tmp, stats, d);
+        const float v0 = pss.value(kStrategyDim);
+        const int s0 = std::min(int(v0 * float(n)), d);
+        const float xi = std::min(std::max(v0 * float(n) - float(s0), 0.f), 1.f);
+        for (int s = 0; s < n; ++s) {
+            if (s == s0) {
+                f[size_t(s)] = f0, v[size_t(s)] = v0;
+                continue;
+            }
+            v[size_t(s)] = strategy_coordinate(s, n, xi);
+            pss.restart(stream, i, int(kStrategyDim), v[size_t(s)]);
+            f[size_t(s)] = evaluate(pss, tmp, stats, d);
+        }
+    }
+
+    // mmlt's bootstrap (the head): a pilot that deals the points to the
+    // depths, then every depth's points; each in blocks on the threads,
+    // summed in block order; b_d; the chains dealt to the depths; each
+    // chain's start. False when cancelled.
+    bool bootstrap_depths(PassLoop& loop) {
+        const int D = m_.max_depth_;
+        if (D < 2) return true;  // depth 1 alone: the camera pass, every chain dead
+        const uint64_t nd = uint64_t(D - 1), total = uint64_t(m_.bootstrap_);
+        pilot_ = std::min(total, std::max(nd, total / 8));
+        std::vector<BootBlock> pilot;
+        for (int d = 2; d <= D; ++d) add_blocks(pilot, d, chain_share(pilot_, nd, uint64_t(d - 2)), true);
+        if (!run_blocks(loop, pilot)) return false;
+        std::vector<double> sd(size_t(D) + 1, 0.0), n_p(size_t(D) + 1, 0.0), s1(size_t(D) + 1, 0.0),
+            s2(size_t(D) + 1, 0.0);
+        for (const BootBlock& bb : pilot) {
+            n_p[size_t(bb.d)] += double(bb.i1 - bb.i0);
+            s1[size_t(bb.d)] += bb.f_sum;
+            s2[size_t(bb.d)] += bb.f_sq;
+        }
+        double sd_sum = 0;
+        for (int d = 2; d <= D; ++d) {
+            const double n = n_p[size_t(d)];
+            sd[size_t(d)] =
+                n > 1 ? std::sqrt(std::max(0.0, (s2[size_t(d)] - s1[size_t(d)] * s1[size_t(d)] / n) / (n - 1.0))) : 0.0;
+            sd_sum += sd[size_t(d)];
+        }
+        // Neyman allocation (Cochran, "Sampling Techniques", sec. 5.5): b's
+        // variance sum_d var(F_d) / n_d is least with n_d in proportion to
+        // sd(F_d); an eighth of the points is spread evenly, as the pilot's
+        // sd is itself an estimate. The pilot's points are not reused, so
+        // n_d is independent of the points b_d averages (b_d stays unbiased).
+        const uint64_t rest = total - pilot_, even = rest / (8 * nd);
+        std::vector<double> weight(size_t(D) + 1, 0.0);
+        for (int d = 2; d <= D; ++d) weight[size_t(d)] = sd_sum > 0 ? sd[size_t(d)] : 1.0;
+        std::vector<uint64_t> share = largest_remainders(rest - even * nd, weight);
+        std::vector<BootBlock> blocks;
+        for (int d = 2; d <= D; ++d) {
+            Depth& dp = depths_[size_t(d)];
+            dp.n = std::max<uint64_t>(1, even + share[size_t(d)]);
+            dp.cdf.assign(size_t(dp.n) + 1, 0.0);
+            add_blocks(blocks, d, dp.n, false);
+        }
+        if (!run_blocks(loop, blocks)) return false;
+        std::vector<double> root_b(size_t(D) + 1, 0.0);
+        int live = 0;
+        for (int d = 2; d <= D; ++d) {
+            Depth& dp = depths_[size_t(d)];
+            dp.fs_sum.assign(size_t(d) + 1, 0.0);
+            dp.fs_sq.assign(size_t(d) + 1, 0.0);
+            for (size_t i = 1; i < dp.cdf.size(); ++i) dp.cdf[i] += dp.cdf[i - 1];
+        }
+        for (const BootBlock& bb : blocks) {
+            Depth& dp = depths_[size_t(bb.d)];
+            dp.f_sum += bb.f_sum;
+            dp.f_sq += bb.f_sq;
+            for (size_t s = 0; s < bb.fs_sum.size(); ++s) dp.fs_sum[s] += bb.fs_sum[s], dp.fs_sq[s] += bb.fs_sq[s];
+        }
+        for (int d = 2; d <= D; ++d) {
+            Depth& dp = depths_[size_t(d)];
+            dp.b = dp.f_sum / double(dp.n);
+            if (dp.b > 0) ++live, root_b[size_t(d)] = std::sqrt(dp.b);
+        }
+        allocate_chains(root_b, live);
+        auto start = [&](size_t c, int th) { start_chain(loop, c, loop.stats(th)); };
+        return loop.parallel_for(size_t(C_), start);
+    }
+
+    // `n` split in proportion to `weight` (largest remainders, ties to the
+    // lower index).
+    static std::vector<uint64_t> largest_remainders(uint64_t n, const std::vector<double>& weight) {
+        std::vector<uint64_t> out(weight.size(), 0);
+        double sum = 0;
+        for (double w : weight) sum += w;
+        if (!(sum > 0)) return out;
+        std::vector<std::pair<double, size_t>> frac;
+        uint64_t given = 0;
+        for (size_t k = 0; k < weight.size(); ++k) {
+            if (!(weight[k] > 0)) continue;
+            const double q = double(n) * weight[k] / sum;
+            out[k] = std::min<uint64_t>(n - given, uint64_t(std::floor(q)));
+            given += out[k];
+            frac.push_back({q - double(out[k]), k});
+        }
+        std::stable_sort(frac.begin(), frac.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+        for (size_t k = 0; given < n && k < frac.size(); ++k, ++given) ++out[frac[k].second];
+        return out;
+    }
+
+    // Depth d's points [0, n) in blocks (`pilot`: the pilot's stream).
+    static void add_blocks(std::vector<BootBlock>& blocks, int d, uint64_t n, bool pilot) {
+        constexpr uint64_t kBlock = 1024;
+        for (uint64_t i0 = 0; i0 < n; i0 += kBlock) {
+            BootBlock bb;
+            bb.d = d, bb.i0 = i0, bb.i1 = std::min(n, i0 + kBlock), bb.pilot = pilot;
+            blocks.push_back(bb);
+        }
+    }
+
+    // The blocks' points on the threads: their sums, and each point's F_i
+    // into its depth's cdf (not the pilot's). False when cancelled.
+    bool run_blocks(PassLoop& loop, std::vector<BootBlock>& blocks) {
+        auto run = [&](size_t k, int th) {
+            BootBlock& bb = blocks[k];
+            Depth& dp = depths_[size_t(bb.d)];
+            const uint64_t stream =
+                bb.pilot ? mix64(depth_stream(loop, bb.d) ^ 0x70696c6f74ULL) : depth_stream(loop, bb.d);
+            PssSampler pss(m_.sigma_, m_.large_p_);
+            std::vector<Splat> tmp;
+            std::vector<double> f;
+            std::vector<float> v;
+            bb.fs_sum.assign(size_t(bb.d) + 1, 0.0);
+            bb.fs_sq.assign(size_t(bb.d) + 1, 0.0);
+            for (uint64_t i = bb.i0; i < bb.i1; ++i) {
+                if (loop.cancelled()) return;
+                point_strategies(pss, stream, i, bb.d, tmp, loop.stats(th), f, v);
+                double F = 0;
+                for (size_t s = 0; s < f.size(); ++s) {
+                    const double share = f[s] / double(f.size());
+                    F += share;
+                    bb.fs_sum[s] += share;
+                    bb.fs_sq[s] += share * share;
+                }
+                if (!bb.pilot) dp.cdf[size_t(i) + 1] = F;  // the point's F_i; prefix sums after
+                bb.f_sum += F;
+                bb.f_sq += F * F;
+            }
+        };
+        return loop.parallel_for(blocks.size(), run);
+    }
+
+    // mmlt: the chains dealt to the depths with b_d > 0: two each, the rest
+    // in proportion to sqrt(b_d) (largest_remainders), in depth order, each
+    // depth's batches next to each other. In proportion to b_d (the time
+    // Hachisuka 2014's one chain spends at each depth) would be best for the
+    // image mean, but starves the pixels a deep, dim depth lights most
+    // (docs/mlt.md); sqrt(b_d) lies between that and an even split.
+    void allocate_chains(const std::vector<double>& root_b, int live) {
+        if (live == 0) return;  // no light at any depth: every chain dead
+        // chains >= 2 (max_depth - 1): checked by the factory
+        const std::vector<uint64_t> extra = largest_remainders(C_ - 2 * uint64_t(live), root_b);
+        int next_chain = 0;
+        size_t next_batch = 0;
+        for (int d = 2; d <= m_.max_depth_; ++d) {
+            Depth& dp = depths_[size_t(d)];
+            if (!(dp.b > 0)) continue;
+            dp.chains = int(2 + extra[size_t(d)]);
+            dp.first_chain = next_chain;
+            dp.first_batch = next_batch;
+            dp.batches = size_t(std::min(dp.chains, kMaxBatches));
+            for (int j = 0; j < dp.chains; ++j) {
+                Chain& ch = chains_[size_t(next_chain + j)];
+                ch.depth = d;
+                ch.batch = dp.first_batch + size_t(j) % dp.batches;
+                ch.b = dp.b * double(C_) / double(dp.chains);  // the splats' weight: b_d C / M_d
+            }
+            next_chain += dp.chains;
+            next_batch += dp.batches;
+        }
+        nb_ = next_batch;
+        batches_.assign(size_t(W_) * size_t(H_) * nb_ * 3, 0.0);
+    }
+
+    // mmlt: chain c's start, a (point, strategy) of its depth's bootstrap
+    // drawn with probability f_d(u_i^s) / ((d + 1) sum_i F_i): the point by
+    // F_i, then its strategy by f_d(u_i^s), each by a number of the chain's
+    // own stream.
+    void start_chain(PassLoop& loop, size_t c, ThreadStats& stats) {
+        Chain& ch = chains_[c];
+        const uint64_t own = mix64(loop.seed() ^ mix64(uint64_t(c) + 0x6d6c74636861696eULL));
+        if (ch.depth == 0) {
+            ch.pss.reseed(own, uint64_t(c));
+            return;
+        }
+        const Depth& dp = depths_[size_t(ch.depth)];
+        const uint64_t stream = depth_stream(loop, ch.depth);
+        Pcg32 pick(own, uint64_t(c) ^ 0x5bd1e995ULL);
+        const size_t i = pick_index(dp.cdf, double(pick.next_float()) * dp.cdf.back());
+        std::vector<Splat> tmp;
+        std::vector<double> f;
+        std::vector<float> v;
+        point_strategies(ch.pss, stream, uint64_t(i), ch.depth, tmp, stats, f, v);
+        std::vector<double> cdf(1, 0.0);
+        for (double x : f) cdf.push_back(cdf.back() + x);
+        const size_t s = pick_index(cdf, double(pick.next_float()) * cdf.back());
+        ch.pss.restart(stream, uint64_t(i), int(kStrategyDim), v[s]);
+        ch.f_cur = evaluate(ch.pss, ch.cur, stats, ch.depth);
+        ch.pss.reseed(own, uint64_t(c));
+    }
+
+    // mmlt's depth 1: row y's camera samples [a, b) into this chunk's sums
+    // (the emitters seen directly, the path tracer with max_depth 1).
+    void direct_row(PassLoop& loop, int y, int a, int b, ThreadStats& stats) {
+        if (y < cy0_ || y >= cy1_) return;
+        const uint64_t seed = mix64(loop.seed() ^ 0x6d6d6c7464697231ULL);
+        for (int x = cx0_; x < cx1_; ++x) {
+            const int pixel = y * W_ + x;
+            double* acc = &direct_chunk_[size_t(pixel) * kDirectSlots];
+            for (int k = a; k < b; ++k) {
+                if (loop.cancelled()) return;
+                Sampler sampler(seed, uint64_t(pixel), uint64_t(k));
+                SensorRay sr = sample_camera_ray(*scene_.sensor, filter_, pixel, sampler);
+                EffectRadiance er;
+                ++stats.paths;
+                direct_->sample(scene_, sampler, sr.ray, er, stats);
+                Color total(0.f);
+                for (int e = 0; e < kNumEffects; ++e) {
+                    const Color v = er.by_effect[e] * sr.weight;
+                    if (!keep_finite(stats, v)) continue;
+                    total += v;
+                    for (int ch = 0; ch < 3; ++ch) acc[size_t(e) * 3 + size_t(ch)] += double(v[ch]);
+                }
+                const double l = double(luminance(total));
+                for (int ch = 0; ch < 3; ++ch) acc[kNumEffects * 3 + size_t(ch)] += double(total[ch]) * total[ch];
+                acc[kNumEffects * 3 + 3] += l * l;
+            }
+        }
     }
 
     // mmlt's strategies (d, s), d = 1 .. max_depth, s = 0 .. d, in that
@@ -582,13 +909,7 @@ private:
         PssSampler& pss = ch.pss;
         pss.start_iteration();
         const bool large = pss.large_step();
-        int depth = 0;
-        const float fy = evaluate(pss, ch.prop, stats, &depth);
-        if (m_.multiplexed_) {
-            ch.depth_proposed.resize(size_t(m_.max_depth_) + 1, 0);
-            ch.depth_accepted.resize(size_t(m_.max_depth_) + 1, 0);
-            ++ch.depth_proposed[size_t(depth)];
-        }
+        const float fy = evaluate(pss, ch.prop, stats, ch.depth);
         const double a = std::min(1.0, double(fy) / double(ch.f_cur));
         ++ch.proposed;
         if (large) ++ch.large_proposed;
@@ -601,7 +922,6 @@ private:
             pss.accept();
             ++ch.accepted;
             if (large) ++ch.large_accepted;
-            if (m_.multiplexed_) ++ch.depth_accepted[size_t(depth)];
             ch.run = 0;
         } else {
             pss.reject();
@@ -625,7 +945,7 @@ private:
     // The chunk's splats, in chain order, into rows [y0, y1).
     void merge_rows(int y0, int y1) {
         for (uint64_t c = 0; c < C_; ++c) {
-            const size_t b = size_t(c % uint64_t(B_));
+            const size_t b = chains_[size_t(c)].batch;
             for (const Splat& sp : chains_[size_t(c)].out) {
                 if (sp.pixel >= 0) {
                     const int py = sp.pixel / W_;
@@ -637,20 +957,143 @@ private:
                                      [&](size_t p, double wgt) { add(p, b, sp.effect, sp.value, wgt); });
             }
         }
+        if (!direct_) return;
+        // mmlt: the chunk's camera samples of depth 1.
+        const size_t p0 = size_t(y0) * size_t(W_) * kDirectSlots, p1 = size_t(y1) * size_t(W_) * kDirectSlots;
+        for (size_t k = p0; k < p1; ++k) direct_sums_[k] += direct_chunk_[k];
     }
 
     void add(size_t p, size_t batch, int effect, const Color& v, double wgt) {
         double* e = &sums_[(p * kNumEffects + size_t(effect)) * 3];
-        double* bb = &batches_[(p * size_t(B_) + batch) * 3];
+        double* bb = &batches_[(p * (m_.multiplexed_ ? nb_ : size_t(B_)) + batch) * 3];
         for (int c = 0; c < 3; ++c) {
             e[c] += wgt * double(v[c]);
             bb[c] += wgt * double(v[c]);
         }
     }
 
+    // mmlt's estimate: the depths' chains (sums_ / n) and depth 1's camera
+    // samples (their mean); the variance per pixel: each depth's batch
+    // means and b_d's share (depth_variance), and the camera samples' own.
+    void develop_mmlt(int spp, std::vector<float>& image, std::vector<float>& variance,
+                      std::vector<std::vector<float>>* effects) const {
+        const size_t px = size_t(W_) * size_t(H_);
+        image.assign(3 * px, 0.f);
+        variance.assign(3 * px, std::numeric_limits<float>::quiet_NaN());
+        if (effects) effects->assign(kNumEffects, std::vector<float>(3 * px, 0.f));
+        if (spp <= 0) return;
+        const double n = double(uint64_t(spp) * per_spp_), k = double(spp);
+        for (size_t p = 0; p < px; ++p) {
+            const double* dir = &direct_sums_[p * kDirectSlots];
+            for (int c = 0; c < 3; ++c) {
+                double total = 0, dir_sum = 0;
+                for (int e = 0; e < kNumEffects; ++e) {
+                    const double de = dir[size_t(e) * 3 + size_t(c)];
+                    const double v = sums_[(p * kNumEffects + size_t(e)) * 3 + size_t(c)] / n + de / k;
+                    dir_sum += de;
+                    total += v;
+                    if (effects) (*effects)[size_t(e)][3 * p + size_t(c)] = float(v);
+                }
+                image[3 * p + size_t(c)] = float(total);
+                if (spp < 2) continue;  // depth 1's variance needs two samples: NaN, never a fake 0
+                double var = sample_mean_variance(dir_sum, dir[kNumEffects * 3 + size_t(c)], k);
+                for (const Depth& dp : depths_)
+                    if (dp.chains > 0)
+                        var += depth_variance(dp, n, [&](size_t b) { return batches_[(p * nb_ + b) * 3 + size_t(c)]; });
+                variance[3 * p + size_t(c)] = float(var);
+            }
+        }
+    }
+
+    // The variance of the mean of k samples with sum `sum` and sum of squares `sq`.
+    static double sample_mean_variance(double sum, double sq, double k) {
+        return k > 1 ? std::max(0.0, sq - sum * sum / k) / (k * (k - 1.0)) : std::numeric_limits<double>::quiet_NaN();
+    }
+
+    // b_d's relative variance: var(F) / (n_d b_d^2), from its bootstrap points.
+    static double b_relative_variance(const Depth& dp) {
+        const double n = double(dp.n);
+        if (!(dp.b > 0) || n < 2) return 0.0;
+        return std::max(0.0, (dp.f_sq - n * dp.b * dp.b) / (n - 1.0)) / n / (dp.b * dp.b);
+    }
+
+    // The variance of depth dp's estimate I_d = sum_b S(b) / n (S(b): batch
+    // b's sum, of a pixel or of the image mean; n the mutations of all
+    // chains, each chain n / C): batch means over the depth's B_d batches
+    // of m_b chains each (Law and Kelton, sec. 9.5), batch b's estimate
+    // I_b = S(b) M_d / (m_b n), var = sum_b (m_b / M_d) (I_b - I_d)^2 /
+    // (B_d - 1); plus I_d^2 times b_d's relative variance (the head).
+    template <class Sum>
+    static double depth_variance(const Depth& dp, double n, Sum S) {
+        const size_t B = dp.batches, M = size_t(dp.chains);
+        double I = 0;
+        for (size_t b = 0; b < B; ++b) I += S(dp.first_batch + b);
+        I /= n;
+        double ss = 0;
+        for (size_t b = 0; b < B; ++b) {
+            const double m_b = double(M / B + (b < M % B ? 1 : 0));
+            const double I_b = S(dp.first_batch + b) * double(M) / (m_b * n);
+            ss += m_b / double(M) * (I_b - I) * (I_b - I);
+        }
+        return ss / double(B - 1) + I * I * b_relative_variance(dp);
+    }
+
+    // mmlt's "mlt_image_mean_variance" (R, G, B): per depth the batch means
+    // of the image sums and b_d's share, plus the camera samples' variance
+    // of depth 1 (independent pixels: the sum of theirs over px^2).
+    std::vector<double> mmlt_image_mean_variance() const {
+        const size_t px = size_t(W_) * size_t(H_);
+        std::vector<double> out(3, std::numeric_limits<double>::quiet_NaN());
+        if (committed_ < 2 || px == 0) return out;
+        const double n = double(uint64_t(committed_) * per_spp_), k = double(committed_);
+        for (int c = 0; c < 3; ++c) {
+            std::vector<double> img(nb_, 0.0);
+            double dir_var = 0;
+            for (size_t p = 0; p < px; ++p) {
+                for (size_t b = 0; b < nb_; ++b) img[b] += batches_[(p * nb_ + b) * 3 + size_t(c)];
+                const double* dir = &direct_sums_[p * kDirectSlots];
+                double sum = 0;
+                for (int e = 0; e < kNumEffects; ++e) sum += dir[size_t(e) * 3 + size_t(c)];
+                dir_var += sample_mean_variance(sum, dir[kNumEffects * 3 + size_t(c)], k);
+            }
+            double var = dir_var / (double(px) * double(px));
+            for (const Depth& dp : depths_)
+                if (dp.chains > 0) var += depth_variance(dp, n, [&](size_t b) { return img[b] / double(px); });
+            out[size_t(c)] = var;
+        }
+        return out;
+    }
+
+    // mmlt's b per depth 1 .. max_depth and the variance of each: depth 1
+    // the luminance sum of the camera samples' image, the others b_d.
+    void depth_b(std::vector<double>& b, std::vector<double>& var) const {
+        b.assign(size_t(m_.max_depth_), 0.0);
+        var.assign(size_t(m_.max_depth_), 0.0);
+        const double k = double(committed_);
+        if (committed_ > 0) {
+            for (size_t p = 0; p < size_t(W_) * size_t(H_); ++p) {
+                const double* dir = &direct_sums_[p * kDirectSlots];
+                Color sum(0.f);
+                for (int e = 0; e < kNumEffects; ++e)
+                    for (int c = 0; c < 3; ++c) sum[c] += float(dir[size_t(e) * 3 + size_t(c)]);
+                const double l = double(luminance(sum));
+                b[0] += l / k;
+                var[0] += sample_mean_variance(l, dir[kNumEffects * 3 + 3], k);
+            }
+        } else {
+            var[0] = std::numeric_limits<double>::quiet_NaN();
+        }
+        for (int d = 2; d <= m_.max_depth_; ++d) {
+            const Depth& dp = depths_[size_t(d)];
+            b[size_t(d - 1)] = dp.b;
+            var[size_t(d - 1)] = dp.b * dp.b * b_relative_variance(dp);
+        }
+    }
+
     const PssmltIntegrator& m_;
     const Scene& scene_;
     const Integrator& inner_;
+    const Integrator* direct_;  // mmlt's depth 1 (null for pssmlt)
     FilterSampler filter_;
     const int W_, H_;
     const uint64_t C_;
@@ -661,6 +1104,14 @@ private:
     std::vector<double> norm_x_, norm_y_;
     std::vector<double> sums_, batches_;  // [pixel][effect][rgb], [pixel][batch][rgb]
     std::vector<Chain> chains_;
+    // mmlt: depths 0 .. max_depth (2 .. max_depth used), the batches of all
+    // depths, depth 1's sums per pixel (committed, this chunk's):
+    // [pixel][kDirectSlots].
+    std::vector<Depth> depths_;
+    size_t nb_ = 0;
+    uint64_t pilot_ = 0;  // the pilot's bootstrap points
+    std::vector<double> direct_sums_, direct_chunk_;
+    int committed_ = 0;  // samples per pixel in the sums
     int stripes_ = 1;
     bool started_ = false;
 };
@@ -668,11 +1119,22 @@ private:
 RenderOutput PssmltIntegrator::drive(const Scene& scene, const RenderOptions& opts, const PollFn& poll) const {
     const int W = scene.sensor->width, H = scene.sensor->height;
     const double px = double(W) * double(H);
-    check_memory(type, W, H,
-                 {{"per-pixel sums", px * 8.0 * 3.0 * (kNumEffects + std::min(kMaxBatches, chains_)),
-                   "the resolution (film width, height)"},
-                  {"chains", double(chains_) * 512.0, "chains"},
-                  output_memory(opts, W, H)});
+    if (multiplexed_)  // batches: min(32, M_d) per depth; depth 1's sums twice; the bootstrap's F_i
+        check_memory(type, W, H,
+                     {{"per-pixel sums",
+                       px * 8.0 *
+                           (3.0 * (kNumEffects + std::min(chains_, kMaxBatches * std::max(max_depth_ - 1, 1))) +
+                            2.0 * kDirectSlots),
+                       "the resolution (film width, height)"},
+                      {"chains", double(chains_) * 512.0, "chains"},
+                      {"bootstrap", double(bootstrap_) * 8.0, "bootstrap_samples"},
+                      output_memory(opts, W, H)});
+    else
+        check_memory(type, W, H,
+                     {{"per-pixel sums", px * 8.0 * 3.0 * (kNumEffects + std::min(kMaxBatches, chains_)),
+                       "the resolution (film width, height)"},
+                      {"chains", double(chains_) * 512.0, "chains"},
+                      output_memory(opts, W, H)});
     IntegratorDesc d;
     d.type = bidir_ ? "bdpt" : "path";
     d.params.set("max_depth", int64_t(max_depth_));
@@ -684,9 +1146,24 @@ RenderOutput PssmltIntegrator::drive(const Scene& scene, const RenderOptions& op
     std::unique_ptr<Integrator> made = make_integrator(d, mask);
     const Integrator& inner = made->for_scene(scene);
     inner.check_scene(scene);
+    // mmlt's depth 1: the path tracer with max_depth 1, the emitters the
+    // camera sees (the head).
+    std::unique_ptr<Integrator> made_direct;
+    const Integrator* direct = nullptr;
+    if (multiplexed_) {
+        IntegratorDesc d1;
+        d1.type = "path";
+        d1.params.set("max_depth", int64_t(1));
+        d1.params.set("rr_depth", int64_t(rr_depth_));
+        d1.params.set("hide_emitters", hide_);
+        d1.params.set("truncation_probe", 0.0);
+        made_direct = make_integrator(d1, mask);
+        direct = &made_direct->for_scene(scene);
+        direct->check_scene(scene);
+    }
     PassLoop loop(scene, opts, poll);
     loop.set_pixels(uint64_t(scene.sensor->crop_w) * uint64_t(scene.sensor->crop_h));
-    Passes passes(*this, scene, inner);
+    Passes passes(*this, scene, inner, direct);
     return loop.run(passes);
 }
 
