@@ -64,9 +64,21 @@ def make_mitsuba_reference(scene_xml, out_exr, *, runs: int = 16, spp: int = 102
         raise ValueError(f"make_mitsuba_reference: spp must be >= 1, got {spp}")
     import mitsuba as mi
 
+    previous = mi.variant()
     used, note = _set_variant(mi, variant)
+    try:
+        return _render_runs(mi, used, note, variant, scene_xml, out_exr, runs, spp, progress, integrator, scene_note,
+                            first_seed, {**(xml_params or {}), **scene_params})
+    finally:
+        # Mitsuba's variant is process-wide: the caller's (a test that set
+        # scalar_rgb, say) is restored.
+        if previous is not None and previous != mi.variant():
+            mi.set_variant(previous)
+
+
+def _render_runs(mi, used, note, variant, scene_xml, out_exr, runs, spp, progress, integrator, scene_note,
+                 first_seed, scene_params):
     scene_xml = Path(scene_xml)
-    scene_params = {**(xml_params or {}), **scene_params}
     scene = mi.load_file(str(scene_xml), **scene_params)
     integ = mi.load_dict(dict(integrator)) if integrator else scene.integrator()
 

@@ -123,10 +123,19 @@ def test_clean_effects_sum_and_stats(variant):
         np.testing.assert_allclose([sum(b_d), sum(v_d)], [s["mlt_b"], s["mlt_b_variance"]], rtol=1e-9)
 
 
-def test_mmlt_refuses_too_few_chains():
-    """Every depth 2 .. max_depth with light gets two chains (pssmlt.cpp's head)."""
-    with pytest.raises(rm.SceneError, match="chains"):
-        rm.render(rm.load_file(CORNELL, res=8), integrator={"type": "mmlt", "max_depth": 6, "chains": 9}, spp=1)
+def test_mmlt_raises_too_few_chains_and_says_so():
+    """Every depth 2 .. max_depth with light gets two chains (pssmlt.cpp's
+    head): fewer chains are raised to 2 (max_depth - 1), reported in
+    res.stats and by a warning, never silently; enough are kept."""
+    scene = rm.load_file(CORNELL, res=8)
+    with pytest.warns(UserWarning, match=r"mmlt: chains raised from 9 to 10"):
+        r = rm.render(scene, integrator={"type": "mmlt", "max_depth": 6, "chains": 9, "bootstrap_samples": 1024},
+                      spp=1)
+    assert (r.stats["mlt_chains"], r.stats["mlt_chains_requested"]) == (10, 9)
+    assert sum(r.stats["mlt_chains_per_depth"]) == 10 and "mmlt: chains raised" in r.stats["warnings"][0]
+    assert np.all(np.isfinite(r.image)) and r.image.mean() > 0
+    ok = rm.render(scene, integrator={"type": "mmlt", "max_depth": 6, "chains": 10, "bootstrap_samples": 1024}, spp=1)
+    assert ok.stats["mlt_chains"] == 10 and "warnings" not in ok.stats
 
 
 def test_time_budget_and_cancel():

@@ -232,6 +232,9 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
     elif smp["type"] != "independent" and spec["type"] == "photonmapper":
         _warn(stats, f"photonmapper: sampler '{smp['type']}' draws the camera passes; the photon passes use the "
                      f"independent sampler")
+    if stats.get("mlt_chains", 0) > stats.get("mlt_chains_requested", float("inf")):
+        _warn(stats, f"mmlt: chains raised from {stats['mlt_chains_requested']:.0f} to {stats['mlt_chains']:.0f}, two "
+                     f"for each depth 2 .. max_depth (renderer/estimators/pssmlt.cpp)")
     result = RenderResult(image=r["image"], variance=r["variance"], effects=dict(r["effects"]), spp=r["spp"],
                           seconds=r["seconds"], stats=stats, checkpoints=list(r["checkpoints"]), integrator=spec,
                           seed=int(seed), strategies=dict(r["strategies"]),

@@ -86,7 +86,8 @@
 // chains: docs/mlt.md). Every chain of depth d starts at a (point,
 // strategy) drawn from depth d's bootstrap with probability f_d(u_i^s) /
 // ((d + 1) sum_i F_i), and splats g / f_d with weight b_d C / M_d (C
-// chains, M_d at depth d; chains < 2 (max_depth - 1) is refused). Unbiased at
+// chains, M_d at depth d; fewer chains than 2 (max_depth - 1) are raised to
+// that, and reported). Unbiased at
 // any length: given the bootstrap, E[b_d h(x_0)] = (1 / n_d) sum_i
 // (1 / (d + 1)) sum_s f_d(u_i^s) h(u_i^s), whose expectation is
 // E[f_d h] = b_d E_pi_d[h] (for u uniform the moved point is uniform given
@@ -230,12 +231,12 @@ public:
           mpp_(p.get_int("mutations_per_pixel")),
           large_p_(p.get_float("large_step_probability")),
           sigma_(p.get_float("sigma")),
-          stuck_(p.get_int("stuck_rejections")) {
-        // mmlt gives every depth 2 .. max_depth with light two chains at least (the head).
-        if (multiplexed && chains_ < 2 * (max_depth_ - 1))
-            throw ParamError("mmlt", "chains",
-                             "mmlt: chains (" + std::to_string(chains_) + ") must be at least 2 (max_depth - 1) = " +
-                                 std::to_string(2 * (max_depth_ - 1)) + ": two chains for each depth 2 .. max_depth");
+          stuck_(p.get_int("stuck_rejections")),
+          chains_requested_(chains_) {
+        // mmlt gives every depth 2 .. max_depth with light two chains at least
+        // (the head): fewer are raised to that, which res.stats reports
+        // ("mlt_chains", "mlt_chains_requested") and the Python side warns of.
+        if (multiplexed) chains_ = std::max(chains_, 2 * (max_depth_ - 1));
     }
 
     void sample(const Scene&, Sampler&, const Ray&, EffectRadiance&, ThreadStats&) const override {
@@ -251,6 +252,7 @@ private:
     int chains_, bootstrap_, mpp_;
     float large_p_, sigma_;
     int64_t stuck_;
+    int chains_requested_;
 };
 
 class PssmltIntegrator::Passes final : public PassStep {
@@ -420,6 +422,7 @@ public:
         st.push_back({"mlt_b_variance", {b_var}});
         st.push_back({"mlt_bootstrap_samples", {n_f}});
         st.push_back({"mlt_chains", {double(C_)}});
+        st.push_back({"mlt_chains_requested", {double(m_.chains_requested_)}});
         st.push_back({"mlt_dead_chains", {dead}});
         st.push_back({"mlt_mutations", {double(prop)}});
         st.push_back({"mlt_acceptance", {ratio(acc, prop)}});
