@@ -124,9 +124,7 @@ def _render(path: Path, threads: int = 0, change=None, spp=None):
         desc = _load(path)
         if change is not None:
             change(desc)
-        h, w = desc.sensor.height, desc.sensor.width
-        spp = spp or 2_000_000 // (h * w)
-        return rm.render(rm.Scene(desc), spp=spp, seed=0, threads=threads)
+        return rm.render(rm.Scene(desc), spp=spp or _suite_spp(desc), seed=0, threads=threads)
 
 
 def _sidak(z, pixels: int, df=None) -> dict:
@@ -233,6 +231,10 @@ def suite_spp(path: Path) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         desc = _load(path)
+    return _suite_spp(desc)
+
+
+def _suite_spp(desc) -> int:
     return 2_000_000 // (desc.sensor.height * desc.sensor.width)
 
 

@@ -122,13 +122,7 @@ void Scene::add_mesh_attribute(int shape, const MeshAttribute& attribute, int gr
     if (committed_) throw std::logic_error("scene is already committed");
     Shape* target = nullptr;
     if (group >= 0) {  // `shape` is a member of that shapegroup (its instances read the member's attributes)
-        if (group >= int(groups_.size()))
-            throw std::invalid_argument("add_mesh_attribute: shapegroup index out of range");
-        ShapeGroup& g = groups_[size_t(group)];
-        if (shape < 0 || size_t(shape) >= g.members.size())
-            throw std::invalid_argument("shapegroup '" + g.id + "': member index out of range");
-        if (g.scene) throw std::invalid_argument("shapegroup '" + g.id + "' is already instanced");
-        target = g.members[size_t(shape)].get();
+        target = editable_member(group, shape, "add_mesh_attribute");
     } else {
         if (shape < 0 || size_t(shape) >= shapes.size())
             throw std::invalid_argument("add_mesh_attribute: no such shape");
@@ -283,18 +277,23 @@ void Scene::set_shape_media(int shape, int interior, int exterior) {
     shapes[shape]->medium_exterior = exterior;
 }
 
-void Scene::set_member_media(int group, int member, int interior, int exterior) {
+Shape* Scene::editable_member(int group, int member, const char* who) {
     if (group < 0 || group >= int(groups_.size()))
-        throw std::invalid_argument("set_member_media: shapegroup index out of range");
+        throw std::invalid_argument(std::string(who) + ": shapegroup index out of range");
     ShapeGroup& g = groups_[size_t(group)];
     if (member < 0 || member >= int(g.members.size()))
         throw std::invalid_argument("shapegroup '" + g.id + "': member index out of range");
     if (g.scene) throw std::invalid_argument("shapegroup '" + g.id + "' is already instanced");
-    for (int m : {interior, exterior})
-        if (m < -1 || m >= int(media.size()))
-            throw std::invalid_argument("shape '" + g.members[size_t(member)]->id + "': medium index out of range");
-    g.members[size_t(member)]->medium_interior = interior;
-    g.members[size_t(member)]->medium_exterior = exterior;
+    return g.members[size_t(member)].get();
+}
+
+void Scene::set_member_media(int group, int member, int interior, int exterior) {
+    Shape* m = editable_member(group, member, "set_member_media");
+    for (int i : {interior, exterior})
+        if (i < -1 || i >= int(media.size()))
+            throw std::invalid_argument("shape '" + m->id + "': medium index out of range");
+    m->medium_interior = interior;
+    m->medium_exterior = exterior;
 }
 
 int Scene::add_dipole(int shape, const DipoleDesc& desc) {

@@ -196,6 +196,10 @@ private:
         RTCScene scene = nullptr;
     };
     std::vector<ShapeGroup> groups_;
+    // Member `member` of shapegroup `group`, checked (indices, not yet
+    // instanced) for a change before its instances are made; `who` names
+    // the caller in the error.
+    Shape* editable_member(int group, int member, const char* who);
     RTCDevice device_ = nullptr;
     RTCScene scene_ = nullptr;
     bool committed_ = false;
