@@ -267,23 +267,35 @@ def test_path_unbiased_on_the_furnace(sampler):
     assert not ok, f"{sampler}: a 1 % bias went undetected\n{msg}"
 
 
+# Every estimator that draws on the sampler: the camera driver's (path,
+# direct) and the light driver's (ptracer; bdpt draws both subpaths on it).
+SAMPLER_ESTIMATORS = ("path", "direct", "ptracer", "bdpt")
+
+
 @pytest.mark.parametrize("sampler", STRUCTURED)
+@pytest.mark.parametrize("est", SAMPLER_ESTIMATORS)
 @pytest.mark.parametrize("light", ["disk", "rect"])
-def test_path_unbiased_under_area_lights(light, sampler):
-    """path (max_depth 2) under the disk and rectangle lights
-    (reference_scenes/area_lights) against the exact box-filtered image, 4 x
-    4 blocks, level ALPHA; the exact image * 1.01 is rejected."""
+def test_unbiased_under_area_lights(light, est, sampler):
+    """Each estimator that draws on the sampler (max_depth 2) under the disk
+    and rectangle lights (reference_scenes/area_lights) against the exact
+    box-filtered image, 4 x 4 blocks, level ALPHA; the exact image * 1.01 is
+    rejected (path, direct at 64 spp; ptracer and bdpt, whose light paths
+    land anywhere on the film, at 128)."""
     from radiometer.reference_scenes.area_lights import analytic as area
 
     xml, ref = (area.DISK_XML, area.reference_disk()[0]) if light == "disk" else (area.RECT_XML,
                                                                                     area.reference_rect()[0])
-    r = rm.render(rm.load_file(xml), integrator={"type": "path", "max_depth": 2}, spp=64, seed=43, sampler=sampler)
+    spp = 64 if est in ("path", "direct") else 128
+    integ = {"type": est} if est == "direct" else {"type": est, "max_depth": 2}  # direct: two segments by definition
+    r = rm.render(rm.load_file(xml), integrator=integ, spp=spp, seed=43, sampler=sampler)
+    assert r.stats["sampler"] == sampler, f"{est} did not draw on {sampler}"
     assert r.stats["nan_samples"] == 0 and r.stats["inf_samples"] == 0 and r.image.min() >= 0
-    ok, msg = _blocked(r.image, r.variance, ref, f"{light} {sampler}: ")
+    where = f"{light}, {est}, {sampler}"
+    ok, msg = _blocked(r.image, r.variance, ref, f"{where}: ")
     ratio = r.image.sum() / ref.sum()
-    assert ok, f"{light}, {sampler}: image sum / exact = {ratio:.5f}\n{msg}"
-    ok, msg = _blocked(r.image, r.variance, ref * 1.01, f"{light} {sampler} x1.01: ")
-    assert not ok, f"{light}, {sampler}: a 1 % bias went undetected\n{msg}"
+    assert ok, f"{where}: image sum / exact = {ratio:.5f}\n{msg}"
+    ok, msg = _blocked(r.image, r.variance, ref * 1.01, f"{where} x1.01: ")
+    assert not ok, f"{where}: a 1 % bias went undetected\n{msg}"
 
 
 # ---------------------------------------------------------------------------
