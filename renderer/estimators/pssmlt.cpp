@@ -536,6 +536,7 @@ private:
         uint64_t n = 0;                     // bootstrap points
         std::vector<double> cdf;            // prefix sums of the points' F_i (n + 1 entries)
         double f_sum = 0, f_sq = 0;         // sum of F_i, of F_i^2
+        double f_c4 = 0;                    // sum of (F_i - b_d)^4
         std::vector<double> fs_sum, fs_sq;  // per strategy s: sum of f_d(u_i^s) / (d + 1), of its square
         double b = 0;                       // b_d = f_sum / n
         int first_chain = 0, chains = 0;
@@ -724,7 +725,6 @@ private:
             Depth& dp = depths_[size_t(d)];
             dp.fs_sum.assign(size_t(d) + 1, 0.0);
             dp.fs_sq.assign(size_t(d) + 1, 0.0);
-            for (size_t i = 1; i < dp.cdf.size(); ++i) dp.cdf[i] += dp.cdf[i - 1];
         }
         for (const BootBlock& bb : blocks) {
             Depth& dp = depths_[size_t(bb.d)];
@@ -736,6 +736,13 @@ private:
             Depth& dp = depths_[size_t(d)];
             dp.b = dp.f_sum / double(dp.n);
             if (dp.b > 0) ++live, root_b[size_t(d)] = std::sqrt(dp.b);
+            // The points' central fourth moment (b_d's degrees of freedom,
+            // depth_variance), from each F_i before the prefix sums.
+            for (size_t i = 1; i < dp.cdf.size(); ++i) {
+                const double e2 = (dp.cdf[i] - dp.b) * (dp.cdf[i] - dp.b);
+                dp.f_c4 += e2 * e2;
+            }
+            for (size_t i = 1; i < dp.cdf.size(); ++i) dp.cdf[i] += dp.cdf[i - 1];
         }
         allocate_chains(root_b, live);
         auto start = [&](size_t c, int th) { start_chain(loop, c, loop.stats(th)); };
@@ -1071,9 +1078,10 @@ private:
     //   kappa estimated by sum_b w_b e_b^4 / (sum_b w_b e_b^2)^2: normal
     //   batch means give B_d - 1, one visited batch of 32 about 2, k visited
     //   batches about 2 k (a Poisson count's own variance estimate), kept
-    //   within [1, B_d - 1];
+    //   within [1, B_d - 1] (variance_dof);
     // - I_d^2 times b_d's relative variance (the head), from the depth's
-    //   n_d bootstrap points: n_d - 1.
+    //   n_d bootstrap points, with their kurtosis likewise (a heavy tail of
+    //   F gives far fewer than n_d - 1).
     template <class Sum>
     static void depth_variance(const Depth& dp, double n, Sum S, VarianceDof& out) {
         const size_t B = dp.batches, M = size_t(dp.chains);
@@ -1088,14 +1096,21 @@ private:
             m2 += m_b / double(M) * (I_b - I) * (I_b - I);
             m4 += m_b / double(M) * e2 * e2;
         }
-        const double nb = double(B), top = nb - 1.0;
-        double nu = top;
-        if (m2 > 0) {
-            const double kappa = m4 / (m2 * m2);
-            const double rel = 2.0 / top + (kappa - 3.0) / nb;  // Var(s^2) / sigma^4
-            if (rel > 0) nu = std::min(top, std::max(1.0, 2.0 / rel));
-        }
-        out.add(m2 / top, nu, I * I * b_relative_variance(dp), double(dp.n) - 1.0);
+        const double n_d = double(dp.n), m2_b = n_d > 1 ? (dp.f_sq - n_d * dp.b * dp.b) / n_d : 0.0;
+        out.add(m2 / (double(B) - 1.0), variance_dof(double(B), m2, m4),
+                I * I * b_relative_variance(dp), variance_dof(n_d, m2_b, dp.f_c4 / n_d));
+    }
+
+    // The degrees of freedom of a sample variance of `n` values with second
+    // and fourth central moments m2, m4 (weighted means over the values):
+    // Satterthwaite's nu = 2 sigma^4 / Var(s^2), Var(s^2) = sigma^4 (2 / (n
+    // - 1) + (kappa - 3) / n), kappa = m4 / m2^2 (Cramer 1946, sec. 27.4),
+    // within [1, n - 1] (n - 1 for normal values).
+    static double variance_dof(double n, double m2, double m4) {
+        const double top = n - 1.0;
+        if (!(m2 > 0) || !(top > 0)) return std::max(top, 1.0);
+        const double rel = 2.0 / top + (m4 / (m2 * m2) - 3.0) / n;  // Var(s^2) / sigma^4
+        return rel > 0 ? std::min(top, std::max(1.0, 2.0 / rel)) : top;
     }
 
     // mmlt's "mlt_image_mean_variance" (R, G, B): per depth the batch means
