@@ -86,7 +86,10 @@ def blocked_z_test(a, var_a, b, var_b=None, *, b_splatted=False, a_correlated=Fa
     Cauchy-Schwarz bound too (z_test's `common_mode`).
     `var_a_floor` (per pixel, like var_a): a lower bound on the variance of
     a's pixels (`reference_variance_floor`); a block's variance is the larger
-    of a's own estimate and the floor's. `exclude`: pixel boxes (x0, y0, x1,
+    of a's own estimate and the floor's, the floor's taken by a's own rule
+    (a_correlated: the Cauchy-Schwarz bound, as it stands in for a's pixels,
+    whose errors a chain shares; measured on mmlt's glass_sphere_caustic
+    cell, docs/mlt.md). `exclude`: pixel boxes (x0, y0, x1,
     y1); every block that touches one is left out. `block_mask`: (H/k, W/k)
     booleans, the blocks to test. The Sidak level counts the blocks tested.
     Images whose sides k does not divide (a 1 x 1 irradiance meter) use the
@@ -95,9 +98,10 @@ def blocked_z_test(a, var_a, b, var_b=None, *, b_splatted=False, a_correlated=Fa
     while k > 1 and (h % k or w % k):
         k -= 1
     ba = block_mean(a, k)
-    va = block_var_bound(var_a, k) if a_correlated else block_var_independent(var_a, k)
+    a_rule = block_var_bound if a_correlated else block_var_independent
+    va = a_rule(var_a, k)
     if var_a_floor is not None:
-        va = np.maximum(va, block_var_independent(var_a_floor, k))
+        va = np.maximum(va, a_rule(var_a_floor, k))
     bb = block_mean(b, k)
     if var_b is None:
         vb = np.zeros_like(bb)

@@ -61,6 +61,19 @@ def test_variance_floor_only_widens():
     assert np.allclose(reference_variance_floor(va, 1000, 10), va * 100)
 
 
+def test_variance_floor_follows_a_correlated():
+    """A floor stands in for a's pixel variances, so a's block rule applies to
+    it: with a_correlated the Cauchy-Schwarz bound (k^2 times the independent
+    sum on a block of equal floors), without it the independent sum."""
+    ref = np.ones((H, W, 3))
+    a = np.ones((H, W, 3))
+    a[8:12, 8:12] += 0.08
+    va = np.full((H, W, 3), 1e-8)
+    floor = np.full((H, W, 3), 4e-3)  # independent block sd 0.016 (z 5.1); bound 0.063 (z 1.3)
+    assert not blocked_z_test(a, va, ref, var_a_floor=floor)[0]
+    assert blocked_z_test(a, va, ref, var_a_floor=floor, a_correlated=True)[0]
+
+
 def test_small_or_odd_images_use_a_block_that_fits():
     """A 1 x 1 meter image and a 6 x 9 one: the block side drops to what
     divides both sides (1 and 3), instead of failing to reshape."""

@@ -121,6 +121,26 @@ def test_clean_effects_sum_and_stats(variant):
         b_d, v_d = s["mlt_b_per_depth"], s["mlt_b_per_depth_variance"]
         assert len(b_d) == 5 and all(b > 0 for b in b_d) and all(v > 0 for v in v_d), (b_d, v_d)
         np.testing.assert_allclose([sum(b_d), sum(v_d)], [s["mlt_b"], s["mlt_b_variance"]], rtol=1e-9)
+        # res.variance's degrees of freedom (Welch-Satterthwaite over its
+        # parts): one per pixel and channel, at least 1 where the variance
+        # is positive, inf where it is 0; the image mean's likewise.
+        dof = r.arrays["mlt_variance_dof"]
+        assert dof.shape == r.variance.shape
+        assert np.all(dof[r.variance > 0] >= 1) and np.all(np.isinf(dof[r.variance == 0])), dof
+        assert len(s["mlt_image_mean_dof"]) == 3 and min(s["mlt_image_mean_dof"]) >= 1
+
+
+def test_mmlt_variance_dof_of_the_camera_pass():
+    """With max_depth 1 mmlt is its camera pass alone (every chain dead), so
+    a pixel's variance is the sample variance of its spp camera samples and
+    its degrees of freedom are spp - 1 exactly (the Cornell box's light seen
+    directly: its edge pixels vary, the rest do not, inf)."""
+    scene = rm.load_file(CORNELL, res=16)
+    r = rm.render(scene, integrator={"type": "mmlt", "max_depth": 1, "chains": 4, "bootstrap_samples": 64},
+                  spp=16, seed=5)
+    dof = r.arrays["mlt_variance_dof"]
+    varies = r.variance > 0
+    assert varies.any() and np.all(dof[varies] == 15) and np.all(np.isinf(dof[~varies])), np.unique(dof)
 
 
 def test_mmlt_raises_too_few_chains_and_says_so():

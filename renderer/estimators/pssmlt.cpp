@@ -437,7 +437,10 @@ public:
             image_mean_variance(st);
             return;
         }
-        st.push_back({"mlt_image_mean_variance", mmlt_image_mean_variance()});
+        std::vector<double> mean_dof;
+        st.push_back({"mlt_image_mean_variance", mmlt_image_mean_variance(mean_dof)});
+        st.push_back({"mlt_image_mean_dof", mean_dof});
+        out.arrays.push_back(variance_dof_array());
         st.push_back({"mlt_b_per_depth", b_depth});
         st.push_back({"mlt_b_per_depth_variance", b_depth_var});
         // Chains and acceptance by depth 1 .. max_depth (depth 1: no chains, NaN).
@@ -533,6 +536,7 @@ private:
         uint64_t n = 0;                     // bootstrap points
         std::vector<double> cdf;            // prefix sums of the points' F_i (n + 1 entries)
         double f_sum = 0, f_sq = 0;         // sum of F_i, of F_i^2
+        double f_c4 = 0;                    // sum of (F_i - b_d)^4
         std::vector<double> fs_sum, fs_sq;  // per strategy s: sum of f_d(u_i^s) / (d + 1), of its square
         double b = 0;                       // b_d = f_sum / n
         int first_chain = 0, chains = 0;
@@ -721,7 +725,6 @@ private:
             Depth& dp = depths_[size_t(d)];
             dp.fs_sum.assign(size_t(d) + 1, 0.0);
             dp.fs_sq.assign(size_t(d) + 1, 0.0);
-            for (size_t i = 1; i < dp.cdf.size(); ++i) dp.cdf[i] += dp.cdf[i - 1];
         }
         for (const BootBlock& bb : blocks) {
             Depth& dp = depths_[size_t(bb.d)];
@@ -733,6 +736,13 @@ private:
             Depth& dp = depths_[size_t(d)];
             dp.b = dp.f_sum / double(dp.n);
             if (dp.b > 0) ++live, root_b[size_t(d)] = std::sqrt(dp.b);
+            // The points' central fourth moment (b_d's degrees of freedom,
+            // depth_variance), from each F_i before the prefix sums.
+            for (size_t i = 1; i < dp.cdf.size(); ++i) {
+                const double e2 = (dp.cdf[i] - dp.b) * (dp.cdf[i] - dp.b);
+                dp.f_c4 += e2 * e2;
+            }
+            for (size_t i = 1; i < dp.cdf.size(); ++i) dp.cdf[i] += dp.cdf[i - 1];
         }
         allocate_chains(root_b, live);
         auto start = [&](size_t c, int th) { start_chain(loop, c, loop.stats(th)); };
@@ -977,7 +987,8 @@ private:
 
     // mmlt's estimate: the depths' chains (sums_ / n) and depth 1's camera
     // samples (their mean); the variance per pixel: each depth's batch
-    // means and b_d's share (depth_variance), and the camera samples' own.
+    // means and b_d's share (depth_variance), and the camera samples' own
+    // (pixel_variance, which also gives its degrees of freedom).
     void develop_mmlt(int spp, std::vector<float>& image, std::vector<float>& variance,
                       std::vector<std::vector<float>>* effects) const {
         const size_t px = size_t(W_) * size_t(H_);
@@ -989,23 +1000,55 @@ private:
         for (size_t p = 0; p < px; ++p) {
             const double* dir = &direct_sums_[p * kDirectSlots];
             for (int c = 0; c < 3; ++c) {
-                double total = 0, dir_sum = 0;
+                double total = 0;
                 for (int e = 0; e < kNumEffects; ++e) {
-                    const double de = dir[size_t(e) * 3 + size_t(c)];
-                    const double v = sums_[(p * kNumEffects + size_t(e)) * 3 + size_t(c)] / n + de / k;
-                    dir_sum += de;
+                    const double v = sums_[(p * kNumEffects + size_t(e)) * 3 + size_t(c)] / n +
+                                     dir[size_t(e) * 3 + size_t(c)] / k;
                     total += v;
                     if (effects) (*effects)[size_t(e)][3 * p + size_t(c)] = float(v);
                 }
                 image[3 * p + size_t(c)] = float(total);
                 if (spp < 2) continue;  // depth 1's variance needs two samples: NaN, never a fake 0
-                double var = sample_mean_variance(dir_sum, dir[kNumEffects * 3 + size_t(c)], k);
-                for (const Depth& dp : depths_)
-                    if (dp.chains > 0)
-                        var += depth_variance(dp, n, [&](size_t b) { return batches_[(p * nb_ + b) * 3 + size_t(c)]; });
-                variance[3 * p + size_t(c)] = float(var);
+                variance[3 * p + size_t(c)] = float(pixel_variance(p, c, spp).var);
             }
         }
+    }
+
+    // A variance made of independent parts, each estimated with its own
+    // degrees of freedom, and the degrees of freedom of the sum by
+    // Welch-Satterthwaite (Satterthwaite 1946): nu = (sum v_i)^2 /
+    // sum (v_i^2 / nu_i). Parts of variance 0 carry no weight; a sum of 0
+    // has nu = inf (nothing varied: the z-tests take a zero variance as
+    // exact).
+    struct VarianceDof {
+        double var = 0, weight = 0;  // sum v_i, sum v_i^2 / nu_i
+        void add(double v, double nu) { add(v, nu, 0.0, 1.0); }
+        // Two parts at once, summed first (as res.variance always summed them).
+        void add(double v1, double nu1, double v2, double nu2) {
+            var += std::max(v1, 0.0) + std::max(v2, 0.0);
+            if (v1 > 0) weight += v1 * v1 / nu1;
+            if (v2 > 0) weight += v2 * v2 / nu2;
+        }
+        double dof() const {
+            return weight > 0 ? var * var / weight : std::numeric_limits<double>::infinity();
+        }
+    };
+
+    // Pixel p's channel c after `spp` samples per pixel: its variance (what
+    // res.variance reports) and that estimate's degrees of freedom
+    // ("mlt_variance_dof"). The camera pass's sample variance has spp - 1;
+    // each depth's batch means and b_d's share theirs (depth_variance).
+    VarianceDof pixel_variance(size_t p, int c, int spp) const {
+        const double n = double(uint64_t(spp) * per_spp_), k = double(spp);
+        const double* dir = &direct_sums_[p * kDirectSlots];
+        double dir_sum = 0;
+        for (int e = 0; e < kNumEffects; ++e) dir_sum += dir[size_t(e) * 3 + size_t(c)];
+        VarianceDof v;
+        v.add(sample_mean_variance(dir_sum, dir[kNumEffects * 3 + size_t(c)], k), k - 1.0);
+        for (const Depth& dp : depths_)
+            if (dp.chains > 0)
+                depth_variance(dp, n, [&](size_t b) { return batches_[(p * nb_ + b) * 3 + size_t(c)]; }, v);
+        return v;
     }
 
     // The variance of the mean of k samples with sum `sum` and sum of squares `sq`.
@@ -1022,31 +1065,63 @@ private:
 
     // The variance of depth dp's estimate I_d = sum_b S(b) / n (S(b): batch
     // b's sum, of a pixel or of the image mean; n the mutations of all
-    // chains, each chain n / C): batch means over the depth's B_d batches
-    // of m_b chains each (Law and Kelton, sec. 9.5), batch b's estimate
-    // I_b = S(b) M_d / (m_b n), var = sum_b (m_b / M_d) (I_b - I_d)^2 /
-    // (B_d - 1); plus I_d^2 times b_d's relative variance (the head).
+    // chains, each chain n / C), added to `out` in two parts:
+    // - batch means over the depth's B_d batches of m_b chains each (Law and
+    //   Kelton, sec. 9.5), batch b's estimate I_b = S(b) M_d / (m_b n),
+    //   var = sum_b w_b (I_b - I_d)^2 / (B_d - 1) with w_b = m_b / M_d. Its
+    //   degrees of freedom are B_d - 1 only for normal batch means; a pixel
+    //   that few chains visit has batch means that are mostly 0 and a few
+    //   clumps, and then the estimate of the variance is itself uncertain.
+    //   Satterthwaite's nu = 2 var^2 / Var(var estimate) with the variance
+    //   of a sample variance, Var(s^2) = sigma^4 (2 / (B - 1) + (kappa - 3)
+    //   / B) (kappa the batch means' kurtosis; Cramer 1946, sec. 27.4),
+    //   kappa estimated by sum_b w_b e_b^4 / (sum_b w_b e_b^2)^2: normal
+    //   batch means give B_d - 1, one visited batch of 32 about 2, k visited
+    //   batches about 2 k (a Poisson count's own variance estimate), kept
+    //   within [1, B_d - 1] (variance_dof);
+    // - I_d^2 times b_d's relative variance (the head), from the depth's
+    //   n_d bootstrap points, with their kurtosis likewise (a heavy tail of
+    //   F gives far fewer than n_d - 1).
     template <class Sum>
-    static double depth_variance(const Depth& dp, double n, Sum S) {
+    static void depth_variance(const Depth& dp, double n, Sum S, VarianceDof& out) {
         const size_t B = dp.batches, M = size_t(dp.chains);
         double I = 0;
         for (size_t b = 0; b < B; ++b) I += S(dp.first_batch + b);
         I /= n;
-        double ss = 0;
+        double m2 = 0, m4 = 0;
         for (size_t b = 0; b < B; ++b) {
             const double m_b = double(M / B + (b < M % B ? 1 : 0));
             const double I_b = S(dp.first_batch + b) * double(M) / (m_b * n);
-            ss += m_b / double(M) * (I_b - I) * (I_b - I);
+            const double e2 = (I_b - I) * (I_b - I);
+            m2 += m_b / double(M) * (I_b - I) * (I_b - I);
+            m4 += m_b / double(M) * e2 * e2;
         }
-        return ss / double(B - 1) + I * I * b_relative_variance(dp);
+        const double n_d = double(dp.n), m2_b = n_d > 1 ? (dp.f_sq - n_d * dp.b * dp.b) / n_d : 0.0;
+        out.add(m2 / (double(B) - 1.0), variance_dof(double(B), m2, m4),
+                I * I * b_relative_variance(dp), variance_dof(n_d, m2_b, dp.f_c4 / n_d));
+    }
+
+    // The degrees of freedom of a sample variance of `n` values with second
+    // and fourth central moments m2, m4 (weighted means over the values):
+    // Satterthwaite's nu = 2 sigma^4 / Var(s^2), Var(s^2) = sigma^4 (2 / (n
+    // - 1) + (kappa - 3) / n), kappa = m4 / m2^2 (Cramer 1946, sec. 27.4),
+    // within [1, n - 1] (n - 1 for normal values).
+    static double variance_dof(double n, double m2, double m4) {
+        const double top = n - 1.0;
+        if (!(m2 > 0) || !(top > 0)) return std::max(top, 1.0);
+        const double rel = 2.0 / top + (m4 / (m2 * m2) - 3.0) / n;  // Var(s^2) / sigma^4
+        return rel > 0 ? std::min(top, std::max(1.0, 2.0 / rel)) : top;
     }
 
     // mmlt's "mlt_image_mean_variance" (R, G, B): per depth the batch means
     // of the image sums and b_d's share, plus the camera samples' variance
-    // of depth 1 (independent pixels: the sum of theirs over px^2).
-    std::vector<double> mmlt_image_mean_variance() const {
+    // of depth 1 (independent pixels: the sum of theirs over px^2, with the
+    // camera pass's spp - 1 degrees of freedom); `dof` gets each channel's
+    // degrees of freedom ("mlt_image_mean_dof").
+    std::vector<double> mmlt_image_mean_variance(std::vector<double>& dof) const {
         const size_t px = size_t(W_) * size_t(H_);
         std::vector<double> out(3, std::numeric_limits<double>::quiet_NaN());
+        dof = out;
         if (committed_ < 2 || px == 0) return out;
         const double n = double(uint64_t(committed_) * per_spp_), k = double(committed_);
         for (int c = 0; c < 3; ++c) {
@@ -1059,12 +1134,32 @@ private:
                 for (int e = 0; e < kNumEffects; ++e) sum += dir[size_t(e) * 3 + size_t(c)];
                 dir_var += sample_mean_variance(sum, dir[kNumEffects * 3 + size_t(c)], k);
             }
-            double var = dir_var / (double(px) * double(px));
+            VarianceDof v;
+            v.add(dir_var / (double(px) * double(px)), k - 1.0);
             for (const Depth& dp : depths_)
-                if (dp.chains > 0) var += depth_variance(dp, n, [&](size_t b) { return img[b] / double(px); });
-            out[size_t(c)] = var;
+                if (dp.chains > 0) depth_variance(dp, n, [&](size_t b) { return img[b] / double(px); }, v);
+            out[size_t(c)] = v.var;
+            dof[size_t(c)] = v.dof();
         }
         return out;
+    }
+
+    // "mlt_variance_dof": res.variance's degrees of freedom per pixel and
+    // channel (pixel_variance), the crop window's (H, W, 3) as res.variance;
+    // NaN where the variance is (fewer than 2 samples per pixel).
+    OutputArray variance_dof_array() const {
+        OutputArray a;
+        a.name = "mlt_variance_dof";
+        const int w = cx1_ - cx0_, h = cy1_ - cy0_;
+        a.shape = {h, w, 3};
+        a.data.assign(size_t(w) * size_t(h) * 3, std::numeric_limits<float>::quiet_NaN());
+        if (committed_ < 2) return a;
+        for (int y = cy0_; y < cy1_; ++y)
+            for (int x = cx0_; x < cx1_; ++x)
+                for (int c = 0; c < 3; ++c)
+                    a.data[(size_t(y - cy0_) * size_t(w) + size_t(x - cx0_)) * 3 + size_t(c)] =
+                        float(pixel_variance(size_t(y) * size_t(W_) + size_t(x), c, committed_).dof());
+        return a;
     }
 
     // mmlt's b per depth 1 .. max_depth and the variance of each: depth 1
