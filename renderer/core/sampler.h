@@ -36,6 +36,7 @@
 #pragma once
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "core/rng.h"
 
@@ -54,6 +55,16 @@ struct SamplerDesc {
 // The sampler names the renderer knows, in one place ("a, b, c").
 const char* sampler_names();
 
+// permute_index's constants for one n, worked out once per plan: the mask
+// 2^bits - 1 of the smallest power of two >= n and the two shifts of its
+// bijection of [0, 2^bits).
+struct PermuteWidth {
+    PermuteWidth() = default;
+    explicit PermuteWidth(uint32_t n);
+    uint32_t n = 1, mask = 0;
+    int s1 = 1, s2 = 1;
+};
+
 // A render's sampler, resolved once: type, pattern size, film size (zsobol).
 class SamplerPlan {
 public:
@@ -64,9 +75,14 @@ public:
     // The pattern size N the samples of a pixel are structured over.
     uint32_t pattern_size() const { return n_; }
     const std::string& name() const { return name_; }
+    // For the tests: drops the plan's tables (zsobol's keys and top digits),
+    // so that every value is hashed as the definition states; the values
+    // must not change.
+    void drop_tables();
 
 private:
     friend class PixelSampleSource;
+    void build_zsobol_tables();
     SamplerType type_;
     std::string name_;
     bool jitter_;
@@ -76,6 +92,20 @@ private:
     int log2_n_ = 0;                  // zsobol: N = 2^log2_n
     int width_ = 1;                   // film width: pixel index -> (x, y)
     int zbits_ = 0;                   // zsobol: bits of the Morton index of a pixel
+    PermuteWidth pw_n_, pw_x_, pw_y_;  // permute_index's constants for n_, res_x_, res_y_
+    // zsobol, pattern 0 (samples [0, N)), dimensions [0, zdims_): the keys
+    // of a dimension and of its second value (PixelSampleSource::dim_key,
+    // film-wide as the pixel is in the index), two a dimension, and the top
+    // ztop_digits_ base-4 digits of the index scrambled (sampler.cpp's z-order scramble,
+    // all above the sample's digits: a function of the dimension and those
+    // digits alone), for each of the 4^ztop_digits_ values of those digits
+    // a row of zdims_ (so a sample reads its dimensions one after another).
+    // The other digits are hashed per value.
+    int ztop_digits_ = 0;
+    int ztop_shift_ = 0;  // bit where the tabled digits end: the index's bits - 2 ztop_digits_
+    uint32_t zdims_ = 0;
+    std::vector<uint64_t> zkeys_;
+    std::vector<uint16_t> ztop_;
 };
 
 // The values of sample `sample` of pixel `pixel` under `plan`, for
@@ -91,10 +121,14 @@ public:
 
 private:
     uint64_t dim_key(uint32_t dim) const;
+    uint32_t zsobol_index(uint32_t dim, uint64_t key) const;
     const SamplerPlan& plan_;
     uint64_t pixel_key_;   // the seed, pixel and pattern hashed together (zsobol: seed and pattern)
     uint32_t j_;           // the sample's index within its pattern
+    uint32_t rj_ = 0;      // sobol: j's bits reversed
     uint64_t zindex_ = 0;  // zsobol: Morton index of the pixel, then j
+    const uint64_t* zkeys_ = nullptr;  // zsobol, pattern 0: the plan's dimension keys
+    const uint16_t* ztop_ = nullptr;   // zsobol, pattern 0: the plan's row of this index's top digits
 };
 
 // Building blocks, exposed for the tests (test_hooks.cpp).
