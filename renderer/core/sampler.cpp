@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 namespace rm {
@@ -13,8 +14,7 @@ uint32_t reverse_bits32(uint32_t v) {
     v = ((v >> 1) & 0x55555555u) | ((v & 0x55555555u) << 1);
     v = ((v >> 2) & 0x33333333u) | ((v & 0x33333333u) << 2);
     v = ((v >> 4) & 0x0f0f0f0fu) | ((v & 0x0f0f0f0fu) << 4);
-    v = ((v >> 8) & 0x00ff00ffu) | ((v & 0x00ff00ffu) << 8);
-    return (v >> 16) | (v << 16);
+    return __builtin_bswap32(v);
 }
 
 // Direction numbers of Sobol dimension 2 (Joe and Kuo's row "2 1 0 1"):
@@ -61,9 +61,31 @@ float to_float(uint32_t v) { return float(v >> 8) * 0x1p-24f; }
 // A uniform float of (key, i).
 float hash_float(uint64_t key, uint32_t i) { return to_float(uint32_t(mix64(key ^ (uint64_t(i) << 32 | i)) >> 32)); }
 
-// (stratum + offset) / n, kept below 1 whatever the rounding.
-float stratum_value(uint32_t stratum, float offset, uint32_t n) {
-    return std::min(float((double(stratum) + double(offset)) / double(n)), 0x1.fffffep-1f);
+// a / n for 32-bit a by a multiply (Lemire, Kaser and Kurz 2019, "Faster
+// Remainder by Direct Computation", Software: Practice and Experience 49(6),
+// fastdiv: with c = floor(2^64 / n) + 1, floor(a c / 2^64) = floor(a / n)
+// for every 32-bit a, n > 1).
+uint32_t div_by(uint32_t a, const SizeConstants& d) {
+    return d.n == 1 ? a : uint32_t((static_cast<unsigned __int128>(d.magic) * a) >> 64);
+}
+
+// (stratum + offset) / n, kept below 1 whatever the rounding: the float
+// nearest to the double nearest to the quotient. The numerator is exact in
+// a double (stratum < 2^24, offset a multiple of 2^-24), and so is its
+// product by 1 / n when n is a power of two. Otherwise the product by the
+// rounded 1 / n is within 2^-51.9 of the quotient, relatively, as the
+// rounded quotient is within 2^-53: both round to the same float unless a
+// float rounding midpoint lies within that of them, which the product
+// shows by its 29 bits below the float's (2^28 at a midpoint: within 16 of
+// it, 2 x the error or more to spare). Then (a quotient on a midpoint, or
+// by chance once in about 10^7 values) the division itself decides.
+float stratum_value(uint32_t stratum, float offset, const SizeConstants& d) {
+    const double num = double(stratum) + double(offset);
+    double q = num * d.inv;
+    uint64_t bits;
+    std::memcpy(&bits, &q, sizeof bits);
+    if (d.mask + 1 != d.n && (uint32_t(bits) & 0x1fffffffu) - (0x10000000u - 16u) <= 32u) q = num / double(d.n);
+    return std::min(float(q), 0x1.fffffep-1f);
 }
 
 // Sobol dimension 2 of index i, bit-reversed.
@@ -132,12 +154,12 @@ uint32_t zorder_low32(uint64_t m, int top, uint64_t key) {
     return uint32_t(out);
 }
 
-// permute_index with its constants worked out (PermuteWidth). A keyed
+// permute_index with its constants worked out (SizeConstants). A keyed
 // bijection of [0, 2^bits) (xors with the key, multiplies by odd numbers
 // and xor-shifts, each invertible modulo 2^bits), walked until it lands in
 // [0, n) (cycle walking, Kensler 2013 Section 4), then a keyed rotation,
 // which makes every element's image uniform over keys.
-inline uint32_t permute(uint32_t i, const PermuteWidth& pw, uint64_t key) {
+inline uint32_t permute(uint32_t i, const SizeConstants& pw, uint64_t key) {
     const uint32_t n = pw.n, w = pw.mask;
     if (n <= 1) return 0;
     const uint32_t k0 = uint32_t(key), k1 = uint32_t(key >> 32);
@@ -173,8 +195,9 @@ uint32_t sobol_u32(uint32_t i, int dim) { return reverse_bits32(dim == 0 ? i : s
 
 uint32_t owen_scramble(uint32_t v, uint32_t seed) { return owen_reversed(reverse_bits32(v), seed); }
 
-PermuteWidth::PermuteWidth(uint32_t n_) : n(n_) {
+SizeConstants::SizeConstants(uint32_t n_) : n(n_), inv(1.0 / double(n_)) {
     if (n <= 1) return;
+    magic = ~uint64_t(0) / n + 1;
     uint32_t w = n - 1;
     w |= w >> 1;
     w |= w >> 2;
@@ -188,7 +211,7 @@ PermuteWidth::PermuteWidth(uint32_t n_) : n(n_) {
     s2 = std::max(1, bits / 3);
 }
 
-uint32_t permute_index(uint32_t i, uint32_t n, uint64_t key) { return permute(i, PermuteWidth(n), key); }
+uint32_t permute_index(uint32_t i, uint32_t n, uint64_t key) { return permute(i, SizeConstants(n), key); }
 
 const char* sampler_names() { return "independent, stratified, multijitter, sobol, zsobol"; }
 
@@ -242,27 +265,32 @@ SamplerPlan::SamplerPlan(const SamplerDesc& desc, int spp, int width, int height
                 throw std::invalid_argument("sampler 'zsobol': film of " + std::to_string(width) + " x " +
                                             std::to_string(height) + " at " + std::to_string(n_) +
                                             " samples per pixel needs more than 56 index bits");
-            build_zsobol_tables();
+            build_zsobol_tables(uint64_t(std::max(width, 1)) * uint64_t(std::max(height, 1)));
             break;
         }
     }
-    pw_n_ = PermuteWidth(n_);
-    pw_x_ = PermuteWidth(res_x_);
-    pw_y_ = PermuteWidth(res_y_);
+    size_n_ = SizeConstants(n_);
+    size_x_ = SizeConstants(res_x_);
+    size_y_ = SizeConstants(res_y_);
 }
 
-void SamplerPlan::build_zsobol_tables() {
+void SamplerPlan::build_zsobol_tables(uint64_t pixels) {
     // Dimensions with tables: the camera's and 16 bounces of path
-    // (Sampler::start_bounce, PixelSampleSource::bounce_stride); the top
-    // digits: the pixel's highest, at most kTopDigits (a row of 4^5 entries,
-    // 2 KiB a dimension), none when they would all lie above the 32 bits kept.
+    // (Sampler::start_bounce, PixelSampleSource::bounce_stride). Top digits:
+    // the pixel's highest, as many as fit kTopDigits and a table of at most
+    // 4 entries per sample of the render (a render of few samples would
+    // spend more on the table than it saves), and none when they would all
+    // lie above the 32 bits kept. At most 4^6 x 264 entries (2.1 MiB).
     constexpr uint32_t kDims = Sampler::kCameraDims + 16 * 16;
-    constexpr int kTopDigits = 5;
+    constexpr int kTopDigits = 6;
     const int bits = zbits_ + log2_n_;
+    const uint64_t budget = 4 * pixels * n_;
     zdims_ = kDims;
-    ztop_digits_ = std::min(zbits_ / 2, kTopDigits);
+    ztop_digits_ = 0;
+    while (ztop_digits_ < std::min(zbits_ / 2, kTopDigits) && (uint64_t(kDims) << (2 * ztop_digits_ + 2)) <= budget)
+        ++ztop_digits_;
+    if (bits - 2 * ztop_digits_ >= 32) ztop_digits_ = 0;
     ztop_shift_ = bits - 2 * ztop_digits_;
-    if (ztop_shift_ >= 32) ztop_digits_ = 0;
     const uint64_t seed_key = pattern_key(seed_, 0);
     const size_t rows = size_t(1) << (2 * ztop_digits_);
     zkeys_.resize(2 * size_t(zdims_));
@@ -334,8 +362,8 @@ float PixelSampleSource::get_1d(uint32_t dim) {
         case SamplerType::Stratified:
         case SamplerType::Multijitter: {
             const uint64_t h = dim_key(dim);
-            uint32_t stratum = permute(j_, plan_.pw_n_, h);
-            return stratum_value(stratum, plan_.jitter_ ? hash_float(h, j_) : 0.5f, plan_.n_);
+            uint32_t stratum = permute(j_, plan_.size_n_, h);
+            return stratum_value(stratum, plan_.jitter_ ? hash_float(h, j_) : 0.5f, plan_.size_n_);
         }
         case SamplerType::Sobol: {
             const uint64_t h = dim_key(dim);
@@ -356,10 +384,10 @@ Vec2 PixelSampleSource::get_2d(uint32_t dim) {
     switch (plan_.type_) {
         case SamplerType::Stratified: {
             const uint64_t h = dim_key(dim), h1 = mix64(h + 1), h2 = mix64(h + 2);
-            uint32_t p = permute(j_, plan_.pw_n_, h);
-            uint32_t cx = p % plan_.res_x_, cy = p / plan_.res_x_;
+            uint32_t p = permute(j_, plan_.size_n_, h);
+            uint32_t cy = div_by(p, plan_.size_x_), cx = p - cy * plan_.res_x_;
             float jx = plan_.jitter_ ? hash_float(h1, j_) : 0.5f, jy = plan_.jitter_ ? hash_float(h2, j_) : 0.5f;
-            return {stratum_value(cx, jx, plan_.res_x_), stratum_value(cy, jy, plan_.res_y_)};
+            return {stratum_value(cx, jx, plan_.size_x_), stratum_value(cy, jy, plan_.size_y_)};
         }
         case SamplerType::Multijitter: {
             // Kensler 2013, Section 3: cell (col, row) of an m x n grid, and
@@ -368,12 +396,12 @@ Vec2 PixelSampleSource::get_2d(uint32_t dim) {
             // both projections are stratified into N (N-rooks).
             const uint64_t h = dim_key(dim), h1 = mix64(h + 1), h2 = mix64(h + 2);
             const uint32_t m = plan_.res_x_, n = plan_.res_y_;
-            uint32_t s = permute(j_, plan_.pw_n_, h);
-            uint32_t col = s % m, row = s / m;
-            uint32_t sx = permute(col, plan_.pw_x_, h1), sy = permute(row, plan_.pw_y_, h2);
+            uint32_t s = permute(j_, plan_.size_n_, h);
+            uint32_t row = div_by(s, plan_.size_x_), col = s - row * m;
+            uint32_t sx = permute(col, plan_.size_x_, h1), sy = permute(row, plan_.size_y_, h2);
             float jx = plan_.jitter_ ? hash_float(h1, j_) : 0.5f, jy = plan_.jitter_ ? hash_float(h2, j_) : 0.5f;
-            float x = stratum_value(col * n + sy, jx, m * n);
-            float y = stratum_value(row * m + sx, jy, m * n);
+            float x = stratum_value(col * n + sy, jx, plan_.size_n_);  // m n = N
+            float y = stratum_value(row * m + sx, jy, plan_.size_n_);
             return {x, y};
         }
         case SamplerType::Sobol: {

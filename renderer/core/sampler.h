@@ -55,14 +55,17 @@ struct SamplerDesc {
 // The sampler names the renderer knows, in one place ("a, b, c").
 const char* sampler_names();
 
-// permute_index's constants for one n, worked out once per plan: the mask
-// 2^bits - 1 of the smallest power of two >= n and the two shifts of its
-// bijection of [0, 2^bits).
-struct PermuteWidth {
-    PermuteWidth() = default;
-    explicit PermuteWidth(uint32_t n);
+// What the samplers work out once per plan for a size n (a pattern, a
+// grid's side): permute_index's mask 2^bits - 1 (the smallest power of two
+// >= n) and the two shifts of its bijection of [0, 2^bits), and n's
+// reciprocals, so that dividing by n takes a multiply.
+struct SizeConstants {
+    SizeConstants() = default;
+    explicit SizeConstants(uint32_t n);
     uint32_t n = 1, mask = 0;
     int s1 = 1, s2 = 1;
+    uint64_t magic = 0;  // floor(2^64 / n) + 1 (0 for n = 1): a / n = (a magic) >> 64 for 32-bit a
+    double inv = 1.0;    // 1 / n, rounded
 };
 
 // A render's sampler, resolved once: type, pattern size, film size (zsobol).
@@ -82,7 +85,7 @@ public:
 
 private:
     friend class PixelSampleSource;
-    void build_zsobol_tables();
+    void build_zsobol_tables(uint64_t pixels);
     SamplerType type_;
     std::string name_;
     bool jitter_;
@@ -92,7 +95,7 @@ private:
     int log2_n_ = 0;                  // zsobol: N = 2^log2_n
     int width_ = 1;                   // film width: pixel index -> (x, y)
     int zbits_ = 0;                   // zsobol: bits of the Morton index of a pixel
-    PermuteWidth pw_n_, pw_x_, pw_y_;  // permute_index's constants for n_, res_x_, res_y_
+    SizeConstants size_n_, size_x_, size_y_;  // the constants of n_, res_x_, res_y_
     // zsobol, pattern 0 (samples [0, N)), dimensions [0, zdims_): the keys
     // of a dimension and of its second value (PixelSampleSource::dim_key,
     // film-wide as the pixel is in the index), two a dimension, and the top
