@@ -575,6 +575,17 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
     m.def("sobol_u32", &sobol_u32, py::arg("i"), py::arg("dim"), "Sobol dimension dim (0, 1) of index i, unscrambled");
     m.def("owen_scramble", &owen_scramble, py::arg("v"), py::arg("seed"));
     m.def("permute_index", &permute_index, py::arg("i"), py::arg("n"), py::arg("key"));
+    m.def(
+        "stratum_values",
+        [](const std::vector<uint32_t>& strata, const std::vector<float>& offsets, uint32_t n) {
+            if (strata.size() != offsets.size()) throw py::value_error("stratum_values: as many offsets as strata");
+            const SizeConstants d(n);
+            py::array_t<float> out(py::ssize_t(strata.size()));
+            auto o = out.mutable_unchecked<1>();
+            for (size_t i = 0; i < strata.size(); ++i) o(py::ssize_t(i)) = stratum_value(strata[i], offsets[i], d);
+            return out;
+        },
+        py::arg("strata"), py::arg("offsets"), py::arg("n"), "stratum_value of each (stratum, offset) for size n");
     m.def("memory_limit", &memory_limit_bytes, "bytes of memory a render may use (render/memory.h)");
     m.def("set_memory_limit_for_tests", &set_memory_limit_override, py::arg("bytes"),
           "test hook: the memory limit of render/memory.h (0: the machine's)");

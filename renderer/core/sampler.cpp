@@ -69,25 +69,6 @@ uint32_t div_by(uint32_t a, const SizeConstants& d) {
     return d.n == 1 ? a : uint32_t((static_cast<unsigned __int128>(d.magic) * a) >> 64);
 }
 
-// (stratum + offset) / n, kept below 1 whatever the rounding: the float
-// nearest to the double nearest to the quotient. The numerator is exact in
-// a double (stratum < 2^24, offset a multiple of 2^-24), and so is its
-// product by 1 / n when n is a power of two. Otherwise the product by the
-// rounded 1 / n is within 2^-51.9 of the quotient, relatively, as the
-// rounded quotient is within 2^-53: both round to the same float unless a
-// float rounding midpoint lies within that of them, which the product
-// shows by its 29 bits below the float's (2^28 at a midpoint: within 16 of
-// it, 2 x the error or more to spare). Then (a quotient on a midpoint, or
-// by chance once in about 10^7 values) the division itself decides.
-float stratum_value(uint32_t stratum, float offset, const SizeConstants& d) {
-    const double num = double(stratum) + double(offset);
-    double q = num * d.inv;
-    uint64_t bits;
-    std::memcpy(&bits, &q, sizeof bits);
-    if (d.mask + 1 != d.n && (uint32_t(bits) & 0x1fffffffu) - (0x10000000u - 16u) <= 32u) q = num / double(d.n);
-    return std::min(float(q), 0x1.fffffep-1f);
-}
-
 // Sobol dimension 2 of index i, bit-reversed.
 uint32_t sobol2_reversed(uint32_t i) {
     const auto& t = kSobol2.byte;
@@ -190,6 +171,25 @@ int ceil_log2(uint64_t n) {
 }
 
 }  // namespace
+
+// (stratum + offset) / n, kept below 1 whatever the rounding: the float
+// nearest to the double nearest to the quotient. The numerator is exact in
+// a double (stratum < 2^24, offset a multiple of 2^-24), and so is its
+// product by 1 / n when n is a power of two. Otherwise the product by the
+// rounded 1 / n is within 2^-51.9 of the quotient, relatively, as the
+// rounded quotient is within 2^-53: both round to the same float unless a
+// float rounding midpoint lies within that of them, which the product
+// shows by its 29 bits below the float's (2^28 at a midpoint: within 16 of
+// it, 2 x the error or more to spare). Then (a quotient on a midpoint, or
+// by chance once in about 10^7 values) the division itself decides.
+float stratum_value(uint32_t stratum, float offset, const SizeConstants& d) {
+    const double num = double(stratum) + double(offset);
+    double q = num * d.inv;
+    uint64_t bits;
+    std::memcpy(&bits, &q, sizeof bits);
+    if (d.mask + 1 != d.n && (uint32_t(bits) & 0x1fffffffu) - (0x10000000u - 16u) <= 32u) q = num / double(d.n);
+    return std::min(float(q), 0x1.fffffep-1f);
+}
 
 uint32_t sobol_u32(uint32_t i, int dim) { return reverse_bits32(dim == 0 ? i : sobol2_reversed(i)); }
 

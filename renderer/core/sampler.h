@@ -141,5 +141,8 @@ uint32_t sobol_u32(uint32_t i, int dim);
 uint32_t owen_scramble(uint32_t v, uint32_t seed);
 // A pseudo-random permutation of [0, n) (n >= 1) chosen by key: element i.
 uint32_t permute_index(uint32_t i, uint32_t n, uint64_t key);
+// (stratum + offset) / d.n as a float below 1: the float of the double
+// quotient, by a multiply where that is provably the same.
+float stratum_value(uint32_t stratum, float offset, const SizeConstants& d);
 
 }  // namespace rm
