@@ -114,10 +114,8 @@ uint64_t morton2(uint32_t x, uint32_t y) {
 // randomised hierarchically. The digit at bit `at` (at = bits - 2, bits -
 // 4, ...) is a function of m's bits from `at` up and of the key.
 //
-// zorder_low32 is the low 32 bits of that map's digits below bit `top` (a
-// digit boundary: top = bits - 2k), the coin included; digits wholly above
-// bit 31 are skipped, as the sampler keeps 32 bits.
-// The permutation (of kPerm4) of the digit at bit `at` under the digits above it.
+// zorder_perm: the permutation (of kPerm4) of the digit at bit `at` under
+// the digits above it.
 uint32_t zorder_perm(uint64_t above, int at, uint64_t key) {
     return below(mix64((above | (uint64_t(at + 1) << 58)) ^ key), 24u);
 }
@@ -127,6 +125,9 @@ uint32_t zorder_digit(uint64_t m, int at, uint64_t key) {
     return kPerm4.p[zorder_perm(above, at, key)][uint32_t(m >> at) & 3u];
 }
 
+// The low 32 bits of the map's digits below bit `top` (a digit boundary:
+// top = bits - 2k), the coin included; digits wholly above bit 31 are
+// skipped, as the sampler keeps 32 bits.
 uint32_t zorder_low32(uint64_t m, int top, uint64_t key) {
     uint64_t out = 0;
     int b = top > 33 ? 32 + (top & 1) : top;
