@@ -7,12 +7,15 @@ build of the renderer (docs/samplers.md, "Cost per sample").
         [--samplers independent,stratified,multijitter,sobol,zsobol]
         [--res 64] [--spp 16] [--rounds 4] [--reps 2] [--instructions]
 
-Samples per second: each round runs one child process per build (this
+Samples per CPU second (the process's CPU time: one render thread, and
+less sensitive than wall time to other jobs on a shared machine, though
+not immune: caches and memory are shared). Each round runs one child
+process per build (this
 tree's `_core` and --base's, their order alternating between rounds), which
 loads every scene (res x res, box filter where the scene names a filter;
 the scene's own integrator: `path`, `volpath` on fog_room), renders once
 untimed, then renders every sampler `reps` times (one thread, seeds 1..)
-interleaved; reported: the median samples per second of each (build,
+interleaved; reported: the median samples per CPU second of each (build,
 scene, sampler), each sampler's over independent's of the same build (the
 same processes, so the machine's load hits both alike), and this tree's
 over the base's.
@@ -64,9 +67,9 @@ for name in scenes.split(","):
         rm.render(scene, spp=1, seed=99, threads=1)
     for k in range(reps):
         for s in samplers.split(","):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             rm.render(scene, spp=spp, seed=1 + k, threads=1, sampler=s)
-            out.setdefault(name, {}).setdefault(s, []).append(res * res * spp / (time.perf_counter() - t0))
+            out.setdefault(name, {}).setdefault(s, []).append(res * res * spp / (time.process_time() - t0))
 print(json.dumps(out))
 """
 
