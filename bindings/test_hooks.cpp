@@ -531,16 +531,18 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
     // the limit tests do not depend on the machine they run on.
     // Samplers (tests/test_samplers.py): the values samples [0, samples) of
     // `pixel` draw through Sampler, for a draw pattern (1: next_1d, 2:
-    // next_2d), as the camera driver makes them: a (samples, dims) array.
+    // next_2d), as the camera driver makes them: a (samples, dims) array;
+    // tables=False: the plan without its tables (SamplerPlan::drop_tables).
     m.def(
         "sampler_draws",
         [](const std::string& type, int sample_count, bool jitter, uint64_t seed, int width, int height, int spp,
-           uint64_t pixel, int samples, const std::vector<int>& draws) {
+           uint64_t pixel, int samples, const std::vector<int>& draws, bool tables) {
             SamplerDesc d;
             d.type = type;
             d.sample_count = sample_count;
             d.jitter = jitter;
             SamplerPlan plan(d, spp, width, height, seed);
+            if (!tables) plan.drop_tables();
             int dims = 0;
             for (int k : draws) {
                 if (k != 1 && k != 2) throw py::value_error("sampler_draws: draws are 1 or 2");
@@ -565,13 +567,25 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
             return out;
         },
         py::arg("type"), py::arg("sample_count"), py::arg("jitter"), py::arg("seed"), py::arg("width"),
-        py::arg("height"), py::arg("spp"), py::arg("pixel"), py::arg("samples"), py::arg("draws"));
+        py::arg("height"), py::arg("spp"), py::arg("pixel"), py::arg("samples"), py::arg("draws"),
+        py::arg("tables") = true);
     m.def(
         "set_shading_correction_for_tests", [](bool on) { g_shading_correction.store(on, std::memory_order_relaxed); },
         py::arg("on"), "false drops the adjoint shading-normal correction (transport/common.h), for a power check");
     m.def("sobol_u32", &sobol_u32, py::arg("i"), py::arg("dim"), "Sobol dimension dim (0, 1) of index i, unscrambled");
     m.def("owen_scramble", &owen_scramble, py::arg("v"), py::arg("seed"));
     m.def("permute_index", &permute_index, py::arg("i"), py::arg("n"), py::arg("key"));
+    m.def(
+        "stratum_values",
+        [](const std::vector<uint32_t>& strata, const std::vector<float>& offsets, uint32_t n) {
+            if (strata.size() != offsets.size()) throw py::value_error("stratum_values: as many offsets as strata");
+            const SizeConstants d(n);
+            py::array_t<float> out(py::ssize_t(strata.size()));
+            auto o = out.mutable_unchecked<1>();
+            for (size_t i = 0; i < strata.size(); ++i) o(py::ssize_t(i)) = stratum_value(strata[i], offsets[i], d);
+            return out;
+        },
+        py::arg("strata"), py::arg("offsets"), py::arg("n"), "stratum_value of each (stratum, offset) for size n");
     m.def("memory_limit", &memory_limit_bytes, "bytes of memory a render may use (render/memory.h)");
     m.def("set_memory_limit_for_tests", &set_memory_limit_override, py::arg("bytes"),
           "test hook: the memory limit of render/memory.h (0: the machine's)");

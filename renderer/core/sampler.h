@@ -36,6 +36,7 @@
 #pragma once
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "core/rng.h"
 
@@ -54,6 +55,19 @@ struct SamplerDesc {
 // The sampler names the renderer knows, in one place ("a, b, c").
 const char* sampler_names();
 
+// What the samplers work out once per plan for a size n (a pattern, a
+// grid's side): permute_index's mask 2^bits - 1 (the smallest power of two
+// >= n) and the two shifts of its bijection of [0, 2^bits), and n's
+// reciprocals, so that dividing by n takes a multiply.
+struct SizeConstants {
+    SizeConstants() = default;
+    explicit SizeConstants(uint32_t n);
+    uint32_t n = 1, mask = 0;
+    int s1 = 1, s2 = 1;
+    uint64_t magic = 0;  // floor(2^64 / n) + 1 (0 for n = 1): a / n = (a magic) >> 64 for 32-bit a
+    double inv = 1.0;    // 1 / n, rounded
+};
+
 // A render's sampler, resolved once: type, pattern size, film size (zsobol).
 class SamplerPlan {
 public:
@@ -64,9 +78,14 @@ public:
     // The pattern size N the samples of a pixel are structured over.
     uint32_t pattern_size() const { return n_; }
     const std::string& name() const { return name_; }
+    // For the tests: drops the plan's tables (zsobol's keys and top digits),
+    // so that every value is hashed as the definition states; the values
+    // must not change.
+    void drop_tables();
 
 private:
     friend class PixelSampleSource;
+    void build_zsobol_tables(uint64_t pixels);
     SamplerType type_;
     std::string name_;
     bool jitter_;
@@ -76,6 +95,20 @@ private:
     int log2_n_ = 0;                  // zsobol: N = 2^log2_n
     int width_ = 1;                   // film width: pixel index -> (x, y)
     int zbits_ = 0;                   // zsobol: bits of the Morton index of a pixel
+    SizeConstants size_n_, size_x_, size_y_;  // the constants of n_, res_x_, res_y_
+    // zsobol, pattern 0 (samples [0, N)), dimensions [0, zdims_): the keys
+    // of a dimension and of its second value (PixelSampleSource::dim_key,
+    // film-wide as the pixel is in the index), two a dimension, and the top
+    // ztop_digits_ base-4 digits of the index scrambled (sampler.cpp's z-order scramble,
+    // all above the sample's digits: a function of the dimension and those
+    // digits alone), for each of the 4^ztop_digits_ values of those digits
+    // a row of zdims_ (so a sample reads its dimensions one after another).
+    // The other digits are hashed per value.
+    int ztop_digits_ = 0;
+    int ztop_shift_ = 0;  // bit where the tabled digits end: the index's bits - 2 ztop_digits_
+    uint32_t zdims_ = 0;
+    std::vector<uint64_t> zkeys_;
+    std::vector<uint16_t> ztop_;
 };
 
 // The values of sample `sample` of pixel `pixel` under `plan`, for
@@ -91,10 +124,14 @@ public:
 
 private:
     uint64_t dim_key(uint32_t dim) const;
+    uint32_t zsobol_index(uint32_t dim, uint64_t key) const;
     const SamplerPlan& plan_;
     uint64_t pixel_key_;   // the seed, pixel and pattern hashed together (zsobol: seed and pattern)
     uint32_t j_;           // the sample's index within its pattern
+    uint32_t rj_ = 0;      // sobol: j's bits reversed
     uint64_t zindex_ = 0;  // zsobol: Morton index of the pixel, then j
+    const uint64_t* zkeys_ = nullptr;  // zsobol, pattern 0: the plan's dimension keys
+    const uint16_t* ztop_ = nullptr;   // zsobol, pattern 0: the plan's row of this index's top digits
 };
 
 // Building blocks, exposed for the tests (test_hooks.cpp).
@@ -104,5 +141,8 @@ uint32_t sobol_u32(uint32_t i, int dim);
 uint32_t owen_scramble(uint32_t v, uint32_t seed);
 // A pseudo-random permutation of [0, n) (n >= 1) chosen by key: element i.
 uint32_t permute_index(uint32_t i, uint32_t n, uint64_t key);
+// (stratum + offset) / d.n as a float below 1: the float of the double
+// quotient, by a multiply where that is provably the same.
+float stratum_value(uint32_t stratum, float offset, const SizeConstants& d);
 
 }  // namespace rm
