@@ -49,6 +49,18 @@ Mesh::Mesh(std::vector<float> positions, std::vector<uint32_t> indices, std::vec
     }
     total_area_ = float(acc);
     num_vertices_ = nv;
+    // The guide table: one bucket per triangle. area_bucket is monotone in
+    // the target (a product by a positive constant, then truncated and
+    // clamped), which is all the exactness of the search needs.
+    const size_t nf = triangle_count();
+    const float scale = float(nf) / total_area_;
+    if (nf > 0 && total_area_ > 0.f && std::isfinite(total_area_) && std::isfinite(scale) && scale > 0.f &&
+        nf < (size_t(1) << 31)) {
+        area_guide_scale_ = scale;
+        area_guide_.assign(nf + 1, 0);
+        for (size_t k = 0; k < nf; ++k) ++area_guide_[area_bucket(area_cdf_[k]) + 1];
+        for (size_t j = 0; j < nf; ++j) area_guide_[j + 1] += area_guide_[j];
+    }
     pos_.push_back(0.f);  // Embree reads the last vertex with a 16-byte load
 }
 
@@ -179,11 +191,30 @@ void Mesh::add_attribute(MeshAttribute a) {
     attributes_.indices = indices_.data();
 }
 
+size_t Mesh::area_bucket(float target) const {
+    const size_t n = triangle_count();
+    const float x = target * area_guide_scale_;
+    if (!(x < float(n))) return n - 1;  // NaN included
+    if (!(x > 0.f)) return 0;
+    return std::min(size_t(x), n - 1);
+}
+
+size_t Mesh::area_triangle(float target) const {
+    const float* cdf = area_cdf_.data();
+    if (area_guide_.empty())
+        return size_t(std::upper_bound(cdf, cdf + area_cdf_.size(), target) - cdf);
+    // Entries below area_guide_[j] have a lower bucket than the target's,
+    // so are below it; entries from area_guide_[j + 1] on have a higher
+    // bucket, so are above it.
+    const size_t j = area_bucket(target);
+    return size_t(std::upper_bound(cdf + area_guide_[j], cdf + area_guide_[j + 1], target) - cdf);
+}
+
 PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
     PositionSample ps;
     if (total_area_ <= 0) return ps;
     float target = u_extra * total_area_;
-    size_t f = size_t(std::upper_bound(area_cdf_.begin(), area_cdf_.end(), target) - area_cdf_.begin());
+    size_t f = area_triangle(target);
     if (f >= triangle_count()) f = triangle_count() - 1;
     Vec3 p0 = vertex(indices_[3 * f]), p1 = vertex(indices_[3 * f + 1]), p2 = vertex(indices_[3 * f + 2]);
     Vec2 b = warp::square_to_uniform_triangle(u);

@@ -95,6 +95,17 @@ private:
     std::vector<uint32_t> indices_;
     std::vector<float> normals_, uvs_;
     std::vector<float> area_cdf_;  // cumulative triangle areas, for uniform area sampling
+    // A guide table over area_cdf_ (Chen and Asau 1974's cutpoint method):
+    // the target area t falls in bucket area_bucket(t) of triangle_count()
+    // equal buckets, and area_guide_[j] counts the CDF entries whose own
+    // bucket is below j, so the first entry above t lies in
+    // [area_guide_[j], area_guide_[j + 1]]: an upper_bound over that short
+    // range gives the same triangle as one over the whole CDF (tested in
+    // tests/test_emitter_sampling.py), in O(1) expected steps.
+    std::vector<uint32_t> area_guide_;
+    float area_guide_scale_ = 0.f;  // buckets per unit area; 0: no table (search the whole CDF)
+    size_t area_bucket(float target) const;
+    size_t area_triangle(float target) const;  // the first k with area_cdf_[k] > target (n if none)
     std::vector<Vec3> face_n_;     // unit face normals, flip_normals applied at create_geometry
     float total_area_ = 0;
     size_t num_vertices_ = 0;
