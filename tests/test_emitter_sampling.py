@@ -99,20 +99,25 @@ def test_wrong_emitter_pdf_is_rejected():
     assert not r.passed
 
 
-def test_mesh_triangle_choice_is_the_binary_search_of_the_area_cdf(tmp_path):
-    """Mesh::sample_position finds its triangle through a guide table in
-    front of the area CDF (the cutpoint method); it must pick the triangle
-    an upper_bound over the whole CDF picks, for every u_extra: here at each
-    CDF entry and the floats either side of it, at 0 and just below 1, and
-    at random. The triangles (one degenerate, areas dyadic, so the CDF and
-    the targets u_extra * total are exact in float32) lie apart along x in
-    the plane z = 1, facing the reference point, so the sampled direction
-    names the triangle."""
+@pytest.mark.parametrize("count", [5, 60])
+def test_mesh_triangle_choice_is_the_binary_search_of_the_area_cdf(tmp_path, count):
+    """Mesh::sample_position finds its triangle by a scan of a short area
+    CDF (5 triangles) or through a guide table in front of a long one (60:
+    the cutpoint method, a scan or a binary search inside the bucket; a run
+    of 12 small triangles fills one bucket past the scan's length); it must
+    pick the triangle an upper_bound over the whole CDF picks, for every
+    u_extra: here at each CDF entry and the floats either side of it, at 0
+    and just below 1, and at random. The triangles (one degenerate, areas
+    dyadic, so the CDF and the targets u_extra * total are exact in
+    float32) lie apart along x in the plane z = 1, facing the reference
+    point, so the sampled direction names the triangle."""
     rng = np.random.default_rng(3)
-    areas = list(2.0 ** -rng.integers(0, 8, size=40))
-    areas[17] = 0.0  # degenerate: never picked
-    areas[18:24] = [2.0 ** -7] * 6  # a run of small ones inside one bucket
-    areas.append(32.0 - sum(areas))  # total 32: u_extra * total is exact
+    areas = list(2.0 ** -rng.integers(0, 6, size=count - 1))
+    areas[2] = 0.0  # degenerate: never picked
+    if count > 20:
+        areas[18:30] = [2.0 ** -7] * 12
+    total = 2.0 ** np.ceil(np.log2(sum(areas) + 1.0))
+    areas.append(total - sum(areas))  # the total a power of 2: u_extra * total is exact
     lines = []
     for i, a in enumerate(areas):
         x, h = 3.0 * i, 2.0 * a  # right triangle of legs 1 and h, normal -z
@@ -122,7 +127,7 @@ def test_mesh_triangle_choice_is_the_binary_search_of_the_area_cdf(tmp_path):
     obj.write_text("\n".join(lines) + "\n")
     core = _scene({"type": "obj", "filename": str(obj)})
 
-    total = np.float32(32.0)
+    total = np.float32(total)
     cdf = np.cumsum(np.asarray(areas, np.float64)).astype(np.float32)
     u_extra = [np.float32(0.0), np.nextafter(np.float32(1.0), np.float32(0.0))]
     for c in cdf:
@@ -142,4 +147,4 @@ def test_mesh_triangle_choice_is_the_binary_search_of_the_area_cdf(tmp_path):
     target = u_extra * total
     expected = np.minimum(np.searchsorted(cdf, target, side="right"), len(areas) - 1)
     np.testing.assert_array_equal(picked, expected)
-    assert 17 not in picked
+    assert 2 not in picked

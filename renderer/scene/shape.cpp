@@ -48,6 +48,7 @@ Mesh::Mesh(std::vector<float> positions, std::vector<uint32_t> indices, std::vec
         area_cdf_[f] = float(acc);
     }
     total_area_ = float(acc);
+    inv_total_area_ = total_area_ > 0.f ? 1.f / total_area_ : 0.f;
     num_vertices_ = nv;
     // The guide table: one bucket per triangle. area_bucket is monotone in
     // the target (a product by a positive constant, then truncated and
@@ -74,6 +75,18 @@ RTCGeometry Mesh::create_geometry(RTCDevice device, unsigned geom_id) {
         float l = length(c);
         Vec3 n = (l > 0 && std::isfinite(l)) ? c / l : Vec3(0, 0, 1);
         face_n_[f] = flip_normals ? -n : n;
+    }
+    // The parts of the hit record that depend on the face alone.
+    face_frame_.clear();
+    if (normals_.empty()) {
+        face_frame_.reserve(nf);
+        for (size_t f = 0; f < nf; ++f) face_frame_.emplace_back(face_n_[f]);
+    }
+    face_off_origin_.resize(nf);
+    for (size_t f = 0; f < nf; ++f) {
+        Vec3 p0 = vertex(indices_[3 * f]), p1 = vertex(indices_[3 * f + 1]), p2 = vertex(indices_[3 * f + 2]);
+        float mag = std::max(max_component(abs(p0)), std::max(max_component(abs(p1)), max_component(abs(p2))));
+        face_off_origin_[f] = mag > 0.f ? 1 : 0;
     }
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, pos_.data(), 0, 3 * sizeof(float),
@@ -116,8 +129,7 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     constexpr float kGamma7 = 7.f * 0x1p-24f / (1.f - 7.f * 0x1p-24f);
     Vec3 err_bary = (abs(p0 * b0) + abs(p1 * b1) + abs(p2 * b2)) * kGamma7;
     Vec3 err_ray = (abs(ray.o) + abs(ray.d * t)) * kGamma7;
-    float tri_mag = std::max(max_component(abs(p0)), std::max(max_component(abs(p1)), max_component(abs(p2))));
-    if (max_component(err_ray) < max_component(err_bary) && tri_mag > 0.f) {
+    if (max_component(err_ray) < max_component(err_bary) && face_off_origin_[f]) {
         it.p = ray.o + ray.d * t;
         it.eps = offset_epsilon(it.p, n, err_ray);
     } else {
@@ -130,8 +142,10 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
         Vec3 s = nv(i0) * b0 + nv(i1) * b1 + nv(i2) * b2;
         float l = length(s);
         if (l > 0 && std::isfinite(l)) ns = flip_normals ? -(s / l) : s / l;
+        it.sh = Frame(ns);
+    } else {
+        it.sh = face_frame_[f];  // Frame(n), made once per face
     }
-    it.sh = Frame(ns);
     it.uv = surface_uv(f, b1, b2);
     if (uv_frame) {
         if (!uvs_.empty()) {
@@ -161,7 +175,9 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     }
 }
 
-SurfaceUv Mesh::surface_uv(uint32_t f, float b1, float b2) const {
+// Inlined into both callers (fill_interaction, sample_position): as a call
+// it cost about 40 instructions a hit, half of them its record's copy.
+[[gnu::always_inline]] inline SurfaceUv Mesh::surface_uv(uint32_t f, float b1, float b2) const {
     SurfaceUv out;
     if (!uvs_.empty()) {
         const uint32_t i0 = indices_[3 * f], i1 = indices_[3 * f + 1], i2 = indices_[3 * f + 2];
@@ -191,6 +207,10 @@ void Mesh::add_attribute(MeshAttribute a) {
     attributes_.indices = indices_.data();
 }
 
+namespace {
+constexpr size_t kShortCdf = 8;  // CDF ranges searched by a scan
+}  // namespace
+
 size_t Mesh::area_bucket(float target) const {
     const size_t n = triangle_count();
     const float x = target * area_guide_scale_;
@@ -199,15 +219,24 @@ size_t Mesh::area_bucket(float target) const {
     return std::min(size_t(x), n - 1);
 }
 
-size_t Mesh::area_triangle(float target) const {
+[[gnu::always_inline]] inline size_t Mesh::area_triangle(float target) const {
     const float* cdf = area_cdf_.data();
-    if (area_guide_.empty())
-        return size_t(std::upper_bound(cdf, cdf + area_cdf_.size(), target) - cdf);
-    // Entries below area_guide_[j] have a lower bucket than the target's,
-    // so are below it; entries from area_guide_[j + 1] on have a higher
-    // bucket, so are above it.
-    const size_t j = area_bucket(target);
-    return size_t(std::upper_bound(cdf + area_guide_[j], cdf + area_guide_[j + 1], target) - cdf);
+    size_t lo = 0, hi = area_cdf_.size();
+    // A few triangles (a rectangle light has two): no table.
+    if (hi > kShortCdf && !area_guide_.empty()) {
+        // Entries below area_guide_[j] have a lower bucket than the
+        // target's, so are at or below it; entries from area_guide_[j + 1]
+        // on have a higher bucket, so are above it.
+        const size_t j = area_bucket(target);
+        lo = area_guide_[j];
+        hi = area_guide_[j + 1];
+    }
+    // upper_bound over [lo, hi): the first entry above the target (hi if
+    // none; a NaN target is above none, as in upper_bound), by a scan
+    // where the range is short.
+    if (hi - lo > kShortCdf) return size_t(std::upper_bound(cdf + lo, cdf + hi, target) - cdf);
+    while (lo < hi && !(target < cdf[lo])) ++lo;
+    return lo;
 }
 
 PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
@@ -223,7 +252,7 @@ PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
     ps.n = face_n_[f];
     constexpr float kGamma7 = 7.f * 0x1p-24f / (1.f - 7.f * 0x1p-24f);
     ps.eps = offset_epsilon(ps.p, ps.n, (abs(p0 * b0) + abs(p1 * b.x) + abs(p2 * b.y)) * kGamma7);
-    ps.pdf_a = 1.f / total_area_;
+    ps.pdf_a = inv_total_area_;
     ps.uv = surface_uv(uint32_t(f), b.x, b.y);
     return ps;
 }

@@ -89,7 +89,8 @@ public:
 
 private:
     // uv, triangle, barycentrics and attributes at barycentrics (b1, b2) of triangle f.
-    SurfaceUv surface_uv(uint32_t f, float b1, float b2) const;
+    // (Inline, defined in shape.cpp: its only callers are there.)
+    inline SurfaceUv surface_uv(uint32_t f, float b1, float b2) const;
     Vec3 vertex(uint32_t i) const { return {pos_[3 * i], pos_[3 * i + 1], pos_[3 * i + 2]}; }
     std::vector<float> pos_;
     std::vector<uint32_t> indices_;
@@ -105,9 +106,16 @@ private:
     std::vector<uint32_t> area_guide_;
     float area_guide_scale_ = 0.f;  // buckets per unit area; 0: no table (search the whole CDF)
     size_t area_bucket(float target) const;
-    size_t area_triangle(float target) const;  // the first k with area_cdf_[k] > target (n if none)
+    inline size_t area_triangle(float target) const;  // the first k with area_cdf_[k] > target (n if none)
     std::vector<Vec3> face_n_;     // unit face normals, flip_normals applied at create_geometry
+    // Per face, for the hit record (create_geometry): Frame(face_n_[f]),
+    // the shading frame of a mesh without vertex normals (empty otherwise),
+    // and whether some corner has a nonzero coordinate (the point-from-ray
+    // choice of fill_interaction needs it).
+    std::vector<Frame> face_frame_;
+    std::vector<uint8_t> face_off_origin_;
     float total_area_ = 0;
+    float inv_total_area_ = 0;  // 1 / total_area_: the area density of sample_position
     size_t num_vertices_ = 0;
     Vec3 lo_, hi_;
     MeshAttributes attributes_;
