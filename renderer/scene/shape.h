@@ -107,7 +107,7 @@ private:
     float area_guide_scale_ = 0.f;  // buckets per unit area; 0: no table (search the whole CDF)
     size_t area_bucket(float target) const;
     inline size_t area_triangle(float target) const;  // the first k with area_cdf_[k] > target (n if none)
-    std::vector<Vec3> face_n_;     // unit face normals, flip_normals applied at create_geometry
+    std::vector<Vec3> face_n_;                        // unit face normals, flip_normals applied at create_geometry
     // Per face, for the hit record (create_geometry): Frame(face_n_[f]),
     // the shading frame of a mesh without vertex normals (empty otherwise),
     // and whether some corner has a nonzero coordinate (the point-from-ray
