@@ -97,3 +97,54 @@ def test_wrong_emitter_pdf_is_rejected():
 
     r = chi2_test(sample, wrong_pdf, n_samples=100_000, grid=SphereGrid(n_theta=20, n_phi=40), seed=7, level=0.01)
     assert not r.passed
+
+
+@pytest.mark.parametrize("count", [5, 60])
+def test_mesh_triangle_choice_is_the_binary_search_of_the_area_cdf(tmp_path, count):
+    """Mesh::sample_position finds its triangle by a scan of a short area
+    CDF (5 triangles) or through a guide table in front of a long one (60:
+    the cutpoint method, a scan or a binary search inside the bucket; a run
+    of 12 small triangles fills one bucket past the scan's length); it must
+    pick the triangle an upper_bound over the whole CDF picks, for every
+    u_extra: here at each CDF entry and the floats either side of it, at 0
+    and just below 1, and at random. The triangles (one degenerate, areas
+    dyadic, so the CDF and the targets u_extra * total are exact in
+    float32) lie apart along x in the plane z = 1, facing the reference
+    point, so the sampled direction names the triangle."""
+    rng = np.random.default_rng(3)
+    areas = list(2.0 ** -rng.integers(0, 6, size=count - 1))
+    areas[2] = 0.0  # degenerate: never picked
+    if count > 20:
+        areas[18:30] = [2.0 ** -7] * 12
+    total = 2.0 ** np.ceil(np.log2(sum(areas) + 1.0))
+    areas.append(total - sum(areas))  # the total a power of 2: u_extra * total is exact
+    lines = []
+    for i, a in enumerate(areas):
+        x, h = 3.0 * i, 2.0 * a  # right triangle of legs 1 and h, normal -z
+        lines += [f"v {x} 0 1", f"v {x} {h} 1", f"v {x + 1} 0 1"]
+    lines += [f"f {3 * i + 1} {3 * i + 2} {3 * i + 3}" for i in range(len(areas))]
+    obj = tmp_path / "strips.obj"
+    obj.write_text("\n".join(lines) + "\n")
+    core = _scene({"type": "obj", "filename": str(obj)})
+
+    total = np.float32(total)
+    cdf = np.cumsum(np.asarray(areas, np.float64)).astype(np.float32)
+    u_extra = [np.float32(0.0), np.nextafter(np.float32(1.0), np.float32(0.0))]
+    for c in cdf:
+        u = np.float32(c / total)
+        u_extra += [np.nextafter(u, np.float32(0.0)), u, np.nextafter(u, np.float32(1.0))]
+    u_extra = np.asarray(u_extra, np.float32)
+    u_extra = u_extra[(u_extra >= 0) & (u_extra < 1)]
+    u_extra = np.concatenate([u_extra, rng.random(20000, dtype=np.float32)])
+    n = len(u_extra)
+    u = np.zeros((n, 4), np.float32)
+    u[:, 1:3] = 0.25  # barycentrics (0.75, 0.125, 0.125): inside each triangle
+    u[:, 3] = u_extra
+    s = core.sample_emitter_direction(np.zeros((n, 3), np.float32), u)
+    assert np.all(s["pdf"] > 0)
+    x = s["d"][:, 0] / s["d"][:, 2]  # where the direction crosses z = 1
+    picked = np.rint((x - 0.125) / 3.0).astype(int)
+    target = u_extra * total
+    expected = np.minimum(np.searchsorted(cdf, target, side="right"), len(areas) - 1)
+    np.testing.assert_array_equal(picked, expected)
+    assert 2 not in picked

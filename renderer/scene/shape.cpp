@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "core/warp.h"
 #include "scene/light_sampler.h"
@@ -10,6 +13,50 @@
 namespace rm {
 
 namespace {
+// A triangle's point p0 b0 + p1 b1 + p2 b2 and its error bound
+// (|p0 b0| + |p1 b1| + |p2 b2|) gamma_7 (PBR4 eq. 6.21), from corners
+// given as three floats each with a fourth readable after them (Mesh's
+// positions are padded for Embree's 16-byte loads); and a point o + d t
+// along a ray with its bound (|o| + |d t|) gamma_7 (PBR4 eq. 6.24). With
+// SSE2 the three coordinates share one register: the same IEEE products
+// and sums in the same order as the scalar code, so the same bits, in
+// about a third of the instructions (the hit record and area sampling
+// both take them).
+constexpr float kGamma7 = 7.f * 0x1p-24f / (1.f - 7.f * 0x1p-24f);
+#ifdef __SSE2__
+inline Vec3 to_vec3(__m128 v) {
+    alignas(16) float f[4];
+    _mm_store_ps(f, v);
+    return {f[0], f[1], f[2]};
+}
+inline __m128 abs4(__m128 v) { return _mm_and_ps(v, _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff))); }
+#endif
+inline void bary_point(const float* v0, const float* v1, const float* v2, float b0, float b1, float b2, Vec3& p,
+                       Vec3& err) {
+#ifdef __SSE2__
+    const __m128 a = _mm_mul_ps(_mm_loadu_ps(v0), _mm_set1_ps(b0));
+    const __m128 b = _mm_mul_ps(_mm_loadu_ps(v1), _mm_set1_ps(b1));
+    const __m128 c = _mm_mul_ps(_mm_loadu_ps(v2), _mm_set1_ps(b2));
+    p = to_vec3(_mm_add_ps(_mm_add_ps(a, b), c));
+    err = to_vec3(_mm_mul_ps(_mm_add_ps(_mm_add_ps(abs4(a), abs4(b)), abs4(c)), _mm_set1_ps(kGamma7)));
+#else
+    const Vec3 p0(v0[0], v0[1], v0[2]), p1(v1[0], v1[1], v1[2]), p2(v2[0], v2[1], v2[2]);
+    p = p0 * b0 + p1 * b1 + p2 * b2;
+    err = (abs(p0 * b0) + abs(p1 * b1) + abs(p2 * b2)) * kGamma7;
+#endif
+}
+inline void ray_point(const Ray& ray, float t, Vec3& p, Vec3& err) {
+#ifdef __SSE2__
+    static_assert(sizeof(Ray) == 8 * sizeof(float), "Ray: o, d, tmin, tmax");
+    const __m128 o = _mm_loadu_ps(&ray.o.x), dt = _mm_mul_ps(_mm_loadu_ps(&ray.d.x), _mm_set1_ps(t));
+    p = to_vec3(_mm_add_ps(o, dt));
+    err = to_vec3(_mm_mul_ps(_mm_add_ps(abs4(o), abs4(dt)), _mm_set1_ps(kGamma7)));
+#else
+    p = ray.o + ray.d * t;
+    err = (abs(ray.o) + abs(ray.d * t)) * kGamma7;
+#endif
+}
+
 // The shading frame about n whose tangent is dp/du made orthogonal to n
 // (Mitsuba 3's SurfaceInteraction::initialize_sh_frame); the default frame
 // about n where dp/du is zero, parallel to n or not finite.
@@ -48,7 +95,20 @@ Mesh::Mesh(std::vector<float> positions, std::vector<uint32_t> indices, std::vec
         area_cdf_[f] = float(acc);
     }
     total_area_ = float(acc);
+    inv_total_area_ = total_area_ > 0.f ? 1.f / total_area_ : 0.f;
     num_vertices_ = nv;
+    // The guide table: one bucket per triangle. area_bucket is monotone in
+    // the target (a product by a positive constant, then truncated and
+    // clamped), which is all the exactness of the search needs.
+    const size_t nf = triangle_count();
+    const float scale = float(nf) / total_area_;
+    if (nf > 0 && total_area_ > 0.f && std::isfinite(total_area_) && std::isfinite(scale) && scale > 0.f &&
+        nf < (size_t(1) << 31)) {
+        area_guide_scale_ = scale;
+        area_guide_.assign(nf + 1, 0);
+        for (size_t k = 0; k < nf; ++k) ++area_guide_[area_bucket(area_cdf_[k]) + 1];
+        for (size_t j = 0; j < nf; ++j) area_guide_[j + 1] += area_guide_[j];
+    }
     pos_.push_back(0.f);  // Embree reads the last vertex with a 16-byte load
 }
 
@@ -62,6 +122,18 @@ RTCGeometry Mesh::create_geometry(RTCDevice device, unsigned geom_id) {
         float l = length(c);
         Vec3 n = (l > 0 && std::isfinite(l)) ? c / l : Vec3(0, 0, 1);
         face_n_[f] = flip_normals ? -n : n;
+    }
+    // The parts of the hit record that depend on the face alone.
+    face_frame_.clear();
+    if (normals_.empty()) {
+        face_frame_.reserve(nf);
+        for (size_t f = 0; f < nf; ++f) face_frame_.emplace_back(face_n_[f]);
+    }
+    face_off_origin_.resize(nf);
+    for (size_t f = 0; f < nf; ++f) {
+        Vec3 p0 = vertex(indices_[3 * f]), p1 = vertex(indices_[3 * f + 1]), p2 = vertex(indices_[3 * f + 2]);
+        float mag = std::max(max_component(abs(p0)), std::max(max_component(abs(p1)), max_component(abs(p2))));
+        face_off_origin_[f] = mag > 0.f ? 1 : 0;
     }
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, pos_.data(), 0, 3 * sizeof(float),
@@ -91,7 +163,6 @@ void Mesh::normal_cone(Vec3& w, float& cos_theta) const {
 void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interaction& it) const {
     uint32_t f = hit.primID;
     uint32_t i0 = indices_[3 * f], i1 = indices_[3 * f + 1], i2 = indices_[3 * f + 2];
-    Vec3 p0 = vertex(i0), p1 = vertex(i1), p2 = vertex(i2);
     float b1 = hit.u, b2 = hit.v, b0 = 1.f - b1 - b2;
     Vec3 n = face_n_[f];
     it.n = n;
@@ -101,15 +172,14 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     // ~eps (|o| + t |d|) (PBR4 eq. 6.24). A huge floor seen from close by
     // needs the ray: interpolating 1e4-sized vertices misplaces the point by
     // 1e-3, which smears the shadow of a 1e-3 object into streaks.
-    constexpr float kGamma7 = 7.f * 0x1p-24f / (1.f - 7.f * 0x1p-24f);
-    Vec3 err_bary = (abs(p0 * b0) + abs(p1 * b1) + abs(p2 * b2)) * kGamma7;
-    Vec3 err_ray = (abs(ray.o) + abs(ray.d * t)) * kGamma7;
-    float tri_mag = std::max(max_component(abs(p0)), std::max(max_component(abs(p1)), max_component(abs(p2))));
-    if (max_component(err_ray) < max_component(err_bary) && tri_mag > 0.f) {
-        it.p = ray.o + ray.d * t;
+    Vec3 p_bary, err_bary, p_ray, err_ray;
+    bary_point(&pos_[3 * size_t(i0)], &pos_[3 * size_t(i1)], &pos_[3 * size_t(i2)], b0, b1, b2, p_bary, err_bary);
+    ray_point(ray, t, p_ray, err_ray);
+    if (max_component(err_ray) < max_component(err_bary) && face_off_origin_[f]) {
+        it.p = p_ray;
         it.eps = offset_epsilon(it.p, n, err_ray);
     } else {
-        it.p = p0 * b0 + p1 * b1 + p2 * b2;
+        it.p = p_bary;
         it.eps = offset_epsilon(it.p, n, err_bary);
     }
     Vec3 ns = n;
@@ -118,10 +188,13 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
         Vec3 s = nv(i0) * b0 + nv(i1) * b1 + nv(i2) * b2;
         float l = length(s);
         if (l > 0 && std::isfinite(l)) ns = flip_normals ? -(s / l) : s / l;
+        it.sh = Frame(ns);
+    } else {
+        it.sh = face_frame_[f];  // Frame(n), made once per face
     }
-    it.sh = Frame(ns);
     it.uv = surface_uv(f, b1, b2);
     if (uv_frame) {
+        const Vec3 p0 = vertex(i0), p1 = vertex(i1), p2 = vertex(i2);
         if (!uvs_.empty()) {
             // dp/du and dp/dv of the triangle's uv parametrisation (Mitsuba 3
             // src/render/mesh.cpp, compute_surface_interaction): solve
@@ -149,7 +222,9 @@ void Mesh::fill_interaction(const Ray& ray, const RTCHit& hit, float t, Interact
     }
 }
 
-SurfaceUv Mesh::surface_uv(uint32_t f, float b1, float b2) const {
+// Inlined into both callers (fill_interaction, sample_position): as a call
+// it cost about 40 instructions a hit, half of them its record's copy.
+[[gnu::always_inline]] inline SurfaceUv Mesh::surface_uv(uint32_t f, float b1, float b2) const {
     SurfaceUv out;
     if (!uvs_.empty()) {
         const uint32_t i0 = indices_[3 * f], i1 = indices_[3 * f + 1], i2 = indices_[3 * f + 2];
@@ -179,20 +254,52 @@ void Mesh::add_attribute(MeshAttribute a) {
     attributes_.indices = indices_.data();
 }
 
+namespace {
+constexpr size_t kShortCdf = 8;  // CDF ranges searched by a scan
+}  // namespace
+
+size_t Mesh::area_bucket(float target) const {
+    const size_t n = triangle_count();
+    const float x = target * area_guide_scale_;
+    if (!(x < float(n))) return n - 1;  // NaN included
+    if (!(x > 0.f)) return 0;
+    return std::min(size_t(x), n - 1);
+}
+
+[[gnu::always_inline]] inline size_t Mesh::area_triangle(float target) const {
+    const float* cdf = area_cdf_.data();
+    size_t lo = 0, hi = area_cdf_.size();
+    // A few triangles (a rectangle light has two): no table.
+    if (hi > kShortCdf && !area_guide_.empty()) {
+        // Entries below area_guide_[j] have a lower bucket than the
+        // target's, so are at or below it; entries from area_guide_[j + 1]
+        // on have a higher bucket, so are above it.
+        const size_t j = area_bucket(target);
+        lo = area_guide_[j];
+        hi = area_guide_[j + 1];
+    }
+    // upper_bound over [lo, hi): the first entry above the target (hi if
+    // none; a NaN target is above none, as in upper_bound), by a scan
+    // where the range is short.
+    if (hi - lo > kShortCdf) return size_t(std::upper_bound(cdf + lo, cdf + hi, target) - cdf);
+    while (lo < hi && !(target < cdf[lo])) ++lo;
+    return lo;
+}
+
 PositionSample Mesh::sample_position(Vec2 u, float u_extra) const {
     PositionSample ps;
     if (total_area_ <= 0) return ps;
     float target = u_extra * total_area_;
-    size_t f = size_t(std::upper_bound(area_cdf_.begin(), area_cdf_.end(), target) - area_cdf_.begin());
+    size_t f = area_triangle(target);
     if (f >= triangle_count()) f = triangle_count() - 1;
-    Vec3 p0 = vertex(indices_[3 * f]), p1 = vertex(indices_[3 * f + 1]), p2 = vertex(indices_[3 * f + 2]);
     Vec2 b = warp::square_to_uniform_triangle(u);
     float b0 = 1.f - b.x - b.y;
-    ps.p = p0 * b0 + p1 * b.x + p2 * b.y;
+    Vec3 err;
+    bary_point(&pos_[3 * size_t(indices_[3 * f])], &pos_[3 * size_t(indices_[3 * f + 1])],
+               &pos_[3 * size_t(indices_[3 * f + 2])], b0, b.x, b.y, ps.p, err);
     ps.n = face_n_[f];
-    constexpr float kGamma7 = 7.f * 0x1p-24f / (1.f - 7.f * 0x1p-24f);
-    ps.eps = offset_epsilon(ps.p, ps.n, (abs(p0 * b0) + abs(p1 * b.x) + abs(p2 * b.y)) * kGamma7);
-    ps.pdf_a = 1.f / total_area_;
+    ps.eps = offset_epsilon(ps.p, ps.n, err);
+    ps.pdf_a = inv_total_area_;
     ps.uv = surface_uv(uint32_t(f), b.x, b.y);
     return ps;
 }

@@ -89,14 +89,33 @@ public:
 
 private:
     // uv, triangle, barycentrics and attributes at barycentrics (b1, b2) of triangle f.
-    SurfaceUv surface_uv(uint32_t f, float b1, float b2) const;
+    // (Inline, defined in shape.cpp: its only callers are there.)
+    inline SurfaceUv surface_uv(uint32_t f, float b1, float b2) const;
     Vec3 vertex(uint32_t i) const { return {pos_[3 * i], pos_[3 * i + 1], pos_[3 * i + 2]}; }
     std::vector<float> pos_;
     std::vector<uint32_t> indices_;
     std::vector<float> normals_, uvs_;
     std::vector<float> area_cdf_;  // cumulative triangle areas, for uniform area sampling
-    std::vector<Vec3> face_n_;     // unit face normals, flip_normals applied at create_geometry
+    // A guide table over area_cdf_ (Chen and Asau 1974's cutpoint method):
+    // the target area t falls in bucket area_bucket(t) of triangle_count()
+    // equal buckets, and area_guide_[j] counts the CDF entries whose own
+    // bucket is below j, so the first entry above t lies in
+    // [area_guide_[j], area_guide_[j + 1]]: an upper_bound over that short
+    // range gives the same triangle as one over the whole CDF (tested in
+    // tests/test_emitter_sampling.py), in O(1) expected steps.
+    std::vector<uint32_t> area_guide_;
+    float area_guide_scale_ = 0.f;  // buckets per unit area; 0: no table (search the whole CDF)
+    size_t area_bucket(float target) const;
+    inline size_t area_triangle(float target) const;  // the first k with area_cdf_[k] > target (n if none)
+    std::vector<Vec3> face_n_;                        // unit face normals, flip_normals applied at create_geometry
+    // Per face, for the hit record (create_geometry): Frame(face_n_[f]),
+    // the shading frame of a mesh without vertex normals (empty otherwise),
+    // and whether some corner has a nonzero coordinate (the point-from-ray
+    // choice of fill_interaction needs it).
+    std::vector<Frame> face_frame_;
+    std::vector<uint8_t> face_off_origin_;
     float total_area_ = 0;
+    float inv_total_area_ = 0;  // 1 / total_area_: the area density of sample_position
     size_t num_vertices_ = 0;
     Vec3 lo_, hi_;
     MeshAttributes attributes_;
