@@ -137,7 +137,8 @@ def timings(builds, scenes, samplers, res, spp, rounds, reps):
                 med = statistics.median(acc[label][name][s])
                 row[f"{label}_samples_per_s"] = round(med)
                 if "independent" in acc[label][name]:
-                    row[f"{label}_over_independent"] = round(med / statistics.median(acc[label][name]["independent"]), 3)
+                    base = statistics.median(acc[label][name]["independent"])
+                    row[f"{label}_over_independent"] = round(med / base, 3)
             if "base" in builds:
                 row["this_over_base"] = round(row["this_samples_per_s"] / row["base_samples_per_s"], 3)
             rows.append(row)
