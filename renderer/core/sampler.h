@@ -90,11 +90,11 @@ private:
     std::string name_;
     bool jitter_;
     uint64_t seed_;
-    uint32_t n_ = 1;                  // pattern size
-    uint32_t res_x_ = 1, res_y_ = 1;  // multijitter: columns x rows; stratified: the 2D grid side
-    int log2_n_ = 0;                  // zsobol: N = 2^log2_n
-    int width_ = 1;                   // film width: pixel index -> (x, y)
-    int zbits_ = 0;                   // zsobol: bits of the Morton index of a pixel
+    uint32_t n_ = 1;                          // pattern size
+    uint32_t res_x_ = 1, res_y_ = 1;          // multijitter: columns x rows; stratified: the 2D grid side
+    int log2_n_ = 0;                          // zsobol: N = 2^log2_n
+    int width_ = 1;                           // film width: pixel index -> (x, y)
+    int zbits_ = 0;                           // zsobol: bits of the Morton index of a pixel
     SizeConstants size_n_, size_x_, size_y_;  // the constants of n_, res_x_, res_y_
     // zsobol, pattern 0 (samples [0, N)), dimensions [0, zdims_): the keys
     // of a dimension and of its second value (PixelSampleSource::dim_key,
@@ -126,10 +126,10 @@ private:
     uint64_t dim_key(uint32_t dim) const;
     uint32_t zsobol_index(uint32_t dim, uint64_t key) const;
     const SamplerPlan& plan_;
-    uint64_t pixel_key_;   // the seed, pixel and pattern hashed together (zsobol: seed and pattern)
-    uint32_t j_;           // the sample's index within its pattern
-    uint32_t rj_ = 0;      // sobol: j's bits reversed
-    uint64_t zindex_ = 0;  // zsobol: Morton index of the pixel, then j
+    uint64_t pixel_key_;               // the seed, pixel and pattern hashed together (zsobol: seed and pattern)
+    uint32_t j_;                       // the sample's index within its pattern
+    uint32_t rj_ = 0;                  // sobol: j's bits reversed
+    uint64_t zindex_ = 0;              // zsobol: Morton index of the pixel, then j
     const uint64_t* zkeys_ = nullptr;  // zsobol, pattern 0: the plan's dimension keys
     const uint16_t* ztop_ = nullptr;   // zsobol, pattern 0: the plan's row of this index's top digits
 };

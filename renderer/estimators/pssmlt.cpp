@@ -1002,8 +1002,8 @@ private:
             for (int c = 0; c < 3; ++c) {
                 double total = 0;
                 for (int e = 0; e < kNumEffects; ++e) {
-                    const double v = sums_[(p * kNumEffects + size_t(e)) * 3 + size_t(c)] / n +
-                                     dir[size_t(e) * 3 + size_t(c)] / k;
+                    const double v =
+                        sums_[(p * kNumEffects + size_t(e)) * 3 + size_t(c)] / n + dir[size_t(e) * 3 + size_t(c)] / k;
                     total += v;
                     if (effects) (*effects)[size_t(e)][3 * p + size_t(c)] = float(v);
                 }
@@ -1029,9 +1029,7 @@ private:
             if (v1 > 0) weight += v1 * v1 / nu1;
             if (v2 > 0) weight += v2 * v2 / nu2;
         }
-        double dof() const {
-            return weight > 0 ? var * var / weight : std::numeric_limits<double>::infinity();
-        }
+        double dof() const { return weight > 0 ? var * var / weight : std::numeric_limits<double>::infinity(); }
     };
 
     // Pixel p's channel c after `spp` samples per pixel: its variance (what
@@ -1097,8 +1095,8 @@ private:
             m4 += m_b / double(M) * e2 * e2;
         }
         const double n_d = double(dp.n), m2_b = n_d > 1 ? (dp.f_sq - n_d * dp.b * dp.b) / n_d : 0.0;
-        out.add(m2 / (double(B) - 1.0), variance_dof(double(B), m2, m4),
-                I * I * b_relative_variance(dp), variance_dof(n_d, m2_b, dp.f_c4 / n_d));
+        out.add(m2 / (double(B) - 1.0), variance_dof(double(B), m2, m4), I * I * b_relative_variance(dp),
+                variance_dof(n_d, m2_b, dp.f_c4 / n_d));
     }
 
     // The degrees of freedom of a sample variance of `n` values with second
