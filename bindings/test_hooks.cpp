@@ -73,6 +73,7 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
     py::class_<RayLog>(m, "RayLog")
         .def(py::init<>())
         .def("__len__", [](const RayLog& l) { return l.rays.size(); })
+        .def_readonly("samples", &RayLog::samples)
         .def_property_readonly("shadow_rays", [](const RayLog& l) {
             size_t n = 0;
             for (uint8_t s : l.shadow) n += s;
@@ -91,6 +92,27 @@ void bind_test_hooks(py::module_& m, py::class_<Scene>& scene) {
                 return s.replay(log, bare, repeats);
             },
             py::arg("log"), py::arg("bare"), py::arg("repeats") = 3)
+        .def(
+            "replay_rays_grouped",
+            [](const Scene& s, const RayLog& log, int width, bool wavefront, bool coherent, int repeats) {
+                ReplayTiming t;
+                {
+                    py::gil_scoped_release release;
+                    t = s.replay_grouped(log, width, wavefront, coherent, repeats);
+                }
+                py::dict d;
+                d["seconds"] = t.seconds;
+                d["closest_seconds"] = t.closest_seconds;
+                d["shadow_seconds"] = t.shadow_seconds;
+                d["closest_hits"] = t.closest;
+                d["occluded"] = t.occluded;
+                d["calls"] = t.calls;
+                return d;
+            },
+            py::arg("log"), py::arg("width"), py::arg("wavefront") = false, py::arg("coherent") = false,
+            py::arg("repeats") = 3,
+            "the log's rays by bare Embree: width 1, 4, 8, 16 (packets) or 0 (stream), in the log's order "
+            "or queued as a wavefront renderer would (rank within each sample)")
         .def("set_robust", &Scene::set_robust, py::arg("on"))
         .def_property_readonly("robust", &Scene::robust)
         // The closest hits of N rays (origins and directions (N, 3)), as the

@@ -209,3 +209,60 @@ def test_robust_mode_keeps_rays_from_leaking_through_shared_edges(packet):
 def test_robust_mode_where_the_scene_needs_it(name, robust):
     """On with meshes (shared edges), off for analytic shapes alone."""
     assert _scene(name).core().robust == robust
+
+
+def _logged_render(scene, single: bool, spp=2):
+    log = _core.RayLog()
+    _core.set_camera_packets(not single)
+    _core.attach_ray_log(log)
+    try:
+        rm.render(scene, integrator="path", spp=spp, seed=3, threads=1)
+    finally:
+        _core.attach_ray_log(None)
+        _core.set_camera_packets(True)
+    return log
+
+
+def test_grouped_replay_traces_every_ray_once_in_each_grouping():
+    """The Embree-limit study's packet and stream replays
+    (benchmarks/studies/embree_limit.py --groups): every mode traces the
+    log's rays, each once, and finds the hits one-ray replay finds (to a
+    few rays: the packet kernels' barycentrics differ by an ulp); a packet
+    call per N rays of each queue; the wavefront queues hold every
+    sample's k-th ray, so they number twice the longest sample's rays of
+    one kind, where the traced order has two queues."""
+    scene = _scene("cornell_box", res=16)
+    core = scene.core()
+    log = _logged_render(scene, single=True)
+    assert log.samples == 16 * 16 * 2
+    n = len(log)
+    base = core.replay_rays_grouped(log, width=1, repeats=1)
+    assert base["calls"] == n
+    # Camera rays into a closed box all hit; bounces leave by the open front.
+    assert 16 * 16 * 2 <= base["closest_hits"] < n - log.shadow_rays
+    assert 0 < base["occluded"] < log.shadow_rays
+    for width in (0, 4, 8, 16):
+        for wavefront in (False, True):
+            t = core.replay_rays_grouped(log, width=width, wavefront=wavefront, repeats=1)
+            got = t["closest_hits"] + t["occluded"]
+            assert abs(got - base["closest_hits"] - base["occluded"]) <= 2 + 1e-3 * n, (width, wavefront)
+            if width == 0:
+                assert t["calls"] == 2 or wavefront  # traced order: one stream call per kind
+            elif not wavefront:
+                closest = n - log.shadow_rays
+                assert t["calls"] == -(-closest // width) + -(-log.shadow_rays // width)
+            else:
+                assert t["calls"] > -(-n // width)  # partly filled packets at each queue's end
+    stream = core.replay_rays_grouped(log, width=0, wavefront=True, repeats=1)
+    single_wavefront = core.replay_rays_grouped(log, width=1, wavefront=True, repeats=1)
+    assert stream["calls"] > 2 and single_wavefront["calls"] == n
+
+
+def test_grouped_replay_refuses_what_it_cannot_do():
+    scene = _scene("cornell_box", res=8)
+    core = scene.core()
+    with pytest.raises(ValueError, match="width must be 0 .stream., 1, 4, 8 or 16, not 3"):
+        core.replay_rays_grouped(_logged_render(scene, single=True, spp=1), width=3)
+    # With camera packets the driver marks no samples: no wavefront queues.
+    with pytest.raises(ValueError, match="no sample marks"):
+        core.replay_rays_grouped(_logged_render(scene, single=False, spp=1), width=8, wavefront=True)

@@ -135,6 +135,7 @@ private:
     }
 
     void render_sample(Sampler& sampler, int pixel, ThreadStats& stats) {
+        if (__builtin_expect(ray_log_attached(), 0)) ray_log_begin_sample();
         SensorRay sr = sample_camera_ray(*scene_.sensor, filter_, pixel, sampler);
         // 2. The estimator's radiance along it, by effect, times the ray's weight.
         EffectRadiance er;

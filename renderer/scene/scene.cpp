@@ -40,10 +40,16 @@ std::mutex g_ray_log_mutex;  // a render on several threads records safely (in n
     std::lock_guard<std::mutex> lock(g_ray_log_mutex);
     g_ray_log->rays.push_back(ray);
     g_ray_log->shadow.push_back(shadow ? 1 : 0);
+    g_ray_log->sample.push_back(g_ray_log->samples);
 }
 }  // namespace
 
 void attach_ray_log(RayLog* log) { g_ray_log = log; }
+bool ray_log_attached() { return g_ray_log != nullptr; }
+void ray_log_begin_sample() {
+    std::lock_guard<std::mutex> lock(g_ray_log_mutex);
+    if (g_ray_log) ++g_ray_log->samples;
+}
 
 Scene::Scene() {
     device_ = rtcNewDevice(nullptr);
@@ -566,34 +572,186 @@ void Scene::set_robust(bool on) {
     check_embree();
 }
 
+namespace {
+// One queue of a grouped replay: its rays copied out of the log in queue
+// order, so the timed loop reads them contiguously (as a wavefront renderer
+// reads its ray queues).
+struct ReplayQueue {
+    bool shadow;
+    std::vector<Ray> rays;
+};
+
+// The log's rays as queues: in the log's order (closest-hit and shadow
+// rays apart, each in order), or as a wavefront renderer queues them.
+std::vector<ReplayQueue> replay_queues(const RayLog& log, bool wavefront) {
+    std::vector<ReplayQueue> q;
+    if (!wavefront) {
+        q.push_back({false, {}});
+        q.push_back({true, {}});
+        for (size_t i = 0; i < log.rays.size(); ++i) q[log.shadow[i] ? 1 : 0].rays.push_back(log.rays[i]);
+        return q;
+    }
+    // Rank of each ray among its sample's rays of the same kind; queue 2k
+    // holds every sample's k-th closest-hit ray, 2k + 1 its k-th shadow ray.
+    uint32_t cur = ~0u, rank[2] = {0, 0};
+    for (size_t i = 0; i < log.rays.size(); ++i) {
+        if (log.sample[i] != cur) {
+            cur = log.sample[i];
+            rank[0] = rank[1] = 0;
+        }
+        const int kind = log.shadow[i] ? 1 : 0;
+        const size_t qi = 2 * size_t(rank[kind]++) + size_t(kind);
+        while (q.size() <= qi) q.push_back({q.size() % 2 == 1, {}});
+        q[qi].rays.push_back(log.rays[i]);
+    }
+    return q;
+}
+
+template <int N, typename RayHitN, typename RayN>
+void replay_packets(RTCScene scene, const ReplayQueue& queue, ReplayTiming& t) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    const size_t n = queue.rays.size();
+    for (size_t a = 0; a < n; a += N) {
+        alignas(64) int valid[N];
+        RayHitN rh;
+        const size_t m = std::min(n - a, size_t(N));
+        for (size_t k = 0; k < size_t(N); ++k) {
+            valid[k] = k < m ? -1 : 0;
+            const Ray& ray = queue.rays[a + std::min(k, m - 1)];
+            rh.ray.org_x[k] = ray.o.x;
+            rh.ray.org_y[k] = ray.o.y;
+            rh.ray.org_z[k] = ray.o.z;
+            rh.ray.dir_x[k] = ray.d.x;
+            rh.ray.dir_y[k] = ray.d.y;
+            rh.ray.dir_z[k] = ray.d.z;
+            rh.ray.tnear[k] = ray.tmin;
+            rh.ray.tfar[k] = ray.tmax;
+            rh.ray.mask[k] = 0xFFFFFFFFu;
+            rh.ray.flags[k] = 0;
+            rh.ray.time[k] = 0;
+            rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+            rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+        }
+        ++t.calls;
+        if (queue.shadow) {
+            if constexpr (N == 4) rtcOccluded4(valid, scene, &ctx, reinterpret_cast<RTCRay4*>(&rh.ray));
+            if constexpr (N == 8) rtcOccluded8(valid, scene, &ctx, reinterpret_cast<RTCRay8*>(&rh.ray));
+            if constexpr (N == 16) rtcOccluded16(valid, scene, &ctx, reinterpret_cast<RTCRay16*>(&rh.ray));
+            for (size_t k = 0; k < m; ++k) t.occluded += rh.ray.tfar[k] < 0.f;
+        } else {
+            if constexpr (N == 4) rtcIntersect4(valid, scene, &ctx, &rh);
+            if constexpr (N == 8) rtcIntersect8(valid, scene, &ctx, &rh);
+            if constexpr (N == 16) rtcIntersect16(valid, scene, &ctx, &rh);
+            for (size_t k = 0; k < m; ++k) t.closest += rh.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID;
+        }
+    }
+}
+
+void replay_stream(RTCScene scene, const ReplayQueue& queue, bool coherent, std::vector<RTCRayHit>& buf,
+                   ReplayTiming& t) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    const size_t n = queue.rays.size();
+    buf.resize(n);
+    for (size_t k = 0; k < n; ++k) {
+        to_rtc(queue.rays[k], buf[k].ray);
+        buf[k].hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        buf[k].hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    }
+    ++t.calls;
+    if (queue.shadow) {
+        rtcOccluded1M(scene, &ctx, reinterpret_cast<RTCRay*>(buf.data()), unsigned(n), sizeof(RTCRayHit));
+        for (size_t k = 0; k < n; ++k) t.occluded += buf[k].ray.tfar < 0.f;
+    } else {
+        rtcIntersect1M(scene, &ctx, buf.data(), unsigned(n), sizeof(RTCRayHit));
+        for (size_t k = 0; k < n; ++k) t.closest += buf[k].hit.geomID != RTC_INVALID_GEOMETRY_ID;
+    }
+}
+
+// One ray by bare Embree, as the renderer's Scene::intersect / occluded
+// would trace it.
+void replay_one(RTCScene scene, const Ray& ray, bool shadow, ReplayTiming& t) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRayHit rh;
+    to_rtc(ray, rh.ray);
+    ++t.calls;
+    if (shadow) {
+        rtcOccluded1(scene, &ctx, &rh.ray);
+        t.occluded += rh.ray.tfar < 0.f;
+    } else {
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+        rtcIntersect1(scene, &ctx, &rh);
+        t.closest += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+    }
+}
+
+}  // namespace
+
 double Scene::replay(const RayLog& log, bool bare, int repeats) const {
     if (!committed_) throw std::logic_error("replay: the scene is not committed");
     double best = kInf;
     for (int r = 0; r < std::max(repeats, 1); ++r) {
+        ReplayTiming t;
         auto t0 = std::chrono::steady_clock::now();
         for (size_t i = 0; i < log.rays.size(); ++i) {
             const Ray& ray = log.rays[i];
-            if (!bare) {
-                Interaction it;
-                if (log.shadow[i])
-                    occluded(ray);
-                else
-                    intersect(ray, it);
-                continue;
-            }
-            RTCIntersectContext ctx;
-            rtcInitIntersectContext(&ctx);
-            RTCRayHit rh;
-            to_rtc(ray, rh.ray);
-            if (log.shadow[i]) {
-                rtcOccluded1(scene_, &ctx, &rh.ray);
+            if (bare) {
+                replay_one(scene_, ray, log.shadow[i] != 0, t);
+            } else if (log.shadow[i]) {
+                occluded(ray);
             } else {
-                rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-                rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-                rtcIntersect1(scene_, &ctx, &rh);
+                Interaction it;
+                intersect(ray, it);
             }
         }
         best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+    return best;
+}
+
+ReplayTiming Scene::replay_grouped(const RayLog& log, int width, bool wavefront, bool coherent, int repeats) const {
+    if (!committed_) throw std::logic_error("replay_grouped: the scene is not committed");
+    if (width != 0 && width != 1 && width != 4 && width != 8 && width != 16)
+        throw std::invalid_argument("replay_grouped: width must be 0 (stream), 1, 4, 8 or 16, not " +
+                                    std::to_string(width));
+    if (wavefront && (log.samples == 0 || log.sample.size() != log.rays.size()))
+        throw std::invalid_argument(
+            "replay_grouped: the log has no sample marks (only the camera driver's one-ray loop marks them)");
+    const std::vector<ReplayQueue> queues = replay_queues(log, wavefront);
+    std::vector<RTCRayHit> buf;
+    ReplayTiming best;
+    best.seconds = kInf;
+    for (int r = 0; r < std::max(repeats, 1); ++r) {
+        ReplayTiming t;
+        auto t0 = std::chrono::steady_clock::now();
+        for (const ReplayQueue& q : queues) {
+            auto q0 = std::chrono::steady_clock::now();
+            switch (width) {
+                case 0:
+                    replay_stream(scene_, q, coherent, buf, t);
+                    break;
+                case 1:
+                    for (const Ray& ray : q.rays) replay_one(scene_, ray, q.shadow, t);
+                    break;
+                case 4:
+                    replay_packets<4, RTCRayHit4, RTCRay4>(scene_, q, t);
+                    break;
+                case 8:
+                    replay_packets<8, RTCRayHit8, RTCRay8>(scene_, q, t);
+                    break;
+                default:
+                    replay_packets<16, RTCRayHit16, RTCRay16>(scene_, q, t);
+                    break;
+            }
+            const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - q0).count();
+            (q.shadow ? t.shadow_seconds : t.closest_seconds) += dt;
+        }
+        t.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (t.seconds < best.seconds) best = t;
     }
     return best;
 }

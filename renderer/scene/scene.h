@@ -48,9 +48,25 @@ struct SceneFeatures {
 // a call per access, and the unattached check must stay one load).
 struct RayLog {
     std::vector<Ray> rays;
-    std::vector<uint8_t> shadow;  // 1: occlusion query, 0: closest hit
+    std::vector<uint8_t> shadow;   // 1: occlusion query, 0: closest hit
+    std::vector<uint32_t> sample;  // which camera sample traced it (ray_log_begin_sample)
+    uint32_t samples = 0;
 };
 void attach_ray_log(RayLog* log);  // nullptr detaches
+bool ray_log_attached();
+// The camera driver calls it before each sample's rays (one-ray camera
+// path only), so the wavefront replay can group the rays of many samples
+// by their rank within each sample.
+void ray_log_begin_sample();
+
+// What a replay of a RayLog measured (Scene::replay_grouped).
+struct ReplayTiming {
+    double seconds = 0;                              // fastest pass
+    double closest_seconds = 0, shadow_seconds = 0;  // its closest-hit and shadow queues
+    size_t closest = 0;                              // closest-hit queries that hit something
+    size_t occluded = 0;                             // occlusion queries that found a blocker
+    size_t calls = 0;                                // Embree calls per pass
+};
 
 class Scene {
 public:
@@ -122,6 +138,14 @@ public:
     // limit); else through intersect() / occluded() (our ray set-up, range
     // check and hit record).
     double replay(const RayLog& log, bool bare, int repeats) const;
+    // The same rays traced by bare Embree in groups: `width` 4, 8 or 16 for
+    // rtcIntersectN / rtcOccludedN packets, 0 for the stream call
+    // rtcIntersect1M / rtcOccluded1M over each whole queue (`coherent`
+    // sets the context's COHERENT flag), 1 for one ray at a time. With
+    // `wavefront` the rays are queued as a wavefront renderer would trace
+    // them (all samples' k-th closest-hit rays, then their k-th shadow
+    // rays, for k = 0, 1, ...), otherwise in the order they were traced.
+    ReplayTiming replay_grouped(const RayLog& log, int width, bool wavefront, bool coherent, int repeats) const;
     // Embree's robust mode (RTC_SCENE_FLAG_ROBUST) on or off, for tests and
     // benchmarks; rebuilds the BVH of a committed scene. commit() turns it
     // on for scenes with meshes, off for analytic shapes alone.

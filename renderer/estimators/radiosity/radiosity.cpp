@@ -371,7 +371,7 @@ struct SideView {
 // (if given) counts the rays that were occluded.
 double receiver_factor(const Scene& scene, const SideView& snd, const SideView& rcv, int k, size_t pair, double a_r,
                        float scale, uint64_t& rays, int* blocked = nullptr) {
-    const Patch &pi = *snd.p, &pj = *rcv.p;
+    const Patch& pi = *snd.p;
     const double si = snd.side, sj = rcv.side;
     const Vec3d ni = pi.n * si;
     auto eps_at = [&](const Vec3d& p) { return 1e-5f * scale + 4e-6f * max_component(abs(p.f())) + 1e-30f; };
