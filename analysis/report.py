@@ -788,6 +788,19 @@ def time_to_error_html(results_json: Path, out: Path) -> str:
                 "radiometer.benchmarks.studies.time_to_error</code>.</p>")
     d = json.loads(results_json.read_text())
     m = d.get("machine") or {}
+    # The ceiling beside it (benchmarks/studies/embree_limit.py --groups):
+    # each scene's ratio if we cost nothing but Embree's fastest grouping.
+    from radiometer.benchmarks.studies.embree_limit import zero_shading_ratio
+
+    limit_json = results_json.with_name("embree_limit.json")
+    limits = {}
+    if limit_json.exists():
+        limits = {r["scene"]: r for r in json.loads(limit_json.read_text()).get("rows", [])
+                  if r.get("estimator") == "path" and r.get("groups")}
+    def floor_cell(scene, r):
+        f = zero_shading_ratio(r, limits[scene]) if scene in limits else None
+        return "not measured" if f is None else f"{f:.2f}"
+
     rows = []
     for scene, r in d.get("scenes", {}).items():
         best = {c["renderer"]: c for c in sorted(r["contenders"], key=lambda c: c["time_to_target_s"], reverse=True)}
@@ -797,7 +810,7 @@ def time_to_error_html(results_json: Path, out: Path) -> str:
                     f"<td>{esc(r['best_ours'])}: {best['radiometer']['time_to_target_s']:.3g} s</td>"
                     f"<td>{esc(r['best_mitsuba'])}: {best['mitsuba']['time_to_target_s']:.3g} s</td>"
                     f"<td style='background:{_ratio_colour(1 / r['ratio'], 'yes')}'>{r['ratio']:.2f}</td>"
-                    f"<td>{esc(threads)}</td></tr>")
+                    f"<td>{floor_cell(scene, r)}</td><td>{esc(threads)}</td></tr>")
     png = results_json.with_suffix(".png")
     img = ""
     if png.exists():
@@ -807,9 +820,14 @@ def time_to_error_html(results_json: Path, out: Path) -> str:
             "curve (box filter on both sides, the same max_depth; Msamples/s at the ladder's middle spp), our best "
             "sampler against Mitsuba 3's best variant and sampler; the goal is a ratio of at most 0.5. Measured at "
             f"commit {esc(str(d.get('commit')))} on {esc(str(m.get('cpu', '?')))}, {esc(str(m.get('cores', '?')))} "
-            f"cores, {esc(str(d.get('date')))}.</p>"
+            f"cores, {esc(str(d.get('date')))}. "
+            "The ratio at zero shading cost is what it would be if our renderer cost nothing but bare Embree's "
+            "fastest grouping of the same rays (packets or streams, queued as a wavefront renderer would; "
+            "<code>embree_limit --groups</code>, robust mode on), with our samples as they are: above 0.5, "
+            "faster rays alone cannot reach the goal on this machine.</p>"
             "<table><tr><th>scene</th><th>target relMSE</th><th>ours, best</th><th>Mitsuba, best</th>"
-            "<th>ratio</th><th>Msamples/s by threads</th></tr>" + "".join(rows) + "</table>" + img)
+            "<th>ratio</th><th>ratio at zero shading cost</th><th>Msamples/s by threads</th></tr>" + "".join(rows) +
+            "</table>" + img)
 
 
 def write_page(run: dict, recs: list, root: Path, out: Path, source, log=print, history=None) -> Path:

@@ -335,3 +335,16 @@ def test_time_to_error_section_from_the_study_results(tmp_path):
     page = time_to_error_html(f, tmp_path)
     assert "cornell_box" in page and ">2.50<" in page and "abc1234" in page
     assert "zsobol: 5 s" in page and "llvm_ad_rgb multijitter: 2 s" in page
+    assert "<td>not measured</td>" in page  # no embree_limit.json beside it
+    # With the ceiling beside it: 2.5 x our best's 1.2 Ms/s over 2 threads x 1.5 Ms/s (the best grouping) = 1.00.
+    scene["thread_scaling"]["2"] = {"ours_msamples_per_s": 0.9, "mitsuba_llvm_msamples_per_s": 3.0}
+    scene["contenders"][0].update(sampler="zsobol", msamples_per_s=1.2)
+    scene["contenders"].insert(0, {"renderer": "radiometer", "sampler": "independent", "time_to_target_s": 9.0,
+                                   "msamples_per_s": 3.0})
+    f.write_text(json.dumps({"commit": "abc1234", "date": "2026-12-06", "machine": {"cpu": "X", "cores": 2},
+                             "scenes": {"cornell_box": scene}}))
+    modes = [{"mode": "1 ray", "msamples_per_s": 1.0}, {"mode": "16-wide", "msamples_per_s": 1.5}]
+    row = {"estimator": "path", "scene": "cornell_box", "groups": {"robust": modes, "fast": []}}
+    (tmp_path / "embree_limit.json").write_text(json.dumps({"rows": [row, {**row, "estimator": "bdpt"}]}))
+    page = time_to_error_html(f, tmp_path)
+    assert "<td>1.00</td>" in page and "zero shading cost" in page

@@ -93,6 +93,30 @@ def grouped(rm, _core, scene, core, estimator: str, spp: int, repeats: int) -> d
     return out
 
 
+def ceiling_msamples_per_s(row: dict, robust: bool = True) -> float | None:
+    """The most samples per second (one thread) bare Embree reaches on a
+    row's recorded rays in any grouping (None without `--groups` or sample
+    marks)."""
+    modes = (row.get("groups") or {}).get("robust" if robust else "fast") or []
+    rates = [m["msamples_per_s"] for m in modes if m.get("msamples_per_s")]
+    return max(rates) if rates else None
+
+
+def zero_shading_ratio(tte_scene: dict, row: dict, robust: bool = True) -> float | None:
+    """time_to_error's ratio for one scene as it would be if our renderer
+    cost nothing but Embree's fastest grouping of the same rays, with the
+    samples it has (the best sampler's error per sample): the ratio times
+    our best contender's samples per second over the ceiling on all the
+    threads the study used (perfect scaling assumed, which favours us)."""
+    ceiling = ceiling_msamples_per_s(row, robust)
+    ours = next((c for c in tte_scene.get("contenders", [])
+                 if c.get("renderer") == "radiometer" and c.get("sampler") == tte_scene.get("best_ours")), None)
+    threads = max((int(t) for t in tte_scene.get("thread_scaling", {})), default=0)
+    if not ceiling or ours is None or not ours.get("msamples_per_s") or not threads:
+        return None
+    return tte_scene["ratio"] * ours["msamples_per_s"] / (threads * ceiling)
+
+
 def measure(estimator: str, scene_name: str, res: int, spp: int, repeats: int, groups: bool = False) -> dict:
     import radiometer as rm
     from radiometer import _core
