@@ -229,7 +229,8 @@ def _plot(results, png):
             pts = c["points"]
             style = "-o" if c["renderer"] == "radiometer" else "--s"
             ax.loglog([p["seconds"] for p in pts], [max(p["relmse"], 1e-9) for p in pts], style, ms=3,
-                      label=f"{('ours' + c['variant'][4:]) if c['renderer'] == 'radiometer' else c['variant'][:4]} {c['sampler']}")
+                      label=f"{'ours' + c['variant'][4:] if c['renderer'] == 'radiometer' else c['variant'][:4]} "
+                            f"{c['sampler']}")
         ax.axhline(results[name]["target_relmse"], color="grey", lw=0.8, ls=":")
         ax.set_title(f"{name}: ratio {results[name]['ratio']:.2f}")
         ax.set_xlabel("seconds")
@@ -317,14 +318,17 @@ def main(argv=None) -> int:
                          "contenders": contenders, "best_ours": best_ours["sampler"],
                          "best_mitsuba": f"{best_m['variant']} {best_m['sampler']}",
                          "ratio": best_ours["time_to_target_s"] / best_m["time_to_target_s"],
-                         "thread_scaling": scaling, **({"ratio_by_variant": by_variant} if by_variant else {})}
+                         "thread_scaling": scaling,
+                         **({"ratio_by_variant": by_variant, "best_ours_variant": best_ours["variant"]}
+                            if by_variant else {})}
         print(f"\n{name}: target relMSE {target:.3e} (ours, independent, {mid} spp)")
         print(f"  {'contender':<34}{'t to target s':>14}{'Msamples/s':>12}")
         for c in contenders:
             label = f"{c['renderer']} {c['variant']} {c['sampler']}"
             mark = " (extrapolated)" if c["extrapolated"] else ""
             print(f"  {label:<34}{c['time_to_target_s']:>14.3f}{c['msamples_per_s']:>12.2f}{mark}")
-        print(f"  ratio ours best ({best_ours['sampler']}) / Mitsuba best ({results[name]['best_mitsuba']}): "
+        which = f"{best_ours['variant']} {best_ours['sampler']}" if by_variant else best_ours["sampler"]
+        print(f"  ratio ours best ({which}) / Mitsuba best ({results[name]['best_mitsuba']}): "
               f"{results[name]['ratio']:.2f}   threads: " + ", ".join(
                   f"{t}: ours {s['ours_msamples_per_s']:.2f} / Mitsuba {s['mitsuba_llvm_msamples_per_s']:.2f} Ms/s"
                   for t, s in scaling.items()), flush=True)
