@@ -160,7 +160,8 @@ def _meter(tmp_path, origin, direction, extra, medium='<float name="sigma_t" val
     return rm.load_file(tmp_path / "meter.xml")
 
 
-_PT2 = '<emitter type="point"><point name="position" x="0" y="0" z="2"/><rgb name="intensity" value="5, 5, 5"/></emitter>'
+_PT2 = ('<emitter type="point"><point name="position" x="0" y="0" z="2"/>'
+        '<rgb name="intensity" value="5, 5, 5"/></emitter>')
 _WALL = ('<shape type="rectangle"><transform name="to_world"><translate z="{z}"/></transform>'
          '<bsdf type="diffuse"/></shape>')
 DEGENERATE = {

@@ -100,8 +100,8 @@ struct EquiSegment {
     float t_max = 0.f;
     const Medium* med = nullptr;
     int medium = -1;
-    Color beta, r_u;    // throughput and normalised channel densities at o
-    int cls = 0;        // the class of light scattered on the segment
+    Color beta, r_u;      // throughput and normalised channel densities at o
+    int cls = 0;          // the class of light scattered on the segment
     bool wanted = false;  // the mask keeps that class
 };
 
@@ -112,7 +112,8 @@ float free_flight_density(const EquiSegment& seg, float t) {
 }
 
 // W_ff for the NEE sample ds (on emitter e) from the free-flight vertex at t.
-float free_flight_weight(const Scene& scene, const EquiSegment& seg, float t, const Emitter& e, const DirectSample& ds) {
+float free_flight_weight(const Scene& scene, const EquiSegment& seg, float t, const Emitter& e,
+                         const DirectSample& ds) {
     Vec3 x = seg.o + seg.d * t;
     float q_o = light_pdf_w_from(scene, e, LightContext{seg.o, Vec3(0.f)}, ds.p, ds.n, x);
     float a = q_o > 0.f ? Equiangular(seg.o, seg.d, seg.t_max, ds.p).pdf(t) * q_o : 0.f;
@@ -262,15 +263,15 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                     if (mask[ncls]) {
                         auto f_of = [&](const Vec3& wo) { return Color(phase.eval(mi.wi, wo)); };
                         auto pdf_of = [&](const Vec3& wo) { return phase.pdf_w(mi.wi, wo); };
-                        // With an equiangular sample on this segment: W_ff (step 5).
-                        Color ld = seg.active ? direct_through_media(scene, mi, medium, sampler, stats, f_of, pdf_of,
-                                                                     true,
-                                                                     [&](const Emitter& e, const DirectSample& ds) {
-                                                                         return free_flight_weight(scene, seg, t, e,
-                                                                                                   ds);
-                                                                     })
-                                              : direct_through_media(scene, mi, medium, sampler, stats, f_of, pdf_of,
-                                                                     true);
+                        Color ld;
+                        if (seg.active) {  // an equiangular sample on this segment: W_ff (step 5)
+                            auto w_ff = [&](const Emitter& e, const DirectSample& ds) {
+                                return free_flight_weight(scene, seg, t, e, ds);
+                            };
+                            ld = direct_through_media(scene, mi, medium, sampler, stats, f_of, pdf_of, true, w_ff);
+                        } else {
+                            ld = direct_through_media(scene, mi, medium, sampler, stats, f_of, pdf_of, true);
+                        }
                         out.add(ncls, beta * ld);
                     } else {
                         sampler.next_1d();
