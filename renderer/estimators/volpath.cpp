@@ -1,7 +1,8 @@
 // `volpath`: path tracing with participating media, the camera-ray loop that
 // `path` (and its alias `volpath`) runs when the scene has media
 // (Scene::features.has_media); scenes without media never enter this file.
-// Parameters are `path`'s (max_depth, rr_depth, hide_emitters), with
+// Parameters are `path`'s (max_depth, rr_depth, hide_emitters; and
+// equiangular, step 5 below), with
 // Mitsuba 3 volpath's meaning: a medium scattering event and a surface
 // scattering event each count as one vertex towards max_depth;
 // index-matched (null BSDF) boundaries are not vertices and do not count,
@@ -47,7 +48,8 @@
 //    where it starts (o) to the next surface (infinite in an open medium),
 //    also gets one equiangular sample (Kulla and Fajardo 2012, sec. 4;
 //    media_common.h's Equiangular): a light point y picked and sampled from
-//    o as NEE does (sample_light from o's medium context), t drawn with the
+//    o as NEE does (pick_emitter and sample_direct from o's medium context,
+//    whatever o itself receives from y), t drawn with the
 //    equiangular density p_eq(t) about y, and the light y sends through a
 //    scattering at x = o + t d:
 //        beta_o sigma_s Tr(t) phase(wi, wo) Tr(x, y) Le / (p_eq(t) q_o),
@@ -74,8 +76,8 @@
 //    again sums to 1. Where equiangular cannot make y from o (an emitter at
 //    infinity, a light point facing away from o, a pick of 0 from o) a = 0
 //    and free flight keeps it all. The equiangular vertex is a medium
-//    vertex V at depth + 1, classified, masked and cut by max_depth as
-//    step 3's free-flight vertex is. Its five random numbers are drawn after
+//    vertex (V, or B behind a dielectric boundary) at depth + 1, classified,
+//    masked and cut by max_depth as step 3's free-flight vertex is. Its five random numbers are drawn after
 //    every other draw of the bounce (at the top of the next loop iteration
 //    or after the loop), so the bounce's own dimensions keep their place.
 //    Grid media keep free flight alone (documented; res.stats'
