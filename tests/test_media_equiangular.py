@@ -303,3 +303,17 @@ def test_warns_where_it_cannot_help(where):
 def test_bad_value_is_refused():
     with pytest.raises(rm.SceneError, match="equiangular"):
         rm.render(rm.load_file(FOG / "scene.xml", res=8), integrator={"type": "path", "equiangular": 3}, spp=1)
+
+
+def test_time_to_error_ours_params():
+    """time_to_error's --ours-params (how its equiangular runs were made):
+    KEY=VALUE lists as typed integrator parameters; the variant's label is
+    plain "path" without any (the default output)."""
+    from radiometer.benchmarks.studies.time_to_error import parse_params, variant_label
+
+    assert parse_params("") == {} and variant_label({}) == "path"
+    p = parse_params("equiangular=true, rr_depth=3, light_sampler=tree, truncation_probe=0.5")
+    assert p == {"equiangular": True, "rr_depth": 3, "light_sampler": "tree", "truncation_probe": 0.5}
+    assert variant_label({"equiangular": True}) == "path equiangular=true"
+    with pytest.raises(SystemExit, match="KEY=VALUE"):
+        parse_params("equiangular")

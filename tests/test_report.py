@@ -335,16 +335,3 @@ def test_time_to_error_section_from_the_study_results(tmp_path):
     page = time_to_error_html(f, tmp_path)
     assert "cornell_box" in page and ">2.50<" in page and "abc1234" in page
     assert "zsobol: 5 s" in page and "llvm_ad_rgb multijitter: 2 s" in page
-
-
-def test_time_to_error_ours_params():
-    """--ours-params: KEY=VALUE lists as typed integrator parameters; the
-    variant's label is plain "path" without any (the default output)."""
-    from radiometer.benchmarks.studies.time_to_error import parse_params, variant_label
-
-    assert parse_params("") == {} and variant_label({}) == "path"
-    p = parse_params("equiangular=true, rr_depth=3, light_sampler=tree, truncation_probe=0.5")
-    assert p == {"equiangular": True, "rr_depth": 3, "light_sampler": "tree", "truncation_probe": 0.5}
-    assert variant_label({"equiangular": True}) == "path equiangular=true"
-    with pytest.raises(SystemExit, match="KEY=VALUE"):
-        parse_params("equiangular")
