@@ -727,6 +727,7 @@ PYBIND11_MODULE(_core, m) {
             st["inf_samples"] = out.stats.inf_samples;
             st["photons"] = out.stats.photons;
             st["truncation_probes"] = out.stats.truncation_probes;
+            st["equiangular_samples"] = out.stats.equiangular_samples;
             st["truncated_sum"] = std::vector<double>(out.stats.truncated, out.stats.truncated + 3);
             st["truncated_sq_sum"] = std::vector<double>(out.stats.truncated_sq, out.stats.truncated_sq + 3);
             // Photon maps built (photon mapping estimators): which, how big, how long.

@@ -351,10 +351,11 @@ def test_single_scattering_point_light_matches_closed_form(g):
     check_single_scatter_point_light(g, "volpath", 1 << 19)
 
 
-def check_single_scatter_point_light(g, integrator, spp):
+def check_single_scatter_point_light(g, integrator, spp, params=None):
     """The radiance meter of the test above (HG g, or isotropic for None),
-    rendered by `integrator` with max_depth 2: z-test against the closed
-    form, and a 1 % error must be rejected; returns the render."""
+    rendered by `integrator` (with further parameters `params`) with
+    max_depth 2: z-test against the closed form, and a 1 % error must be
+    rejected; returns the render."""
     sigma_t, albedo, intensity = 0.5, 0.8, 10.0
     phase = {"type": "isotropic"} if g is None else {"type": "hg", "g": g}
     fog = {"type": "homogeneous", "sigma_t": sigma_t, "albedo": albedo, "phase": phase}
@@ -364,7 +365,8 @@ def check_single_scatter_point_light(g, integrator, spp):
                    "film": {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"}}},
         "light": {"type": "point", "position": [0, 1, 0], "intensity": _rgb(intensity)},
     }
-    res = rm.render(rm.load_dict(d), integrator={"type": integrator, "max_depth": 2}, spp=spp, seed=11)
+    res = rm.render(rm.load_dict(d), integrator={"type": integrator, "max_depth": 2, **(params or {})}, spp=spp,
+                    seed=11)
     exact = _single_scatter_exact(sigma_t, albedo, intensity, 1.0, g)
     v, se = float(res.image[0, 0, 0]), float(np.sqrt(res.variance[0, 0, 0]))
     z = (v - exact) / se

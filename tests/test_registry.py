@@ -159,7 +159,7 @@ def test_numbers_convert_as_declared():
     # An integer is a number; numpy scalars are plain values.
     assert _resolve("bdpt", beta=3)["beta"] == 3.0 and type(_resolve("bdpt", beta=3)["beta"]) is float
     assert _resolve("path", max_depth=np.int64(4), hide_emitters=np.bool_(True)) == {
-        "max_depth": 4, "rr_depth": 5, "hide_emitters": True, "truncation_probe": 0.0625,
+        "max_depth": 4, "rr_depth": 5, "hide_emitters": True, "truncation_probe": 0.0625, "equiangular": False,
         "light_sampler": "uniform"}
     _raises({"type": "bdpt", "beta": math.nan}, "parameter 'beta'", "finite")
     _raises({"type": "sppm", "initial_radius": math.inf}, "parameter 'initial_radius'", "finite")

@@ -5,6 +5,7 @@ Mitsuba 3, side by side in one run (issue 13 point 4).
         [--scenes cornell_box,veach_mis,glass_sphere_caustic,fog_room]
         [--spp 4,16,64,256] [--repeats 3] [--samplers independent,multijitter,sobol,zsobol]
         [--mitsuba-samplers independent,stratified,multijitter,ldsampler] [--no-scalar]
+        [--ours-params '' --ours-params equiangular=true]
 
 Each scene is rendered at its reference's resolution with a box filter on
 both sides and the scene's own max_depth and integrator (`path`; `volpath`
@@ -87,19 +88,51 @@ def _scene_params(name):
     return {"res": 64, **({"rfilter": "box"} if 'name="rfilter"' in xml else {})}
 
 
-def curve_ours(name, sampler, ladder, repeats, ref, floor, threads=0):
+def parse_params(text: str) -> dict:
+    """`--ours-params` text, KEY=VALUE[,KEY=VALUE...], as integrator
+    parameters: true/false as booleans, numbers as numbers ('' : none)."""
+    out = {}
+    for item in filter(None, (t.strip() for t in text.split(","))):
+        if "=" not in item:
+            raise SystemExit(f"--ours-params: expected KEY=VALUE, got {item!r}")
+        k, v = (x.strip() for x in item.split("=", 1))
+        if v.lower() in ("true", "false"):
+            out[k] = v.lower() == "true"
+        else:
+            try:
+                out[k] = int(v)
+            except ValueError:
+                try:
+                    out[k] = float(v)
+                except ValueError:
+                    out[k] = v
+    return out
+
+
+def variant_label(params: dict) -> str:
+    """Our contenders' `variant`: "path", or "path" and its extra parameters."""
+    return " ".join(["path"] + [f"{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in params.items()])
+
+
+def curve_ours(name, sampler, ladder, repeats, ref, floor, threads=0, params=None):
+    """Our `path` (the scene's own integrator and its parameters, updated
+    by `params`) at each spp of the ladder."""
     import radiometer as rm
     from radiometer.analysis.metrics import relmse
 
     spec = _spec(name)
     scene = rm.load_file(spec.xml, **_scene_params(name))
-    rm.render(scene, spp=1, seed=99, threads=threads)  # first-touch costs out of the timings
+    integ = None
+    if params:
+        own = scene.desc.integrator
+        integ = {"type": own.type, **dict(own.params), **params}
+    rm.render(scene, integrator=integ, spp=1, seed=99, threads=threads)  # first-touch costs out of the timings
     points = []
     for spp in ladder:
         secs, errs = [], []
         for k in range(repeats):
             t0 = time.perf_counter()
-            r = rm.render(scene, spp=spp, seed=1 + k, threads=threads, sampler=sampler)
+            r = rm.render(scene, integrator=integ, spp=spp, seed=1 + k, threads=threads, sampler=sampler)
             secs.append(time.perf_counter() - t0)
             errs.append(relmse(r.image, ref) - floor)
         points.append({"spp": spp, "seconds": statistics.median(secs), "relmse": float(np.mean(errs))})
@@ -196,7 +229,8 @@ def _plot(results, png):
             pts = c["points"]
             style = "-o" if c["renderer"] == "radiometer" else "--s"
             ax.loglog([p["seconds"] for p in pts], [max(p["relmse"], 1e-9) for p in pts], style, ms=3,
-                      label=f"{'ours' if c['renderer'] == 'radiometer' else c['variant'][:4]} {c['sampler']}")
+                      label=f"{'ours' + c['variant'][4:] if c['renderer'] == 'radiometer' else c['variant'][:4]} "
+                            f"{c['sampler']}")
         ax.axhline(results[name]["target_relmse"], color="grey", lw=0.8, ls=":")
         ax.set_title(f"{name}: ratio {results[name]['ratio']:.2f}")
         ax.set_xlabel("seconds")
@@ -215,6 +249,12 @@ def main(argv=None) -> int:
     ap.add_argument("--samplers", default="independent,multijitter,sobol,zsobol")
     ap.add_argument("--mitsuba-samplers", default="independent,stratified,multijitter,ldsampler")
     ap.add_argument("--no-scalar", action="store_true", help="skip Mitsuba scalar_rgb")
+    ap.add_argument("--ours-params", action="append", metavar="KEY=VALUE[,...]",
+                    help="extra integrator parameters for our contenders (e.g. equiangular=true); repeat the option "
+                         "for several variants of ours, '' for the scene's own: each variant renders with every "
+                         "sampler, the target comes from the first variant's independent sampler, and "
+                         "ratio_by_variant gives each variant's best over Mitsuba's best (default: the scene's "
+                         "own integrator only)")
     ap.add_argument("--out", default=str(record.default_path("time_to_error")))
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     ap.add_argument("--worker-scene", help=argparse.SUPPRESS)
@@ -232,23 +272,27 @@ def main(argv=None) -> int:
 
     ladder = [int(x) for x in args.spp.split(",")]
     mid = ladder[len(ladder) // 2]
+    variants = [parse_params(t) for t in (args.ours_params or [""])]
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     results = {}
     for name in args.scenes.split(","):
         ref, var, ref_path = reference(name)
         floor = relmse_floor(ref, var)
         contenders = []
-        for smp in args.samplers.split(","):
-            print(f"{name}: ours, {smp} ...", file=sys.stderr, flush=True)
-            contenders.append({"renderer": "radiometer", "variant": "path", "sampler": smp,
-                               "points": curve_ours(name, smp, ladder, args.repeats, ref, floor)})
+        for params in variants:
+            for smp in args.samplers.split(","):
+                print(f"{name}: ours, {variant_label(params)}, {smp} ...", file=sys.stderr, flush=True)
+                contenders.append({"renderer": "radiometer", "variant": variant_label(params), "sampler": smp,
+                                   "points": curve_ours(name, smp, ladder, args.repeats, ref, floor,
+                                                        params=params)})
         runs = [("llvm_ad_rgb", s) for s in args.mitsuba_samplers.split(",")]
         runs += [] if args.no_scalar else [("scalar_rgb", "independent")]
         for v, smp in runs:
             print(f"{name}: Mitsuba {v}, {smp} ...", file=sys.stderr, flush=True)
             contenders.append({"renderer": "mitsuba", "variant": v, "sampler": smp,
                                "points": _run_worker(name, v, smp, ref_path, args)})
-        base = next(c for c in contenders if c["renderer"] == "radiometer" and c["sampler"] == "independent")
+        base = next(c for c in contenders if c["renderer"] == "radiometer" and c["sampler"] == "independent"
+                    and c["variant"] == variant_label(variants[0]))
         target = next((p["relmse"] for p in base["points"] if p["spp"] == mid), base["points"][-1]["relmse"])
         for c in contenders:
             c["time_to_target_s"], c["extrapolated"] = time_to(c["points"], target)
@@ -256,6 +300,13 @@ def main(argv=None) -> int:
             c["msamples_per_s"] = 64 * 64 * mid / p["seconds"] / 1e6
         best_ours = min((c for c in contenders if c["renderer"] == "radiometer"), key=lambda c: c["time_to_target_s"])
         best_m = min((c for c in contenders if c["renderer"] == "mitsuba"), key=lambda c: c["time_to_target_s"])
+        by_variant = {}
+        if len(variants) > 1 or variants[0]:
+            for params in variants:
+                label = variant_label(params)
+                best_v = min((c for c in contenders if c["renderer"] == "radiometer" and c["variant"] == label),
+                             key=lambda c: c["time_to_target_s"])
+                by_variant[label] = best_v["time_to_target_s"] / best_m["time_to_target_s"]
         scaling = {}
         for t in sorted({1, cores}):
             po = curve_ours(name, "independent", [mid], 1, ref, floor, threads=t)[0]
@@ -267,17 +318,22 @@ def main(argv=None) -> int:
                          "contenders": contenders, "best_ours": best_ours["sampler"],
                          "best_mitsuba": f"{best_m['variant']} {best_m['sampler']}",
                          "ratio": best_ours["time_to_target_s"] / best_m["time_to_target_s"],
-                         "thread_scaling": scaling}
+                         "thread_scaling": scaling,
+                         **({"ratio_by_variant": by_variant, "best_ours_variant": best_ours["variant"]}
+                            if by_variant else {})}
         print(f"\n{name}: target relMSE {target:.3e} (ours, independent, {mid} spp)")
         print(f"  {'contender':<34}{'t to target s':>14}{'Msamples/s':>12}")
         for c in contenders:
             label = f"{c['renderer']} {c['variant']} {c['sampler']}"
             mark = " (extrapolated)" if c["extrapolated"] else ""
             print(f"  {label:<34}{c['time_to_target_s']:>14.3f}{c['msamples_per_s']:>12.2f}{mark}")
-        print(f"  ratio ours best ({best_ours['sampler']}) / Mitsuba best ({results[name]['best_mitsuba']}): "
+        which = f"{best_ours['variant']} {best_ours['sampler']}" if by_variant else best_ours["sampler"]
+        print(f"  ratio ours best ({which}) / Mitsuba best ({results[name]['best_mitsuba']}): "
               f"{results[name]['ratio']:.2f}   threads: " + ", ".join(
                   f"{t}: ours {s['ours_msamples_per_s']:.2f} / Mitsuba {s['mitsuba_llvm_msamples_per_s']:.2f} Ms/s"
                   for t, s in scaling.items()), flush=True)
+        for label, ratio in by_variant.items():
+            print(f"  ratio ours best ({label}) / Mitsuba best: {ratio:.2f}", flush=True)
     extra = {"versions": {"radiometer": rm.__version__, "mitsuba": mi.__version__}, "scenes": results,
              "goal": "ratio <= 0.5 on every scene"}
     path = record.write("time_to_error", record.params_of(args), extra, out=args.out,

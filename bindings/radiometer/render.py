@@ -232,6 +232,13 @@ def render(scene, integrator=None, spp: Optional[int] = None, seconds: Optional[
     elif smp["type"] != "independent" and spec["type"] == "photonmapper":
         _warn(stats, f"photonmapper: sampler '{smp['type']}' draws the camera passes; the photon passes use the "
                      f"independent sampler")
+    medium_classes = mask[EFFECTS.index("volume")] or mask[EFFECTS.index("subsurface")]
+    if spec.get("equiangular") is True and medium_classes and not stats.get("equiangular_samples") \
+            and not r["cancelled"]:
+        _warn(stats, f"{spec['type']}: equiangular = true made no equiangular sample: it samples distances in "
+                     f"homogeneous media towards point, spot and area lights (renderer/estimators/volpath.cpp), "
+                     f"and this scene has none on its camera paths (no media, grid media only, or only emitters "
+                     f"at infinity)")
     if stats.get("mlt_chains", 0) > stats.get("mlt_chains_requested", float("inf")):
         _warn(stats, f"mmlt: chains raised from {stats['mlt_chains_requested']:.0f} to {stats['mlt_chains']:.0f}, two "
                      f"for each depth 2 .. max_depth (renderer/estimators/pssmlt.cpp)")

@@ -41,6 +41,7 @@ std::unique_ptr<Integrator> make_path(ParamReader& p);
         rr_depth_param(),
         hide_emitters_param(),
         truncation_probe_param(),
+        equiangular_param(),
     };
     e.caps.media = true;
     e.caps.dipole = true;
@@ -211,6 +212,7 @@ std::unique_ptr<Integrator> make_path(ParamReader& p) {
     prm.rr_depth = p.get_int("rr_depth");
     prm.hide = p.get_bool("hide_emitters");
     prm.truncation_probe = p.get_float("truncation_probe");
+    prm.equiangular = p.get_bool("equiangular");
     return std::make_unique<PathIntegrator>(prm);
 }
 

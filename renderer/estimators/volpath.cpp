@@ -1,7 +1,8 @@
 // `volpath`: path tracing with participating media, the camera-ray loop that
 // `path` (and its alias `volpath`) runs when the scene has media
 // (Scene::features.has_media); scenes without media never enter this file.
-// Parameters are `path`'s (max_depth, rr_depth, hide_emitters), with
+// Parameters are `path`'s (max_depth, rr_depth, hide_emitters; and
+// equiangular, step 5 below), with
 // Mitsuba 3 volpath's meaning: a medium scattering event and a surface
 // scattering event each count as one vertex towards max_depth;
 // index-matched (null BSDF) boundaries are not vertices and do not count,
@@ -42,6 +43,46 @@
 //    an interior or exterior medium (Mitsuba 3's rule: target_medium(d) is
 //    the exterior when d . n > 0, else the interior); the camera starts in
 //    the sensor's medium.
+// 5. `equiangular` (default false; off, nothing here draws or computes):
+//    each segment of the path through a homogeneous medium, [0, t_max] from
+//    where it starts (o) to the next surface (infinite in an open medium),
+//    also gets one equiangular sample (Kulla and Fajardo 2012, sec. 4;
+//    media_common.h's Equiangular): a light point y picked and sampled from
+//    o as NEE does (pick_emitter and sample_direct from o's medium context,
+//    whatever o itself receives from y), t drawn with the
+//    equiangular density p_eq(t) about y, and the light y sends through a
+//    scattering at x = o + t d:
+//        beta_o sigma_s Tr(t) phase(wi, wo) Tr(x, y) Le / (p_eq(t) q_o),
+//    beta_o the throughput where the segment starts, q_o y's density
+//    in solid angle at x (light_pdf_w_from: the pick from o alone for a
+//    point or spot light). It removes the 1 / |x - y|^2 of single
+//    scattering near a point-like light, which free flight samples badly
+//    (free flight puts vertices where the medium is, not where the light is).
+//    MIS: the same scattering at t towards y is also made by free flight
+//    followed by NEE from x, of density (per the prefix's) b =
+//    mean_c(r_u_c sigma_s_c Tr_c(t)) q_x, q_x = the light sample's pick times
+//    pdf_w from x, where equiangular gives a = p_eq(t) q_o; the two get the
+//    power heuristic's W_eq = a^2 / (a^2 + b^2) and W_ff = 1 - W_eq (Veach
+//    1997, eq. 9.13). The mean over channels with the prefix's normalised
+//    r_u is the spectral MIS of step 2 carried through (the one-sample
+//    balance heuristic over channels nested in the two-strategy weights:
+//    each strategy's estimate is W_s f / mean_c p_c,s, and with W_eq + W_ff
+//    = 1 for every (t, y) the sum over strategies and channels is 1; the
+//    equiangular estimate does not depend on the hero, so it takes beta_o
+//    as it is). For area lights free flight also reaches y by phase
+//    sampling (step 3's weights w_nee + w_phase = 1): the phase-sampled
+//    emission keeps w_phase, and the split is of NEE's share only, W_ff w_nee
+//    and W_eq w_nee (w_nee computed at x for the equiangular sample), which
+//    again sums to 1. Where equiangular cannot make y from o (an emitter at
+//    infinity, a light point facing away from o, a pick of 0 from o) a = 0
+//    and free flight keeps it all. The equiangular vertex is a medium
+//    vertex (V, or B behind a dielectric boundary) at depth + 1, classified,
+//    masked and cut by max_depth as step 3's free-flight vertex is. Its five random numbers are drawn after
+//    every other draw of the bounce (at the top of the next loop iteration
+//    or after the loop), so the bounce's own dimensions keep their place.
+//    Grid media keep free flight alone (documented; res.stats'
+//    equiangular_samples counts the equiangular samples made, and the
+//    Python facade warns when a render asked for them and made none).
 #include "estimators/volpath.h"
 #include "transport/common.h"
 #include "transport/dipole_step.h"
@@ -49,6 +90,101 @@
 #include "transport/scatter_origin.h"
 
 namespace rm {
+
+namespace {
+
+// A segment of the path through a homogeneous medium awaiting its
+// equiangular sample (step 5 of the head comment), with the path's state
+// where it starts.
+struct EquiSegment {
+    bool active = false;
+    Vec3 o, d;
+    float t_max = 0.f;
+    const Medium* med = nullptr;
+    int medium = -1;
+    Color beta, r_u;      // throughput and normalised channel densities at o
+    int cls = 0;          // the class of light scattered on the segment
+    bool wanted = false;  // the mask keeps that class
+};
+
+// Free flight's density of scattering at t on `seg` (per the prefix's,
+// averaged over the channels: step 5).
+float free_flight_density(const EquiSegment& seg, float t) {
+    return average(seg.r_u * seg.med->sigma_s * seg.med->transmittance(t));
+}
+
+// W_ff for the NEE sample ds (on emitter e) from the free-flight vertex at t.
+float free_flight_weight(const Scene& scene, const EquiSegment& seg, float t, const Emitter& e,
+                         const DirectSample& ds) {
+    Vec3 x = seg.o + seg.d * t;
+    float q_o = light_pdf_w_from(scene, e, LightContext{seg.o, Vec3(0.f)}, ds.p, ds.n, x);
+    float a = q_o > 0.f ? Equiangular(seg.o, seg.d, seg.t_max, ds.p).pdf(t) * q_o : 0.f;
+    if (!(a > 0.f)) return 1.f;
+    return mis_power(free_flight_density(seg, t) * ds.pdf_w * ds.pick, a);
+}
+
+// The equiangular sample of `seg` (step 5); always draws five numbers.
+void sample_equiangular(const Scene& scene, Sampler& sampler, EquiSegment& seg, EffectRadiance& out,
+                        ThreadStats& stats) {
+    seg.active = false;
+    float u_pick = sampler.next_1d();
+    Vec2 u = sampler.next_2d();
+    float u_extra = sampler.next_1d(), u_t = sampler.next_1d();
+    if (!seg.wanted) return;
+    // The light point y, picked and sampled from the segment's start as
+    // NEE does, though what o itself receives from it does not matter
+    // (a spot light outside its cone from o still lights the segment).
+    const LightContext from{seg.o, Vec3(0.f)};
+    float pick = 0.f;
+    const Emitter* e = pick_emitter(scene, from, u_pick, pick);
+    if (!e || e->is_infinite()) return;
+    DirectSample ds_o = e->sample_direct(seg.o, u, u_extra);
+    if (!(ds_o.pdf_w > 0.f)) return;
+    const Equiangular eq(seg.o, seg.d, seg.t_max, ds_o.p);
+    float pdf_t = 0.f;
+    float t = eq.sample(u_t, pdf_t);
+    if (!(pdf_t > 0.f)) return;
+    ++stats.equiangular_samples;
+    Interaction mi;
+    mi.kind = VertexKind::Medium;
+    mi.valid = true;
+    mi.p = seg.o + seg.d * t;
+    mi.wi = -seg.d;
+    mi.t = t;
+    float q_o = light_pdf_w_from(scene, *e, from, ds_o.p, ds_o.n, mi.p);
+    if (!(q_o > 0.f)) return;
+    // y seen from x, as light sampling from x would have made it.
+    DirectSample ds;
+    if (e->is_delta()) {
+        ds = e->sample_direct(mi.p, Vec2(0.f, 0.f), 0.f);  // a delta position: the same point
+        if (!ds.is_delta || is_black(ds.radiance)) return;
+    } else {
+        Vec3 v = ds_o.p - mi.p;
+        ds.dist = length(v);
+        if (!(ds.dist > 0.f)) return;
+        ds.p = ds_o.p;
+        ds.n = ds_o.n;
+        ds.eps = ds_o.eps;
+        ds.d = v / ds.dist;
+        ds.pdf_w = e->pdf_direct(mi.p, ds.p, ds.n);
+        ds.radiance = ds_o.radiance;  // Le at y (light_pdf_w_from checked that y faces x)
+    }
+    ds.pick = emitter_pick_prob(scene, light_context(mi), *e);
+    const PhaseFunction& phase = *seg.med->phase;
+    float f = phase.eval(mi.wi, ds.d);
+    if (!(f > 0.f)) return;
+    float q_x = ds.pdf_w * ds.pick;
+    float w_nee = ds.is_delta ? 1.f : mis_power(q_x, phase.pdf_w(mi.wi, ds.d));
+    float w = w_nee * mis_power(pdf_t * q_o, free_flight_density(seg, t) * q_x);
+    if (!(w > 0.f)) return;
+    ++stats.shadow_rays;
+    Color tr = scene.transmittance(mi, ds, seg.medium, stats.rays, sampler, true);
+    if (is_black(tr)) return;
+    Color scatter = seg.med->sigma_s * seg.med->transmittance(t);
+    out.add(seg.cls, seg.beta * scatter * tr * ds.radiance * (f * w / (pdf_t * q_o)));
+}
+
+}  // namespace
 
 void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray, EffectRadiance& out,
                     ThreadStats& stats, const VolPathParams& prm, const EffectMask& mask) {
@@ -76,7 +212,10 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         return survives_roulette(RouletteRule::BelowStart, depth, prm.rr_depth, max_component(beta) * eta_scale, rr_u,
                                  beta);
     };
+    EquiSegment seg;  // step 5 (`equiangular`)
     for (int guard = 0; guard < (1 << 20); ++guard) {
+        // 0. The last segment's equiangular sample, after the bounce's other draws.
+        if (seg.active) sample_equiangular(scene, sampler, seg, out, stats);
         // 1. Find the next surface along the ray.
         Interaction it;
         ++stats.rays;
@@ -88,6 +227,23 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         //    extinction; r_u tracks every channel's path density over the hero's.
         if (medium >= 0) {
             const Medium& med = *scene.media[medium];
+            // 2a. A segment through a homogeneous medium: its equiangular
+            //     sample comes at step 0 (head comment, step 5).
+            if (prm.equiangular && med.homogeneous && !scene.emitters.empty() &&
+                (prm.max_depth < 0 || depth + 1 < prm.max_depth)) {
+                PathClass pn = pc;
+                pn.push_medium(mt.enclosed);
+                seg.active = true;
+                seg.o = ray.o;
+                seg.d = ray.d;
+                seg.t_max = t_hit;
+                seg.med = &med;
+                seg.medium = medium;
+                seg.beta = beta;
+                seg.r_u = th.r_u;
+                seg.cls = pn.classify();
+                seg.wanted = mask[seg.cls];
+            }
             float t = 0.f;
             FlightEvent event = free_flight(med, ray, t_hit, sampler, th, t);
             if (event == kAbsorbed) break;
@@ -107,10 +263,17 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
                 // 3. Next event estimation from the medium vertex.
                 if (!scene.emitters.empty()) {
                     if (mask[ncls]) {
-                        Color ld = direct_through_media(
-                            scene, mi, medium, sampler, stats,
-                            [&](const Vec3& wo) { return Color(phase.eval(mi.wi, wo)); },
-                            [&](const Vec3& wo) { return phase.pdf_w(mi.wi, wo); }, true);
+                        auto f_of = [&](const Vec3& wo) { return Color(phase.eval(mi.wi, wo)); };
+                        auto pdf_of = [&](const Vec3& wo) { return phase.pdf_w(mi.wi, wo); };
+                        Color ld;
+                        if (seg.active) {  // an equiangular sample on this segment: W_ff (step 5)
+                            auto w_ff = [&](const Emitter& e, const DirectSample& ds) {
+                                return free_flight_weight(scene, seg, t, e, ds);
+                            };
+                            ld = direct_through_media(scene, mi, medium, sampler, stats, f_of, pdf_of, true, w_ff);
+                        } else {
+                            ld = direct_through_media(scene, mi, medium, sampler, stats, f_of, pdf_of, true);
+                        }
                         out.add(ncls, beta * ld);
                     } else {
                         sampler.next_1d();
@@ -221,6 +384,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
         prev_ctx = light_context(it);
         if (!roulette(sampler.next_1d())) break;
     }
+    if (seg.active) sample_equiangular(scene, sampler, seg, out, stats);
 }
 
 namespace {

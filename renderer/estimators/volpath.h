@@ -13,6 +13,9 @@ struct VolPathParams {
     // (ThreadStats::truncated, res.error_budget's truncation term) without
     // changing the image. 0: off. The media loop does not probe yet.
     float truncation_probe = 0.f;
+    // Equiangular distance sampling in homogeneous media, combined with
+    // free flight by MIS (volpath.cpp); false: free flight alone.
+    bool equiangular = false;
 };
 
 // Radiance along one camera ray through a scene with media, split by effect class.

@@ -19,6 +19,8 @@ namespace rm {
 struct ThreadStats {
     uint64_t rays = 0, shadow_rays = 0, paths = 0, nan_samples = 0, inf_samples = 0;
     uint64_t photons = 0;  // photons stored (photon mapping estimators)
+    // volpath's equiangular samples that reached a light point (volpath.cpp).
+    uint64_t equiangular_samples = 0;
     // The truncation probe (path.cpp): the light that max_depth cuts off,
     // per camera sample (0 for the samples not probed), summed over samples
     // with its square per channel; probes: the samples continued. Sums of
@@ -39,6 +41,7 @@ struct ThreadStats {
         nan_samples += o.nan_samples;
         inf_samples += o.inf_samples;
         photons += o.photons;
+        equiangular_samples += o.equiangular_samples;
         truncation_probes += o.truncation_probes;
         for (int i = 0; i < 3; ++i) {
             truncated[i] += o.truncated[i];

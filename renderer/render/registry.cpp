@@ -214,6 +214,13 @@ ParamSpec truncation_probe_param() {
         .at_most(1.0);
 }
 
+ParamSpec equiangular_param() {
+    return ParamSpec::boolean("equiangular", false,
+                              "in homogeneous media, also sample scattering distances equiangularly towards a light "
+                              "point (Kulla and Fajardo 2012), combined with free flight by MIS: single scattering "
+                              "near point and spot lights; grid media keep free flight alone");
+}
+
 ParamSpec mis_param() {
     return ParamSpec::string("mis", "power", "MIS weights: the power or balance heuristic, or uniform weights")
         .one_of({"power", "balance", "uniform"});

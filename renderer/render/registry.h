@@ -111,6 +111,8 @@ ParamSpec rr_depth_param();
 ParamSpec hide_emitters_param();
 // The truncation probe of the estimators that estimate what max_depth cuts off.
 ParamSpec truncation_probe_param();
+// volpath's equiangular distance sampling (volpath.cpp).
+ParamSpec equiangular_param();
 ParamSpec strategy_images_param();
 // The MIS heuristic of the bidirectional estimators (bdpt, vcm, bpm) and
 // the power heuristic's exponent.

@@ -85,21 +85,24 @@ inline bool survives_roulette(RouletteRule rule, int depth, int rr_depth, float 
 // probability in ds.pick) and a point on it (or a direction to it), for
 // given random numbers (u_pick picks the emitter). False when the scene
 // has no emitter or the sample carries nothing.
+// `picked`, when given, receives the emitter.
 inline bool sample_light(const Scene& scene, const LightContext& ctx, float u_pick, Vec2 u, float u_extra,
-                         DirectSample& ds) {
+                         DirectSample& ds, const Emitter** picked = nullptr) {
     float pick = 0.f;
     const Emitter* e = pick_emitter(scene, ctx, u_pick, pick);
+    if (picked) *picked = e;
     if (!e) return false;
     ds = e->sample_direct(ctx.p, u, u_extra);
     ds.pick = pick;
     return ds.pdf_w > 0.f && !is_black(ds.radiance);
 }
 // The same with 4 random numbers from `sampler` (always drawn).
-inline bool sample_light(const Scene& scene, const LightContext& ctx, Sampler& sampler, DirectSample& ds) {
+inline bool sample_light(const Scene& scene, const LightContext& ctx, Sampler& sampler, DirectSample& ds,
+                         const Emitter** picked = nullptr) {
     float u_pick = sampler.next_1d();
     Vec2 u = sampler.next_2d();
     float u_extra = sampler.next_1d();
-    return sample_light(scene, ctx, u_pick, u, u_extra, ds);
+    return sample_light(scene, ctx, u_pick, u, u_extra, ds, picked);
 }
 
 // Solid-angle density with which sample_light from `ctx` reaches emitter

@@ -130,6 +130,52 @@ FlightEvent free_flight_tracking_local(const Medium& med, const Ray& r, float t_
     return tm[h] > 0.f && th.rescale(tm / tm[h]) ? kPassed : kAbsorbed;
 }
 
+Equiangular::Equiangular(const Vec3& o, const Vec3& d, float t_max_, const Vec3& y) : t_max(t_max_) {
+    Vec3 v = y - o;
+    delta = dot(v, d);
+    dist = length(v - d * delta);
+    if (!(dist > 0.f) || !std::isfinite(dist) || !(t_max >= 0.f)) return;
+    theta_a = std::atan2(-delta, dist);
+    // An infinite segment ends at pi / 2, taken as the float just below it
+    // (float(pi / 2) lies above pi / 2, where tan turns negative).
+    theta_b = std::isinf(t_max) ? std::nextafter(float(kPi / 2), 0.f) : std::atan2(t_max - delta, dist);
+    ok = theta_b > theta_a;
+}
+
+float Equiangular::pdf(float t) const {
+    if (!ok || !(t >= 0.f) || !(t <= t_max)) return 0.f;
+    float h = t - delta;
+    float p = dist / ((theta_b - theta_a) * (dist * dist + h * h));
+    return std::isfinite(p) ? p : 0.f;
+}
+
+float Equiangular::sample(float u, float& p) const {
+    p = 0.f;
+    if (!ok) return 0.f;
+    float theta = theta_a + u * (theta_b - theta_a);
+    // Rounding may put t a hair outside the segment: it is kept inside.
+    float t = std::min(std::max(delta + dist * std::tan(theta), 0.f), t_max);
+    if (!std::isfinite(t)) return 0.f;
+    p = pdf(t);
+    return t;
+}
+
+float light_pdf_w_from(const Scene& scene, const Emitter& e, const LightContext& from, const Vec3& y, const Vec3& n,
+                       const Vec3& x) {
+    if (e.is_infinite()) return 0.f;
+    float pick = emitter_pick_prob(scene, from, e);
+    if (!(pick > 0.f)) return 0.f;
+    if (e.is_delta()) return pick;
+    float pdf_w = e.pdf_direct(from.p, y, n);
+    if (!(pdf_w > 0.f)) return 0.f;
+    Vec3 vo = y - from.p, vx = y - x;
+    float do2 = length_sq(vo), dx2 = length_sq(vx);
+    float cos_o = -dot(n, vo) / std::sqrt(do2), cos_x = -dot(n, vx) / std::sqrt(dx2);
+    if (!(cos_o > 0.f) || !(cos_x > 0.f)) return 0.f;
+    float p = pick * pdf_w * (cos_o / do2) * (dx2 / cos_x);  // Veach 1997, eq. 8.10, twice
+    return std::isfinite(p) ? p : 0.f;
+}
+
 MediumTracker emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, int it_shape) {
     // Inside shape `s` (the side against its normal) behind a non-null BSDF:
     // a subsurface medium (MediumTracker::cross's rule).

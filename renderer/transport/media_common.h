@@ -110,6 +110,41 @@ MediumTracker emitter_medium(const Scene& scene, const Ray& ray, const Vec3& n, 
 // see exp(-sigma_t inf)); grid media are vacuum outside their box, so 1.
 Color transmittance_from_infinity(const Scene& scene, int medium);
 
+// Equiangular distance sampling (Kulla and Fajardo 2012, "Importance
+// Sampling Techniques for Path Tracing in Participating Media", sec. 4.1),
+// volpath's `equiangular` option (volpath.cpp's head says how it is
+// combined with free flight). Along the segment o + t d, t in [0, t_max]
+// (t_max may be infinite), towards a light point y: with delta = (y - o).d
+// the foot of the perpendicular and D = |y - o - delta d| the point's
+// distance from the ray's line, t = delta + D tan(theta), theta uniform in
+// [theta_a, theta_b] = [atan(-delta / D), atan((t_max - delta) / D)]
+// (theta_b = pi / 2 for an infinite segment), of density
+//     p(t) = D / ((theta_b - theta_a) (D^2 + (t - delta)^2))
+// (their eq. 4 and the inversion after it), which cancels the 1 / |x - y|^2
+// of the light's geometry term exactly. Degenerate (D = 0: y on the line;
+// theta_b = theta_a: a segment of length 0): `ok` false, the density 0
+// everywhere (the segment is left to free flight).
+struct Equiangular {
+    Equiangular(const Vec3& o, const Vec3& d, float t_max, const Vec3& y);
+    bool ok = false;
+    float delta = 0.f, dist = 0.f, theta_a = 0.f, theta_b = 0.f;
+    // t for u in [0, 1); its density in `pdf` (0: no sample).
+    float sample(float u, float& pdf) const;
+    // The density of t (0 outside [0, t_max] or when not ok).
+    float pdf(float t) const;
+    float t_max = 0.f;
+};
+
+// The solid-angle density, seen from x, with which light sampling from
+// `from` (a medium point's context, pick included) produces the point y
+// (normal n) of emitter e: for an area emitter pick * pdf_direct(from, y)
+// converted to area at y and back to solid angle at x (Veach 1997, eq.
+// 8.10); for a delta position (point, spot, projector) the pick alone (the
+// point is the same from everywhere); 0 for emitters at infinity and where
+// y is not reachable from `from` or does not face x.
+float light_pdf_w_from(const Scene& scene, const Emitter& e, const LightContext& from, const Vec3& y, const Vec3& n,
+                       const Vec3& x);
+
 // NEE at a scattering vertex `it` (surface or medium) through media and
 // index-matched boundaries: `f_of(wo)` is the BSDF value (times cosine) or
 // the phase function, `pdf_of(wo)` the density of the direction sampling
@@ -117,11 +152,14 @@ Color transmittance_from_infinity(const Scene& scene, int medium);
 // pdf_of = nullptr: light samples only, no MIS weight (photonmapper, where
 // nothing else finds the emitters from `it`). through_null_lobes: shadow
 // rays pass thindielectric surfaces (volpath's null events, Scene::transmittance).
-template <typename EvalF, typename PdfF>
+// `weight_of(e, ds)`, when given, multiplies the contribution of the light
+// sample ds on emitter e by a further weight (volpath's equiangular MIS).
+template <typename EvalF, typename PdfF, typename WeightF = std::nullptr_t>
 Color direct_through_media(const Scene& scene, const Interaction& it, int medium, Sampler& sampler, ThreadStats& stats,
-                           EvalF f_of, PdfF pdf_of, bool through_null_lobes = false) {
+                           EvalF f_of, PdfF pdf_of, bool through_null_lobes = false, WeightF weight_of = nullptr) {
     DirectSample ds;
-    if (!sample_light(scene, light_context(it), sampler, ds)) return Color(0.f);
+    const Emitter* e = nullptr;
+    if (!sample_light(scene, light_context(it), sampler, ds, &e)) return Color(0.f);
     Color f = f_of(ds.d);
     if (is_black(f)) return Color(0.f);
     ++stats.shadow_rays;
@@ -132,6 +170,7 @@ Color direct_through_media(const Scene& scene, const Interaction& it, int medium
     float w = 1.f;
     if constexpr (!std::is_same_v<PdfF, std::nullptr_t>)
         if (!ds.is_delta) w = mis_power(light_pdf, pdf_of(ds.d));
+    if constexpr (!std::is_same_v<WeightF, std::nullptr_t>) w *= weight_of(*e, ds);
     return f * tr * ds.radiance * (w / light_pdf);
 }
 
