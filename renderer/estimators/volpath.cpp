@@ -93,6 +93,17 @@ namespace rm {
 
 namespace {
 
+// The medium vertex at distance t along the ray (o, d).
+Interaction medium_vertex(const Vec3& o, const Vec3& d, float t) {
+    Interaction mi;
+    mi.kind = VertexKind::Medium;
+    mi.valid = true;
+    mi.p = o + d * t;
+    mi.wi = -d;
+    mi.t = t;
+    return mi;
+}
+
 // A segment of the path through a homogeneous medium awaiting its
 // equiangular sample (step 5 of the head comment), with the path's state
 // where it starts.
@@ -145,12 +156,7 @@ void sample_equiangular(const Scene& scene, Sampler& sampler, EquiSegment& seg, 
     float t = eq.sample(u_t, pdf_t);
     if (!(pdf_t > 0.f)) return;
     ++stats.equiangular_samples;
-    Interaction mi;
-    mi.kind = VertexKind::Medium;
-    mi.valid = true;
-    mi.p = seg.o + seg.d * t;
-    mi.wi = -seg.d;
-    mi.t = t;
+    const Interaction mi = medium_vertex(seg.o, seg.d, t);
     float q_o = light_pdf_w_from(scene, *e, from, ds_o.p, ds_o.n, mi.p);
     if (!(q_o > 0.f)) return;
     // y seen from x, as light sampling from x would have made it.
@@ -250,12 +256,7 @@ void volpath_sample(const Scene& scene, Sampler& sampler, const Ray& camera_ray,
             if (event == kScattered) {
                 ++depth;
                 if (prm.max_depth >= 0 && depth >= prm.max_depth) break;
-                Interaction mi;
-                mi.kind = VertexKind::Medium;
-                mi.valid = true;
-                mi.p = ray.o + ray.d * t;
-                mi.wi = -ray.d;
-                mi.t = t;
+                const Interaction mi = medium_vertex(ray.o, ray.d, t);
                 const PhaseFunction& phase = *med.phase;
                 PathClass pn = pc;
                 pn.push_medium(mt.enclosed);

@@ -501,6 +501,25 @@ void Scene::fill_hit(const Ray& ray, const RTCHit& hit, float t, Interaction& it
     if (s.frame_map) s.frame_map->perturb_frame(it);  // normal and bump maps (Bsdf::perturb_frame)
 }
 
+// Lane k of an Embree N-wide ray-hit record from `ray` (intersect_packet
+// and the grouped replay of the Embree-limit benchmark fill lanes alike).
+template <typename RayHitN>
+static void to_rtc_lane(const Ray& ray, RayHitN& rh, size_t k) {
+    rh.ray.org_x[k] = ray.o.x;
+    rh.ray.org_y[k] = ray.o.y;
+    rh.ray.org_z[k] = ray.o.z;
+    rh.ray.dir_x[k] = ray.d.x;
+    rh.ray.dir_y[k] = ray.d.y;
+    rh.ray.dir_z[k] = ray.d.z;
+    rh.ray.tnear[k] = ray.tmin;
+    rh.ray.tfar[k] = ray.tmax;
+    rh.ray.mask[k] = 0xFFFFFFFFu;
+    rh.ray.flags[k] = 0;
+    rh.ray.time[k] = 0;
+    rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+}
+
 void Scene::intersect_packet(const Ray* rays, int n, Interaction* its, bool* hit) const {
     static_assert(kPacket == 8, "rtcIntersect8 below");
     alignas(32) int valid[8] = {0, 0, 0, 0, 0, 0, 0, 0};
@@ -510,19 +529,7 @@ void Scene::intersect_packet(const Ray* rays, int n, Interaction* its, bool* hit
         check_ray(ray);
         if (__builtin_expect(g_ray_log != nullptr, 0)) log_ray(ray, false);
         valid[i] = -1;
-        rh.ray.org_x[i] = ray.o.x;
-        rh.ray.org_y[i] = ray.o.y;
-        rh.ray.org_z[i] = ray.o.z;
-        rh.ray.dir_x[i] = ray.d.x;
-        rh.ray.dir_y[i] = ray.d.y;
-        rh.ray.dir_z[i] = ray.d.z;
-        rh.ray.tnear[i] = ray.tmin;
-        rh.ray.tfar[i] = ray.tmax;
-        rh.ray.mask[i] = 0xFFFFFFFFu;
-        rh.ray.flags[i] = 0;
-        rh.ray.time[i] = 0;
-        rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-        rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+        to_rtc_lane(ray, rh, size_t(i));
     }
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
@@ -618,20 +625,7 @@ void replay_packets(RTCScene scene, const ReplayQueue& queue, ReplayTiming& t) {
         const size_t m = std::min(n - a, size_t(N));
         for (size_t k = 0; k < size_t(N); ++k) {
             valid[k] = k < m ? -1 : 0;
-            const Ray& ray = queue.rays[a + std::min(k, m - 1)];
-            rh.ray.org_x[k] = ray.o.x;
-            rh.ray.org_y[k] = ray.o.y;
-            rh.ray.org_z[k] = ray.o.z;
-            rh.ray.dir_x[k] = ray.d.x;
-            rh.ray.dir_y[k] = ray.d.y;
-            rh.ray.dir_z[k] = ray.d.z;
-            rh.ray.tnear[k] = ray.tmin;
-            rh.ray.tfar[k] = ray.tmax;
-            rh.ray.mask[k] = 0xFFFFFFFFu;
-            rh.ray.flags[k] = 0;
-            rh.ray.time[k] = 0;
-            rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
-            rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+            to_rtc_lane(queue.rays[a + std::min(k, m - 1)], rh, k);
         }
         ++t.calls;
         if (queue.shadow) {
