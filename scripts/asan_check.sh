@@ -37,6 +37,6 @@ if [ "$#" -eq 0 ]; then
   set -- tests/test_loader.py tests/test_stress.py tests/test_render.py tests/test_float_range.py tests/test_effects.py \
     tests/test_textures.py tests/test_roughplastic.py tests/test_radiosity.py tests/test_radiosity_hierarchical.py \
     tests/test_rays.py tests/test_shapes.py tests/test_normalmap.py tests/test_principled.py \
-    tests/test_emitter_textures.py
+    tests/test_emitter_textures.py tests/test_media_equiangular.py
 fi
 "$B/venv/bin/python" -m pytest -q -p no:cacheprovider "$@"
