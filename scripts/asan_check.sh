@@ -37,6 +37,13 @@ if [ "$#" -eq 0 ]; then
   set -- tests/test_loader.py tests/test_stress.py tests/test_render.py tests/test_float_range.py tests/test_effects.py \
     tests/test_textures.py tests/test_roughplastic.py tests/test_radiosity.py tests/test_radiosity_hierarchical.py \
     tests/test_rays.py tests/test_shapes.py tests/test_normalmap.py tests/test_principled.py \
-    tests/test_emitter_textures.py tests/test_media_equiangular.py
+    tests/test_emitter_textures.py
+  # equiangular sampling's code paths on small renders (its statistical
+  # comparisons run in the suite: they take minutes here and exercise the same code)
+  for t in single_scattering_point_light_closed_form single_scattering_spot_light_closed_form \
+    degenerate_segments_are_finite light_behind_the_ray_agrees_with_free_flight media_stress_scenes \
+    classes_and_masks off_by_default_and_deterministic warns_where_it_cannot_help bad_value_is_refused; do
+    set -- "$@" "tests/test_media_equiangular.py::test_$t"
+  done
 fi
 "$B/venv/bin/python" -m pytest -q -p no:cacheprovider "$@"
