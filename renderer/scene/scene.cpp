@@ -31,8 +31,12 @@ void check_embree() {
 }
 }  // namespace
 
-namespace {
+namespace detail {
 RayLog* g_ray_log = nullptr;
+}  // namespace detail
+using detail::g_ray_log;
+
+namespace {
 
 std::mutex g_ray_log_mutex;  // a render on several threads records safely (in no fixed order)
 
@@ -45,7 +49,6 @@ std::mutex g_ray_log_mutex;  // a render on several threads records safely (in n
 }  // namespace
 
 void attach_ray_log(RayLog* log) { g_ray_log = log; }
-bool ray_log_attached() { return g_ray_log != nullptr; }
 void ray_log_begin_sample() {
     std::lock_guard<std::mutex> lock(g_ray_log_mutex);
     if (g_ray_log) ++g_ray_log->samples;

@@ -53,7 +53,11 @@ struct RayLog {
     uint32_t samples = 0;
 };
 void attach_ray_log(RayLog* log);  // nullptr detaches
-bool ray_log_attached();
+namespace detail {
+extern RayLog* g_ray_log;  // scene.cpp; set by attach_ray_log
+}
+// One load where it is checked (the camera driver, once a sample).
+inline bool ray_log_attached() { return detail::g_ray_log != nullptr; }
 // The camera driver calls it before each sample's rays (one-ray camera
 // path only), so the wavefront replay can group the rays of many samples
 // by their rank within each sample.
