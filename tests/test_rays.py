@@ -212,15 +212,9 @@ def test_robust_mode_where_the_scene_needs_it(name, robust):
 
 
 def _logged_render(scene, single: bool, spp=2):
-    log = _core.RayLog()
-    _core.set_camera_packets(not single)
-    _core.attach_ray_log(log)
-    try:
-        rm.render(scene, integrator="path", spp=spp, seed=3, threads=1)
-    finally:
-        _core.attach_ray_log(None)
-        _core.set_camera_packets(True)
-    return log
+    from radiometer.benchmarks.studies.embree_limit import record_rays
+
+    return record_rays(scene, "path", spp, seed=3, one_ray=single)
 
 
 def test_grouped_replay_traces_every_ray_once_in_each_grouping():

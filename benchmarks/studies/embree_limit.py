@@ -56,16 +56,27 @@ GROUPS = [  # (label, width, wavefront, coherent); width 0 = stream call
 ]
 
 
-def grouped(rm, _core, scene, core, estimator: str, spp: int, repeats: int) -> dict:
-    """The render's rays through bare Embree in groups, robust mode on and off."""
+def record_rays(scene, estimator: str, spp: int, seed: int, one_ray: bool = False):
+    """Every ray a one-thread render of `scene` traces (`_core.RayLog`);
+    with `one_ray` the camera rays are traced one at a time, so the driver
+    marks each ray's sample (the wavefront replay needs the marks)."""
+    import radiometer as rm
+    from radiometer import _core
+
     log = _core.RayLog()
-    _core.set_camera_packets(False)  # one ray per sample first, so each ray knows its sample
+    _core.set_camera_packets(not one_ray)
     _core.attach_ray_log(log)
     try:
-        rm.render(scene, integrator=estimator, spp=spp, seed=7, threads=1)
+        rm.render(scene, integrator=estimator, spp=spp, seed=seed, threads=1)
     finally:
         _core.attach_ray_log(None)
         _core.set_camera_packets(True)
+    return log
+
+
+def grouped(scene, core, estimator: str, spp: int, repeats: int) -> dict:
+    """The render's rays through bare Embree in groups, robust mode on and off."""
+    log = record_rays(scene, estimator, spp, seed=7, one_ray=True)  # one-ray camera rays: each knows its sample
     out = {"rays": len(log), "samples": log.samples}
     for robust in (True, False):
         core.set_robust(robust)
@@ -119,7 +130,6 @@ def zero_shading_ratio(tte_scene: dict, row: dict, robust: bool = True) -> float
 
 def measure(estimator: str, scene_name: str, res: int, spp: int, repeats: int, groups: bool = False) -> dict:
     import radiometer as rm
-    from radiometer import _core
     from radiometer.reference_scenes import registry
 
     spec = registry.get(scene_name)
@@ -128,12 +138,7 @@ def measure(estimator: str, scene_name: str, res: int, spp: int, repeats: int, g
     row = {"estimator": estimator, "scene": scene_name, "res": res, "spp": spp}
     for robust in (True, False):
         core.set_robust(robust)
-        log = _core.RayLog()
-        _core.attach_ray_log(log)
-        try:
-            rm.render(scene, integrator=estimator, spp=spp, seed=7, threads=1)
-        finally:
-            _core.attach_ray_log(None)
+        log = record_rays(scene, estimator, spp, seed=7)
         best = float("inf")
         for _ in range(repeats):
             t0 = time.perf_counter()
@@ -152,7 +157,7 @@ def measure(estimator: str, scene_name: str, res: int, spp: int, repeats: int, g
         }
     core.set_robust(True)
     if groups:
-        row["groups"] = grouped(rm, _core, scene, core, estimator, spp, repeats)
+        row["groups"] = grouped(scene, core, estimator, spp, repeats)
     row["robust_cost_bare"] = row["robust"]["bare_embree_s"] / row["fast"]["bare_embree_s"] - 1.0
     row["robust_cost_render"] = row["robust"]["render_s"] / row["fast"]["render_s"] - 1.0
     return row
